@@ -1,0 +1,73 @@
+"""Command-line flags generated from frozen configuration dataclasses.
+
+Each scalar or fixed-length tuple field becomes ``--prefix-field-name``; its help text is the
+end-of-line comment of the field in the source (the paper symbol and units), so that ``--help``
+is the documentation and every default of the papers' tables can be overridden.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import inspect
+import re
+import typing
+from typing import Any
+
+_COMMENT = re.compile(r"^\s*(\w+)\s*:[^#]*#\s*(.+)$")
+
+
+def field_comments(cls: type) -> dict[str, str]:
+    """Map field name -> end-of-line comment in the class source."""
+    try:
+        source = inspect.getsource(cls)
+    except (OSError, TypeError):
+        return {}
+    return {m.group(1): m.group(2).strip() for m in map(_COMMENT.match, source.splitlines()) if m}
+
+
+def _flag(prefix: str, name: str) -> str:
+    return "--" + (f"{prefix}-" if prefix else "") + name.rstrip("_").replace("_", "-")
+
+
+def add_dataclass_arguments(
+    parser: argparse.ArgumentParser, cls: type, prefix: str = "", title: str | None = None
+) -> None:
+    """Add one flag per field of ``cls`` (nested dataclasses get their own flag prefix)."""
+    group = parser.add_argument_group(title or cls.__name__)
+    comments = field_comments(cls)
+    hints = typing.get_type_hints(cls)
+    defaults = cls()
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        default = getattr(defaults, f.name)
+        dest = f"{prefix}__{f.name}" if prefix else f"__{f.name}"
+        if dataclasses.is_dataclass(hint):
+            continue
+        help_text = f"{comments.get(f.name, '')} (default: {default})"
+        origin = typing.get_origin(hint)
+        if origin is tuple:
+            group.add_argument(
+                _flag(prefix, f.name), dest=dest, type=float, nargs=len(default),
+                metavar=f.name.upper(), help=help_text,
+            )
+        elif hint is bool:
+            group.add_argument(
+                _flag(prefix, f.name), dest=dest, action=argparse.BooleanOptionalAction,
+                default=None, help=help_text,
+            )
+        else:
+            group.add_argument(
+                _flag(prefix, f.name), dest=dest, type=hint, metavar=f.name.upper(), help=help_text
+            )
+
+
+def overrides(args: argparse.Namespace, cls: type, prefix: str = "") -> dict[str, Any]:
+    """The fields of ``cls`` given on the command line (``None`` means not given)."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        dest = f"{prefix}__{f.name}" if prefix else f"__{f.name}"
+        value = getattr(args, dest, None)
+        if value is not None:
+            out[f.name] = tuple(value) if isinstance(value, list) else value
+    return out

@@ -1,0 +1,1 @@
+"""scpformer.dynamics."""

@@ -1,0 +1,235 @@
+"""Problem instance theta of the 6-DoF powered descent family, and its sampler.
+
+theta = (gamma_gs, theta_max, r0, v0, q0, omega0, m0): the parameters the T-SCvx paper varies
+(Section IV.A, Table 2). The final state is fixed by :class:`VehicleConstants`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scpformer.dynamics import quaternion as quat
+from scpformer.problems.pdg6dof.constants import VehicleConstants
+from scpformer.validation import check_finite, check_in_range
+
+UNIT_QUATERNION_TOL = 1e-6
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDGInstance:
+    """One 6-DoF powered descent instance; validated at construction.
+
+    Units are those of Table 1 (nondimensional); inertial axes are e1 = Up, e2 = East,
+    e3 = North, and ``q0`` is the scalar-first quaternion q_{B<-I}.
+    """
+
+    r0: tuple[float, float, float] = (4.0, 4.0, 0.0)  # initial position, Eq. 3c [U_L]
+    v0: tuple[float, float, float] = (-1.0, -1.0, 0.0)  # initial velocity, Eq. 3d [U_L/U_T]
+    q0: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # initial attitude q_{B<-I}
+    omega0_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)  # initial rate, Eq. 3e [deg/U_T]
+    m0: float = 3.0  # initial (wet) mass, Eq. 3b [U_M]
+    gamma_gs_deg: float = 20.0  # glideslope angle, Eq. 5b [deg]
+    theta_max_deg: float = 90.0  # maximum tilt angle, Eq. 5c [deg]; >= 180 means unconstrained
+    constants: VehicleConstants = field(default_factory=VehicleConstants)
+
+    def __post_init__(self) -> None:
+        for name, size in (("r0", 3), ("v0", 3), ("q0", 4), ("omega0_deg", 3)):
+            value = check_finite(name, getattr(self, name), shape=(size,))
+            object.__setattr__(self, name, tuple(float(v) for v in value))
+        norm = float(np.linalg.norm(self.q0))
+        if abs(norm - 1.0) > UNIT_QUATERNION_TOL:
+            raise ValueError(f"q0 must be a unit quaternion, got norm {norm:.6g}")
+        m0 = float(check_finite("m0", self.m0, shape=()))
+        if m0 <= self.constants.m_dry:
+            raise ValueError(f"m0 ({m0}) must exceed the dry mass m_dry ({self.constants.m_dry})")
+        object.__setattr__(self, "m0", m0)
+        gamma = check_in_range("gamma_gs_deg", self.gamma_gs_deg, 0.0, 90.0)
+        if gamma >= 90.0:
+            raise ValueError(f"gamma_gs_deg must be below 90, got {gamma}")
+        object.__setattr__(self, "gamma_gs_deg", gamma)
+        theta = check_in_range("theta_max_deg", self.theta_max_deg, 0.0, 360.0)
+        if theta <= 0.0:
+            raise ValueError(f"theta_max_deg must be positive, got {theta}")
+        object.__setattr__(self, "theta_max_deg", theta)
+
+    # -- derived numeric quantities ------------------------------------------------------
+    @property
+    def x0(self) -> np.ndarray:
+        """Initial state (14,) in the order (r, v, q, omega [rad/U_T], m) of Eq. 24."""
+        omega = np.deg2rad(self.omega0_deg)
+        return np.concatenate([self.r0, self.v0, self.q0, omega, [self.m0]])
+
+    @property
+    def tan_gamma_gs(self) -> float:
+        """``tan(gamma_gs)`` of Eq. 5b."""
+        return math.tan(math.radians(self.gamma_gs_deg))
+
+    @property
+    def tilt_bound(self) -> float:
+        """Bound ``|H_theta q| <= sin(theta_max / 2)`` equivalent to Eq. 5c; 1 (vacuous) past 180 deg."""
+        return math.sin(math.radians(min(self.theta_max_deg, 180.0)) / 2.0)
+
+    # -- construction and serialization --------------------------------------------------
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PDGInstance:
+        """Build from plain values; unknown keys raise ``ValueError`` naming them.
+
+        ``data["constants"]``, if present, is a dict of :class:`VehicleConstants` overrides.
+        """
+        if not isinstance(data, dict):
+            raise ValueError(f"instance must be a JSON object, got {type(data).__name__}")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown instance field(s): {', '.join(unknown)}")
+        kwargs = dict(data)
+        if "constants" in kwargs:
+            kwargs["constants"] = constants_from_dict(kwargs["constants"])
+        return cls(**kwargs)
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> PDGInstance:
+        """Read an instance from a JSON file (keys as in :meth:`from_dict`)."""
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise ValueError(f"instance file not found: {path}") from None
+        except json.JSONDecodeError as err:
+            raise ValueError(f"malformed JSON in {path}: {err}") from None
+        return cls.from_dict(data)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-value dictionary that :meth:`from_dict` reads back."""
+        out = asdict(self)
+        out["constants"] = asdict(self.constants)
+        return out
+
+    def rotated_about_up(self, angle_rad: float) -> PDGInstance:
+        """The same instance seen in an inertial frame rotated by ``angle_rad`` about Up (e1).
+
+        Positions and velocities rotate, the attitude becomes ``q_R (x) q0``, body rates are
+        unchanged. Gravity, the landing target and every constraint are symmetric about Up, so
+        the rotated solution solves the rotated instance (the T-SCvx augmentation, Sec. III.E.2).
+        """
+        q_rot = quat.from_axis_angle([1.0, 0.0, 0.0], angle_rad)
+        return replace(
+            self,
+            r0=tuple(quat.rotate(q_rot, self.r0)),
+            v0=tuple(quat.rotate(q_rot, self.v0)),
+            q0=tuple(quat.normalize(quat.multiply(q_rot, self.q0))),
+        )
+
+
+def constants_from_dict(data: dict[str, Any]) -> VehicleConstants:
+    """:class:`VehicleConstants` from a dict of overrides; unknown keys raise ``ValueError``."""
+    if isinstance(data, VehicleConstants):
+        return data
+    if not isinstance(data, dict):
+        raise ValueError(f"constants must be a JSON object, got {type(data).__name__}")
+    known = {f.name for f in fields(VehicleConstants)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"unknown constants field(s): {', '.join(unknown)}")
+    return VehicleConstants(**data)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SampleRanges:
+    """Uniform sampling ranges of theta (Table 2 of the T-SCvx paper and a nominal sub-range).
+
+    Each entry is ``(low, high)`` per component. ``q0_tilt_max_deg`` and ``q0_any`` choose the
+    attitude: a uniformly random unit quaternion (``q0_any``, Table 2's componentwise range
+    [-1, 1] normalized) or a random tilt of at most ``q0_tilt_max_deg`` about a random
+    horizontal axis followed by a random roll.
+    """
+
+    gamma_gs_deg: tuple[float, float]
+    theta_max_deg: tuple[float, float]
+    r0: tuple[tuple[float, float], ...]
+    v0: tuple[tuple[float, float], ...]
+    omega0_deg: tuple[tuple[float, float], ...]
+    m0: tuple[float, float]
+    q0_any: bool = False
+    q0_tilt_max_deg: float = 0.0
+
+    @classmethod
+    def table2(cls) -> SampleRanges:
+        """Table 2 of the T-SCvx paper, positive East/North only (Sec. III.E.2).
+
+        Table 2 lists m0 down to 0.003, below the dry mass 2.0 of Table 1, where no descent is
+        possible; masses are drawn from (m_dry, 3] instead -- the part of Table 2 that holds
+        instances at all. gamma_gs stops just short of 90 deg, where Eq. 5b admits no point off
+        the Up axis.
+        """
+        return cls(
+            gamma_gs_deg=(0.0, 89.0),
+            theta_max_deg=(0.0, 359.4),
+            r0=((0.003, 9.997), (0.0, 13.83), (0.0, 13.83)),
+            v0=((-1.998, -0.001), (-2.779, 2.779), (-2.779, 2.779)),
+            omega0_deg=((-89.98, 89.70), (-123.49, 123.49), (-123.49, 123.49)),
+            m0=(2.001, 3.0),
+            q0_any=True,
+        )
+
+    @classmethod
+    def nominal(cls) -> SampleRanges:
+        """A sub-range of Table 2 where most instances are feasible (positive East/North)."""
+        return cls(
+            gamma_gs_deg=(5.0, 30.0),
+            theta_max_deg=(60.0, 90.0),
+            r0=((3.0, 6.0), (0.0, 4.0), (0.0, 4.0)),
+            v0=((-1.5, -0.2), (-1.0, 1.0), (-1.0, 1.0)),
+            omega0_deg=((-10.0, 10.0), (-10.0, 10.0), (-10.0, 10.0)),
+            m0=(2.6, 3.0),
+            q0_tilt_max_deg=20.0,
+        )
+
+
+def sample_instances(
+    rng: np.random.Generator,
+    n: int,
+    ranges: SampleRanges | None = None,
+    constants: VehicleConstants | None = None,
+) -> list[PDGInstance]:
+    """Draw ``n`` instances uniformly over ``ranges`` (default: nominal) from ``rng``."""
+    ranges = ranges or SampleRanges.nominal()
+    constants = constants or VehicleConstants()
+    return [_sample_one(rng, ranges, constants) for _ in range(n)]
+
+
+def _uniform(rng: np.random.Generator, bounds: Any) -> np.ndarray:
+    low, high = np.asarray(bounds, dtype=float).T
+    return rng.uniform(low, high)
+
+
+def _sample_attitude(rng: np.random.Generator, ranges: SampleRanges) -> np.ndarray:
+    if ranges.q0_any:
+        q = rng.normal(size=4)
+        return q / np.linalg.norm(q)
+    tilt = math.radians(ranges.q0_tilt_max_deg) * rng.uniform()
+    heading = rng.uniform(0.0, 2.0 * math.pi)
+    q_tilt = quat.from_axis_angle([0.0, math.cos(heading), math.sin(heading)], tilt)
+    q_roll = quat.from_axis_angle([1.0, 0.0, 0.0], rng.uniform(0.0, 2.0 * math.pi))
+    return quat.normalize(quat.multiply(q_tilt, q_roll))
+
+
+def _sample_one(
+    rng: np.random.Generator, ranges: SampleRanges, constants: VehicleConstants
+) -> PDGInstance:
+    return PDGInstance(
+        gamma_gs_deg=float(_uniform(rng, ranges.gamma_gs_deg)),
+        theta_max_deg=max(float(_uniform(rng, ranges.theta_max_deg)), 1e-3),
+        r0=tuple(_uniform(rng, ranges.r0)),
+        v0=tuple(_uniform(rng, ranges.v0)),
+        q0=tuple(_sample_attitude(rng, ranges)),
+        omega0_deg=tuple(_uniform(rng, ranges.omega0_deg)),
+        m0=float(_uniform(rng, ranges.m0)),
+        constants=constants,
+    )

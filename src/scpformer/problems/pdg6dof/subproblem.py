@@ -1,0 +1,257 @@
+"""The SCvx convex subproblem of the 6-DoF problem, compiled once as a parametric cvxpy problem.
+
+Variables: X (N, 14), U (N, 3), sigma = t_f, virtual control nu (N-1, 14) (E = I, Eq. 8) and
+virtual buffers s (N,) >= 0 for the linearized thrust lower bound (Eq. 9, 11). Everything that
+changes between SCvx iterations *or between instances* is a ``cvxpy.Parameter``: the FOH
+matrices, the reference trajectory, the trust radius, the boundary conditions and the constraint
+bounds. The problem is therefore canonicalized once per node count N and process (DPP), and an
+iteration only writes numbers into parameters before calling the conic solver.
+
+Subproblem (Eq. 7 with Eqs. 10-11):
+
+    min   -m_N + lambda (|nu|_1 + sum s)
+    s.t.  X_{k+1} = A_k X_k + Bm_k U_k + Bp_k U_{k+1} + S_k sigma + z_k + nu_k       (10)
+          T_min - d_k . U_k <= s_k,  d_k = U_bar_k / |U_bar_k|                       (11, 6a)
+          convex rows of 5a-5d, 6a (upper), 6b at every node
+          boundary conditions 3b-3i (terminal attitude: see TerminalAttitude note)
+          tf_min <= sigma <= tf_max                                                   (3a)
+          |X - X_bar|_inf, |U - U_bar|_inf, |sigma - sigma_bar| <= eta   (q_tr = inf, Table 1)
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.scp.discretization import FOHDiscretization
+
+SOLVERS = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
+SOLVED = {cp.OPTIMAL, cp.OPTIMAL_INACCURATE}
+
+
+@dataclass(frozen=True)
+class SubproblemSolution:
+    """What one conic solve returns; ``status`` is cvxpy's status string."""
+
+    status: str
+    x: np.ndarray | None  # (N, 14)
+    u: np.ndarray | None  # (N, 3)
+    sigma: float
+    nu: np.ndarray | None  # (N-1, 14) virtual control
+    buffers: np.ndarray | None  # (N,) virtual buffers of the thrust lower bound
+    linear_cost: float  # L^k of Eq. 13
+    solve_time: float  # seconds inside the conic solver (as it reports)
+    wall_time: float  # seconds in cvxpy.Problem.solve, parameter update to unpacking
+    message: str = ""
+
+
+class PDGSubproblem:
+    """Parametric convex subproblem for ``n_nodes`` nodes; see the module docstring."""
+
+    def __init__(self, n_nodes: int, fix_roll: bool = False) -> None:
+        if n_nodes < 3:
+            raise ValueError(f"n_nodes must be at least 3, got {n_nodes}")
+        self.n_nodes = n_nodes
+        self.fix_roll = fix_roll
+        n, k = n_nodes, n_nodes - 1
+        P = cp.Parameter
+        self.A = [P((14, 14), name=f"A{i}") for i in range(k)]
+        self.Bm = [P((14, 3), name=f"Bm{i}") for i in range(k)]
+        self.Bp = [P((14, 3), name=f"Bp{i}") for i in range(k)]
+        self.S = P((k, 14), name="S")
+        self.z = P((k, 14), name="z")
+        self.x_ref = P((n, 14), name="x_ref")
+        self.u_ref = P((n, 3), name="u_ref")
+        self.sigma_ref = P(name="sigma_ref")
+        self.thrust_dir = P((n, 3), name="thrust_dir")
+        self.eta_x = P((n, 14), nonneg=True, name="eta_x")
+        self.eta_u = P((n, 3), nonneg=True, name="eta_u")
+        self.eta_sigma = P(nonneg=True, name="eta_sigma")
+        self.lambda_ = P(nonneg=True, name="lambda")
+        self.x0 = P(14, name="x0")
+        self.r_f = P(3, name="r_f")
+        self.v_f = P(3, name="v_f")
+        self.m_dry = P(name="m_dry")
+        self.tan_gs = P(nonneg=True, name="tan_gamma_gs")
+        self.tilt_bound = P(nonneg=True, name="tilt_bound")
+        self.omega_max = P(nonneg=True, name="omega_max")
+        self.T_min = P(nonneg=True, name="T_min")
+        self.T_max = P(nonneg=True, name="T_max")
+        self.cos_delta = P(nonneg=True, name="cos_delta_max")
+        self.tf_bounds = P(2, name="tf_bounds")
+
+        self.X = cp.Variable((n, 14), name="X")
+        self.U = cp.Variable((n, 3), name="U")
+        self.sigma = cp.Variable(name="sigma")
+        self.nu = cp.Variable((k, 14), name="nu")
+        self.buffers = cp.Variable(n, nonneg=True, name="s")
+        self.dX = cp.Variable((n, 14), name="dX")
+        self.dU = cp.Variable((n, 3), name="dU")
+        self.dsigma = cp.Variable(name="dsigma")
+        self.prox_weight = P(nonneg=True, name="prox_weight")
+        self.problem = self._build()
+
+    def _build(self) -> cp.Problem:
+        X, U, sigma = self.X, self.U, self.sigma
+        dynamics = [
+            X[i + 1]
+            == self.A[i] @ X[i]
+            + self.Bm[i] @ U[i]
+            + self.Bp[i] @ U[i + 1]
+            + self.S[i] * sigma
+            + self.z[i]
+            + self.nu[i]
+            for i in range(self.n_nodes - 1)
+        ]
+        thrust = cp.norm(U, 2, axis=1)
+        terminal_q = [6, 7, 8, 9] if self.fix_roll else [8, 9]
+        terminal_w = [10, 11, 12] if self.fix_roll else [11, 12]
+        constraints = [
+            *dynamics,
+            X[0] == self.x0,
+            X[-1, 0:3] == self.r_f,
+            X[-1, 3:6] == self.v_f,
+            X[-1, terminal_q] == (np.array([1.0, 0, 0, 0])[[t - 6 for t in terminal_q]]),
+            X[-1, terminal_w] == 0.0,
+            X[:, 13] >= self.m_dry,  # 5a
+            cp.multiply(self.tan_gs, cp.norm(X[:, 1:3], 2, axis=1)) <= X[:, 0],  # 5b
+            cp.norm(X[:, 8:10], 2, axis=1) <= self.tilt_bound,  # 5c
+            cp.norm(X[:, 10:13], 2, axis=1) <= self.omega_max,  # 5d
+            self.T_min - cp.sum(cp.multiply(self.thrust_dir, U), axis=1) <= self.buffers,  # 6a lo
+            thrust <= self.T_max,  # 6a upper
+            cp.multiply(self.cos_delta, thrust) <= U[:, 0],  # 6b
+            sigma >= self.tf_bounds[0],
+            sigma <= self.tf_bounds[1],
+            X - self.x_ref <= self.eta_x,
+            self.x_ref - X <= self.eta_x,
+            U - self.u_ref <= self.eta_u,
+            self.u_ref - U <= self.eta_u,
+            sigma - self.sigma_ref <= self.eta_sigma,
+            self.sigma_ref - sigma <= self.eta_sigma,
+        ]
+        penalty = cp.sum(cp.abs(self.nu)) + cp.sum(self.buffers)
+        constraints += [
+            self.dX == X - self.x_ref,
+            self.dU == U - self.u_ref,
+            self.dsigma == sigma - self.sigma_ref,
+        ]
+        prox = cp.sum_squares(self.dX) + cp.sum_squares(self.dU) + cp.square(self.dsigma)
+        cost = -X[-1, 13] + self.lambda_ * penalty + self.prox_weight * prox
+        return cp.Problem(cp.Minimize(cost), constraints)
+
+    def set_instance(self, instance: PDGInstance) -> None:
+        """Write the boundary conditions and constraint bounds of ``instance``."""
+        c = instance.constants
+        self.x0.value = instance.x0
+        self.r_f.value = np.array(c.r_f)
+        self.v_f.value = np.array(c.v_f)
+        self.m_dry.value = c.m_dry
+        self.tan_gs.value = instance.tan_gamma_gs
+        self.tilt_bound.value = instance.tilt_bound
+        self.omega_max.value = math.radians(c.omega_max_deg)
+        self.T_min.value = c.T_min
+        self.T_max.value = c.T_max
+        self.cos_delta.value = math.cos(math.radians(c.delta_max_deg))
+        self.tf_bounds.value = np.array([c.tf_min, c.tf_max])
+        self.scale_x, self.scale_u, self.scale_sigma = trust_region_scales(instance)
+
+    def set_linearization(
+        self, disc: FOHDiscretization, x: np.ndarray, u: np.ndarray, sigma: float
+    ) -> None:
+        """Write the FOH matrices and the reference trajectory of the current iterate."""
+        for i in range(self.n_nodes - 1):
+            self.A[i].value = disc.A[i]
+            self.Bm[i].value = disc.Bm[i]
+            self.Bp[i].value = disc.Bp[i]
+        self.S.value = disc.S
+        self.z.value = disc.z
+        self.x_ref.value = x
+        self.u_ref.value = u
+        self.sigma_ref.value = sigma
+        norms = np.linalg.norm(u, axis=1, keepdims=True)
+        safe = np.where(norms > 0.0, norms, 1.0)
+        self.thrust_dir.value = np.where(norms > 0.0, u / safe, np.array([1.0, 0.0, 0.0]))
+
+    def solve(
+        self, eta: float, lambda_: float, solver: str = "clarabel", prox_weight: float = 0.0
+    ) -> SubproblemSolution:
+        """Solve with trust radius ``eta`` and penalty weight ``lambda_``; failures are statuses."""
+        self.eta_x.value = np.broadcast_to(eta * self.scale_x, (self.n_nodes, 14))
+        self.eta_u.value = np.broadcast_to(eta * self.scale_u, (self.n_nodes, 3))
+        self.eta_sigma.value = eta * self.scale_sigma
+        self.lambda_.value = lambda_
+        self.prox_weight.value = prox_weight
+        start = time.perf_counter()
+        try:
+            self.problem.solve(solver=SOLVERS[solver])
+        except cp.SolverError as err:
+            wall = time.perf_counter() - start
+            return _failed(f"solver_error: {err}", wall)
+        wall = time.perf_counter() - start
+        stats = self.problem.solver_stats
+        solve_time = stats.solve_time if stats and stats.solve_time is not None else wall
+        status = self.problem.status
+        if status not in SOLVED or self.X.value is None:
+            return _failed(status, wall, solve_time)
+        nu, buffers = self.nu.value, np.maximum(self.buffers.value, 0.0)
+        linear_cost = -self.X.value[-1, 13] + lambda_ * (np.abs(nu).sum() + buffers.sum())
+        return SubproblemSolution(
+            status=status,
+            x=self.X.value.copy(),
+            u=self.U.value.copy(),
+            sigma=float(self.sigma.value),
+            nu=nu.copy(),
+            buffers=buffers.copy(),
+            linear_cost=float(linear_cost),
+            solve_time=float(solve_time),
+            wall_time=wall,
+        )
+
+
+def trust_region_scales(instance: PDGInstance) -> tuple[np.ndarray, np.ndarray, float]:
+    """Per-variable scales of the trust region: ``|x_i - x_bar_i| <= eta * scale_i``.
+
+    The paper scales its variables to their ranges (Sec. III.E.1) without listing the scales; a
+    unit trust radius here spans a typical excursion of each quantity: position 10 U_L,
+    velocity 2 U_L/U_T, quaternion 1, rates omega_max, mass m0 - m_dry, thrust T_max and the
+    final time (tf_max - tf_min) / 2. Without it the final time, ten times larger than the
+    other variables, creeps towards its optimum by eta per iteration.
+    """
+    c = instance.constants
+    scale_x = np.concatenate(
+        [
+            np.full(3, 10.0),
+            np.full(3, 2.0),
+            np.ones(4),
+            np.full(3, math.radians(c.omega_max_deg)),
+            [instance.m0 - c.m_dry],
+        ]
+    )
+    return scale_x, np.full(3, c.T_max), 0.5 * (c.tf_max - c.tf_min)
+
+
+def _failed(status: str, wall: float, solve_time: float | None = None) -> SubproblemSolution:
+    return SubproblemSolution(
+        status=status,
+        x=None,
+        u=None,
+        sigma=math.nan,
+        nu=None,
+        buffers=None,
+        linear_cost=math.nan,
+        solve_time=wall if solve_time is None else solve_time,
+        wall_time=wall,
+        message=status,
+    )
+
+
+@functools.lru_cache(maxsize=8)
+def compiled_subproblem(n_nodes: int, fix_roll: bool = False) -> PDGSubproblem:
+    """The process-wide compiled subproblem for ``n_nodes`` (canonicalized on first solve)."""
+    return PDGSubproblem(n_nodes, fix_roll)

@@ -1,0 +1,239 @@
+"""SCvx (Mao, Szmuk & Acikmese 2016; Algorithm 1 of the T-SCvx paper) over any convexifiable problem.
+
+The algorithm object is stateless: parameters live in :class:`SCvxParameters`, the iterate and
+trust radius in local variables of :func:`solve_scvx`, and everything that happened in the
+returned history. A problem family plugs in through :class:`ConvexifiedProblem`.
+
+Per iteration (Alg. 1): solve the subproblem about ``z_bar`` with radius ``eta`` (step 1);
+``Delta J = J(z_bar) - J(z*)`` (Eq. 12) and ``Delta L = J(z_bar) - L(z*)`` (Eq. 13);
+``rho = Delta J / Delta L`` (Eq. 14); reject and shrink if ``rho < rho_0``, else accept and
+update ``eta`` by Eq. 15, clipped to ``[eta_lb, eta_ub]``.
+
+Stopping test (Table 1's epsilon_abs, epsilon_rel, feas tol, read as in SCPToolbox.jl): an
+accepted step with ``|z* - z_bar|_inf <= eps_abs`` (scaled units) or ``|Delta J| <= eps_rel |J(z_bar)|``, whose
+nonlinear penalty is below ``feas_tol``. Because a loop can meet that test with virtual control
+stuck on an unreachable state, it additionally requires the virtual control and buffers of the
+subproblem (``virtual_tol``) and the nonlinear defects (``defect_tol``) to be negligible; the
+problem's nonlinear verification then decides ``Status.CONVERGED``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from scpformer.scp.solution import (
+    IterationRecord,
+    Solution,
+    Status,
+    Timing,
+    Trajectory,
+    Verification,
+)
+from scpformer.validation import check_in_range, check_positive
+
+
+@dataclass(frozen=True, kw_only=True)
+class SCvxParameters:
+    """SCvx parameters; defaults are Table 1 of the T-SCvx paper."""
+
+    iter_max: int = 20  # maximum number of subproblem solves
+    lambda_: float = 500.0  # penalty weight lambda
+    rho_0: float = 0.0  # rejection threshold
+    rho_1: float = 0.1  # shrink threshold
+    rho_2: float = 0.7  # growth threshold
+    beta_sh: float = 2.0  # shrink factor (alpha of Alg. 1)
+    beta_gr: float = 2.0  # growth factor (beta of Alg. 1)
+    eta_init: float = 2.0  # initial trust radius (eta_full,init)
+    eta_lb: float = 1e-3  # minimum trust radius
+    eta_ub: float = 10.0  # maximum trust radius
+    eps_abs: float = 0.1  # absolute step tolerance
+    eps_rel: float = 1e-3  # relative penalized-cost tolerance
+    feas_tol: float = 0.5  # nonlinear penalty allowed at the stopping test
+    virtual_tol: float = 1e-6  # max |nu|, max buffer for "negligible" (not in the paper)
+    defect_tol: float = 1e-4  # max |x_{k+1} - F(x_k, u)| for "negligible" (not in the paper)
+    solver: str = "clarabel"  # conic solver: clarabel, ecos or qoco
+
+    def __post_init__(self) -> None:
+        if int(self.iter_max) != self.iter_max or self.iter_max < 1:
+            raise ValueError(f"iter_max must be a positive integer, got {self.iter_max}")
+        for name in ("lambda_", "eta_init", "eta_lb", "eta_ub", "eps_abs", "eps_rel", "feas_tol"):
+            check_positive(name, getattr(self, name))
+        for name in ("virtual_tol", "defect_tol"):
+            check_positive(name, getattr(self, name))
+        check_in_range("rho_0", self.rho_0, -1.0, 1.0)
+        if not self.rho_0 <= self.rho_1 < self.rho_2 <= 1.0:
+            raise ValueError(
+                f"need rho_0 <= rho_1 < rho_2 <= 1, got {self.rho_0}, {self.rho_1}, {self.rho_2}"
+            )
+        for name in ("beta_sh", "beta_gr"):
+            if check_positive(name, getattr(self, name)) < 1.0:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if not self.eta_lb <= self.eta_init <= self.eta_ub:
+            raise ValueError(
+                f"need eta_lb <= eta_init <= eta_ub, got {self.eta_lb}, {self.eta_init}, "
+                f"{self.eta_ub}"
+            )
+        if self.solver not in ("clarabel", "ecos", "qoco"):
+            raise ValueError(f"solver must be clarabel, ecos or qoco, got {self.solver!r}")
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Nonlinear quantities of a trajectory, and its linearization for the next subproblem."""
+
+    cost: float  # C(z)
+    penalty: float  # P(z): sum of |defects|_1 and nonconvex violations
+    max_defect: float  # max |defect|
+    tight_flags: np.ndarray  # (name, node) flags
+    linearization: object  # opaque to SCvx; handed back to ``solve_subproblem``
+    time: float  # seconds spent evaluating
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """The subproblem optimum ``z*`` with its linearized cost L and virtual-control sizes."""
+
+    trajectory: Trajectory | None
+    linear_cost: float
+    virtual_norm: float  # |nu|_1 + sum buffers
+    virtual_max: float  # max(|nu|_inf, max buffer)
+    status: str
+    solver_time: float
+    ok: bool
+
+
+class ConvexifiedProblem(Protocol):
+    """What a problem family provides to SCvx."""
+
+    def evaluate(self, z: Trajectory) -> Evaluation:
+        """Nonlinear cost, penalty, defects, tight flags, and the linearization about ``z``."""
+
+    def solve_subproblem(
+        self, z: Trajectory, evaluation: Evaluation, eta: float, lambda_: float, solver: str
+    ) -> Candidate:
+        """Solve the convex subproblem about ``z`` with trust radius ``eta``."""
+
+    def verify(self, z: Trajectory) -> Verification:
+        """Propagate ``z``'s controls through the nonlinear model."""
+
+    def node_times(self, z: Trajectory) -> np.ndarray:
+        """Node times of ``z``."""
+
+    def step_norm(self, z_new: Trajectory, z_old: Trajectory) -> float:
+        """``|z_new - z_old|_inf`` in the scaled units of the trust region."""
+
+
+def update_trust_radius(eta: float, rho: float, params: SCvxParameters) -> tuple[float, bool]:
+    """Trust radius after a step with ratio ``rho`` and whether the step is accepted (Eq. 15)."""
+    if rho < params.rho_0:
+        return max(eta / params.beta_sh, params.eta_lb), False
+    if rho < params.rho_1:
+        eta = eta / params.beta_sh
+    elif rho >= params.rho_2:
+        eta = eta * params.beta_gr
+    return float(np.clip(eta, params.eta_lb, params.eta_ub)), True
+
+
+def solve_scvx(
+    problem: ConvexifiedProblem,
+    guess: Trajectory,
+    params: SCvxParameters | None = None,
+    eta_init: float | None = None,
+) -> Solution:
+    """Run SCvx from ``guess``; ``eta_init`` overrides ``params.eta_init`` (e.g. T-SCvx's 0.01)."""
+    params = params or SCvxParameters()
+    start = time.perf_counter()
+    eta = params.eta_init if eta_init is None else eta_init
+    z_bar, ev_bar = guess, problem.evaluate(guess)
+    t_disc, t_solver = ev_bar.time, 0.0
+    J_bar = ev_bar.cost + params.lambda_ * ev_bar.penalty
+    history: list[IterationRecord] = []
+    status, message = Status.MAX_ITERATIONS, ""
+    for iteration in range(1, params.iter_max + 1):
+        t_iter = time.perf_counter()
+        cand = problem.solve_subproblem(z_bar, ev_bar, eta, params.lambda_, params.solver)
+        t_solver += cand.solver_time
+        if not cand.ok or cand.trajectory is None:
+            status, message = Status.SOLVER_FAILED, f"iteration {iteration}: {cand.status}"
+            break
+        ev = problem.evaluate(cand.trajectory)
+        t_disc += ev.time
+        J = ev.cost + params.lambda_ * ev.penalty
+        delta_J, delta_L = J_bar - J, J_bar - cand.linear_cost
+        rho = delta_J / delta_L if delta_L != 0.0 else math.nan
+        step = problem.step_norm(cand.trajectory, z_bar)
+        eta_used = eta
+        if math.isnan(rho) or abs(delta_L) <= 1e-12 * max(1.0, abs(J_bar)):
+            accepted = True  # the subproblem predicts no change: z_bar is stationary
+        else:
+            eta, accepted = update_trust_radius(eta, rho, params)
+        history.append(
+            IterationRecord(
+                iteration=iteration,
+                accepted=accepted,
+                cost=ev.cost,
+                penalty=ev.penalty,
+                J=J,
+                L=cand.linear_cost,
+                rho=rho,
+                trust_radius=eta_used,
+                virtual_control_norm=cand.virtual_norm,
+                step_norm=step,
+                tight_flags=ev.tight_flags,
+                time_discretization=ev.time,
+                time_solver=cand.solver_time,
+                time_total=time.perf_counter() - t_iter,
+                solver_status=cand.status,
+            )
+        )
+        if not accepted:
+            continue
+        small_step = step <= params.eps_abs or abs(delta_J) <= params.eps_rel * abs(J_bar)
+        z_bar, ev_bar, J_bar = cand.trajectory, ev, J
+        negligible = cand.virtual_max <= params.virtual_tol and ev.max_defect <= params.defect_tol
+        if small_step and ev.penalty <= params.feas_tol and negligible:
+            status = Status.CONVERGED
+            break
+    return _finish(problem, z_bar, ev_bar, status, message, history, start, t_disc, t_solver)
+
+
+def _finish(
+    problem: ConvexifiedProblem,
+    z: Trajectory,
+    ev: Evaluation,
+    status: Status,
+    message: str,
+    history: list[IterationRecord],
+    start: float,
+    t_disc: float,
+    t_solver: float,
+) -> Solution:
+    t_verify = time.perf_counter()
+    verification = problem.verify(z)
+    t_verify = time.perf_counter() - t_verify
+    if status is Status.CONVERGED and not verification.passed:
+        status, message = Status.VERIFICATION_FAILED, verification.message
+    if status is Status.MAX_ITERATIONS:
+        message = f"no convergence in {len(history)} iterations (penalty {ev.penalty:.3g})"
+    timing = Timing(
+        total=time.perf_counter() - start,
+        discretization=t_disc,
+        solver=t_solver,
+        verification=t_verify,
+    )
+    return Solution(
+        status=status,
+        trajectory=z,
+        t=problem.node_times(z),
+        cost=ev.cost,
+        iterations=len(history),
+        history=history,
+        verification=verification,
+        timing=timing,
+        message=message,
+    )
