@@ -133,7 +133,7 @@ def test_rtn_and_eci_relative_state_conversions_are_inverse():
 
 def test_rtn_velocity_is_the_time_derivative_of_rtn_position_in_two_body_motion():
     oe_c = ISS.to_array()
-    oe_d = oe_c + [50.0, 1e-4, 1e-5, 2e-5, 0.0, 1e-5]
+    oe_d = oe_c + np.array([50.0, 1e-4, 1e-5, 2e-5, 0.0, 1e-5])
     t = np.array([-0.5, 0.5])
     states = [oe_to_eci(propagate_kepler(o, t)) for o in (oe_c, oe_d)]
     rtn = eci_to_rtn(*states[0], *states[1])
@@ -171,9 +171,7 @@ def test_j2_acceleration_is_the_gradient_of_the_j2_potential():
 
     r = np.array([3000e3, -4500e3, 4200e3])
     h = 1.0
-    grad = np.array(
-        [(potential(r + h * ei) - potential(r - h * ei)) / (2 * h) for ei in np.eye(3)]
-    )
+    grad = np.array([(potential(r + h * ei) - potential(r - h * ei)) / (2 * h) for ei in np.eye(3)])
     np.testing.assert_allclose(accel_two_body_j2(r), grad, rtol=1e-7)
     batch = accel_two_body_j2(np.stack([r, 2 * r]))
     np.testing.assert_allclose(batch[0], accel_two_body_j2(r), rtol=1e-15)
@@ -195,7 +193,9 @@ def test_propagators_broadcast_over_a_time_grid():
 # ---------------------------------------------------------------------------------------
 def test_orbital_elements_from_degrees_converts_angles_and_is_frozen():
     assert ISS.i == pytest.approx(np.deg2rad(51.64))
-    np.testing.assert_allclose(OrbitalElements.from_array(ISS.to_array()).to_array(), ISS.to_array())
+    np.testing.assert_allclose(
+        OrbitalElements.from_array(ISS.to_array()).to_array(), ISS.to_array()
+    )
     with pytest.raises(dataclasses.FrozenInstanceError):
         ISS.a = 7e6  # type: ignore[misc]
 

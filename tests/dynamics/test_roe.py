@@ -105,10 +105,18 @@ def _psi_relative_errors(oe: OrbitalElements, sep: float, model: str) -> tuple[f
         aroe = sep * DIRS
         exact = roe_to_rtn_exact(c, aroe / c[0])
         lin = aroe @ psi_matrix(c, model).T
-        err_p = max(err_p, np.max(np.linalg.norm((lin - exact)[:, :3], axis=1)
-                                  / np.linalg.norm(exact[:, :3], axis=1)))
-        err_v = max(err_v, np.max(np.linalg.norm((lin - exact)[:, 3:], axis=1)
-                                  / np.linalg.norm(exact[:, 3:], axis=1)))
+        err_p = max(
+            err_p,
+            np.max(
+                np.linalg.norm((lin - exact)[:, :3], axis=1) / np.linalg.norm(exact[:, :3], axis=1)
+            ),
+        )
+        err_v = max(
+            err_v,
+            np.max(
+                np.linalg.norm((lin - exact)[:, 3:], axis=1) / np.linalg.norm(exact[:, 3:], axis=1)
+            ),
+        )
     return err_p, err_v
 
 

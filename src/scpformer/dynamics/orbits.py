@@ -114,8 +114,7 @@ def validate_oe(oe: ArrayLike | OrbitalElements, name: str = "oe") -> FloatArray
     a, e, inc = arr[..., 0], arr[..., 1], arr[..., 2]
     if np.any(a < R_EARTH):
         raise ValueError(
-            f"{name}.a: semi-major axis {np.min(a):.6g} m is below the Earth radius "
-            f"{R_EARTH:.6g} m"
+            f"{name}.a: semi-major axis {np.min(a):.6g} m is below the Earth radius {R_EARTH:.6g} m"
         )
     if np.any(e < 0.0):
         raise ValueError(f"{name}.e: eccentricity {np.min(e):.6g} is negative")
@@ -139,9 +138,7 @@ def wrap_to_pi(x: ArrayLike) -> FloatArray:
 # ----------------------------------------------------------------------------------------
 # anomalies
 # ----------------------------------------------------------------------------------------
-def solve_kepler(
-    M: ArrayLike, e: ArrayLike, tol: float = 1e-14, max_iter: int = 50
-) -> FloatArray:
+def solve_kepler(M: ArrayLike, e: ArrayLike, tol: float = 1e-14, max_iter: int = 50) -> FloatArray:
     """Solve Kepler's equation ``M = E - e sin E`` for the eccentric anomaly (vectorized).
 
     Newton iteration started from Danby's guess ``E0 = M + 0.85 e sign(sin M)`` (Vallado
@@ -248,9 +245,7 @@ def oe_to_qns(oe: ArrayLike) -> FloatArray:
     """
     oe = validate_oe(oe)
     a, e, i, raan, argp, M = np.moveaxis(oe, -1, 0)
-    return np.stack(
-        [a, wrap_angle(argp + M), e * np.cos(argp), e * np.sin(argp), i, raan], axis=-1
-    )
+    return np.stack([a, wrap_angle(argp + M), e * np.cos(argp), e * np.sin(argp), i, raan], axis=-1)
 
 
 def qns_to_oe(qns: ArrayLike) -> FloatArray:
@@ -372,9 +367,7 @@ def eci_to_oe(r: ArrayLike, v: ArrayLike, mu: float = MU_EARTH) -> FloatArray:
     argp = np.where(e > 0.0, np.arctan2(ey, ex), 0.0)
     theta = np.arctan2(np.sum(r * p2, axis=-1), np.sum(r * p1, axis=-1))
     M = true_to_mean(theta - argp, e)
-    oe = np.stack(
-        [a, e, inc, wrap_angle(raan), wrap_angle(argp), wrap_angle(M)], axis=-1
-    )
+    oe = np.stack([a, e, inc, wrap_angle(raan), wrap_angle(argp), wrap_angle(M)], axis=-1)
     return validate_oe(oe, "eci_to_oe(r, v)")
 
 
@@ -396,9 +389,7 @@ def rtn_dcm(r: ArrayLike, v: ArrayLike) -> FloatArray:
     return np.stack([R, T, N], axis=-2)
 
 
-def eci_to_rtn(
-    r_c: ArrayLike, v_c: ArrayLike, r_d: ArrayLike, v_d: ArrayLike
-) -> FloatArray:
+def eci_to_rtn(r_c: ArrayLike, v_c: ArrayLike, r_d: ArrayLike, v_d: ArrayLike) -> FloatArray:
     """Relative state of a deputy in the chief's rotating RTN frame.
 
     ``rho = C (r_d - r_c)`` and ``rho_dot = C (v_d - v_c) - omega x rho`` with
@@ -463,9 +454,7 @@ def accel_two_body_j2(
     if j2 != 0.0:
         z2_r2 = r[..., 2:3] ** 2 / r2
         k = -1.5 * j2 * mu * r_e**2 / (r2 * r2 * r_mag)
-        fac = np.concatenate(
-            [1.0 - 5.0 * z2_r2, 1.0 - 5.0 * z2_r2, 3.0 - 5.0 * z2_r2], axis=-1
-        )
+        fac = np.concatenate([1.0 - 5.0 * z2_r2, 1.0 - 5.0 * z2_r2, 3.0 - 5.0 * z2_r2], axis=-1)
         acc = acc + k * r * fac
     return acc
 
@@ -623,6 +612,6 @@ class OrbitalElements:
         """Keplerian orbital period [s]."""
         return 2.0 * np.pi / self.mean_motion
 
-    def __array__(self, dtype=None, copy=None) -> FloatArray:  # noqa: D105
+    def __array__(self, dtype=None, copy=None) -> FloatArray:
         arr = self.to_array()
         return arr if dtype is None else arr.astype(dtype)

@@ -168,8 +168,14 @@ def roe_to_oe(oe_chief: ArrayLike | OrbitalElements, roe: ArrayLike) -> FloatArr
     e_d = np.hypot(ex_d, ey_d)
     w_d = np.where(e_d > 0.0, np.arctan2(ey_d, ex_d), 0.0)
     oe_d = np.stack(
-        [a_c * (1.0 + da), e_d, i_c + dix, wrap_angle(O_c + dO), wrap_angle(w_d),
-         wrap_angle(u_d - w_d)],
+        [
+            a_c * (1.0 + da),
+            e_d,
+            i_c + dix,
+            wrap_angle(O_c + dO),
+            wrap_angle(w_d),
+            wrap_angle(u_d - w_d),
+        ],
         axis=-1,
     )
     return validate_oe(oe_d, "deputy (from roe)")
@@ -234,8 +240,7 @@ def _chief_geometry(c: FloatArray) -> dict[str, FloatArray]:
     ec = ex * np.cos(theta) + ey * np.sin(theta)  # e cos f
     es = ex * np.sin(theta) - ey * np.cos(theta)  # e sin f
     k = 1.0 + ec
-    return dict(a=a, e=e, i=i, n=n, eta=eta, theta=theta, ex=ex, ey=ey, ec=ec, es=es, k=k,
-                u=w + M)
+    return dict(a=a, e=e, i=i, n=n, eta=eta, theta=theta, ex=ex, ey=ey, ec=ec, es=es, k=k, u=w + M)
 
 
 def psi_matrix(oe_chief: ArrayLike | OrbitalElements, model: Model = "eccentric") -> FloatArray:
@@ -351,7 +356,9 @@ def psi_matrix(oe_chief: ArrayLike | OrbitalElements, model: Model = "eccentric"
 # ----------------------------------------------------------------------------------------
 # state transition matrices
 # ----------------------------------------------------------------------------------------
-def _stm_prep(oe_chief: ArrayLike | OrbitalElements, dt: ArrayLike) -> tuple[FloatArray, FloatArray]:
+def _stm_prep(
+    oe_chief: ArrayLike | OrbitalElements, dt: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
     c = _chief(oe_chief)
     try:
         dt = np.asarray(dt, dtype=float)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
@@ -189,7 +190,9 @@ class PDGSubproblem:
         self.prox_weight.value = prox_weight
         start = time.perf_counter()
         try:
-            self.problem.solve(solver=SOLVERS[solver])
+            with warnings.catch_warnings():  # "inaccurate" is reported as a status instead
+                warnings.simplefilter("ignore", UserWarning)
+                self.problem.solve(solver=SOLVERS[solver])
         except cp.SolverError as err:
             wall = time.perf_counter() - start
             return _failed(f"solver_error: {err}", wall)

@@ -1,0 +1,57 @@
+"""End-to-end SCvx solves of the 6-DoF problem (slow: compiles the subproblem once)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from scpformer.dynamics import quaternion as quat
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.problem import solve
+from scpformer.scp.solution import Status
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    return solve(PDGInstance())
+
+
+def test_nominal_instance_converges_to_a_verified_trajectory(nominal):
+    assert nominal.status is Status.CONVERGED, nominal.message
+    ver = nominal.verification
+    assert ver.passed
+    assert max(ver.terminal_error.values()) < 5e-3
+    x = nominal.trajectory.x
+    assert 2.0 <= x[-1, 13] < 3.0  # fuel was used, dry mass respected
+    assert nominal.cost == pytest.approx(-x[-1, 13])
+
+
+def test_history_records_every_iteration_with_flags_and_timing(nominal):
+    assert len(nominal.history) == nominal.iterations
+    n_rows = 7 * 50
+    for rec in nominal.history:
+        assert rec.tight_flags.shape == (n_rows,)
+        assert rec.time_solver > 0.0 and rec.time_discretization > 0.0
+    assert nominal.history[-1].accepted
+    assert nominal.timing.solver <= nominal.timing.total
+
+
+def test_rotating_the_instance_about_up_rotates_the_solution(nominal):
+    angle = math.radians(90.0)
+    rotated = solve(PDGInstance().rotated_about_up(angle))
+    assert rotated.status is Status.CONVERGED
+    q_rot = quat.from_axis_angle([1.0, 0.0, 0.0], angle)
+    expected_r = quat.rotate(q_rot, nominal.trajectory.x[:, 0:3])
+    np.testing.assert_allclose(rotated.trajectory.x[:, 0:3], expected_r, atol=1e-3)
+    assert rotated.trajectory.p[0] == pytest.approx(nominal.trajectory.p[0], abs=1e-3)
+    assert rotated.cost == pytest.approx(nominal.cost, abs=1e-4)
+    agree = np.mean(rotated.tight_flags() == nominal.tight_flags())
+    assert agree == 1.0
+
+
+def test_instance_violating_a_state_constraint_is_a_status_not_a_crash():
+    sol = solve(PDGInstance(omega0_deg=(95.0, 0.0, 0.0)))
+    assert sol.status is Status.INFEASIBLE_INSTANCE
+    assert "omega" in sol.message
