@@ -1,4 +1,4 @@
-"""scpformer: sequential convex programming for spacecraft trajectories, with learned warm starts."""
+"""scpformer: sequential convex programming for spacecraft, with learned warm starts."""
 
 from importlib.metadata import PackageNotFoundError, version
 

@@ -22,10 +22,20 @@ def test_jacobians_match_central_finite_differences(r_cp):
     x, u = random_states(np.random.default_rng(2), 6)
     A, B = pd.jacobians(model, x, u)
     h = 1e-6
-    A_fd = np.stack([(pd.dynamics(model, x + h * e, u) - pd.dynamics(model, x - h * e, u)) / (2 * h)
-                     for e in np.eye(14)], axis=-1)
-    B_fd = np.stack([(pd.dynamics(model, x, u + h * e) - pd.dynamics(model, x, u - h * e)) / (2 * h)
-                     for e in np.eye(3)], axis=-1)
+    A_fd = np.stack(
+        [
+            (pd.dynamics(model, x + h * e, u) - pd.dynamics(model, x - h * e, u)) / (2 * h)
+            for e in np.eye(14)
+        ],
+        axis=-1,
+    )
+    B_fd = np.stack(
+        [
+            (pd.dynamics(model, x, u + h * e) - pd.dynamics(model, x, u - h * e)) / (2 * h)
+            for e in np.eye(3)
+        ],
+        axis=-1,
+    )
     np.testing.assert_allclose(A, A_fd, atol=1e-7)
     np.testing.assert_allclose(B, B_fd, atol=1e-7)
 

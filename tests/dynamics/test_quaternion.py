@@ -10,8 +10,9 @@ W = rng.normal(size=(20, 3))
 
 def test_dcm_of_unit_quaternion_is_a_rotation():
     C = quat.dcm(Q)
-    np.testing.assert_allclose(C @ np.swapaxes(C, -1, -2), np.broadcast_to(np.eye(3), C.shape),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        C @ np.swapaxes(C, -1, -2), np.broadcast_to(np.eye(3), C.shape), atol=1e-12
+    )
     np.testing.assert_allclose(np.linalg.det(C), 1.0, atol=1e-12)
 
 
@@ -19,8 +20,7 @@ def test_rotate_matches_quaternion_sandwich_product():
     pure = np.concatenate([np.zeros((20, 1)), W], axis=1)
     sandwich = quat.multiply(quat.multiply(Q, pure), quat.conjugate(Q))
     np.testing.assert_allclose(quat.rotate(Q, W), sandwich[:, 1:], atol=1e-12)
-    np.testing.assert_allclose(np.einsum("kij,kj->ki", quat.dcm(Q), W), sandwich[:, 1:],
-                               atol=1e-12)
+    np.testing.assert_allclose(np.einsum("kij,kj->ki", quat.dcm(Q), W), sandwich[:, 1:], atol=1e-12)
 
 
 def test_rotate_inverse_undoes_rotate():
@@ -30,14 +30,16 @@ def test_rotate_inverse_undoes_rotate():
 def test_omega_and_xi_matrices_give_the_kinematics_product():
     pure = np.concatenate([np.zeros((20, 1)), W], axis=1)
     expected = quat.multiply(Q, pure)
-    np.testing.assert_allclose(np.einsum("kij,kj->ki", quat.omega_matrix(W), Q), expected,
-                               atol=1e-12)
-    np.testing.assert_allclose(np.einsum("kij,kj->ki", quat.xi_matrix(Q), W), expected,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        np.einsum("kij,kj->ki", quat.omega_matrix(W), Q), expected, atol=1e-12
+    )
+    np.testing.assert_allclose(np.einsum("kij,kj->ki", quat.xi_matrix(Q), W), expected, atol=1e-12)
 
 
-@pytest.mark.parametrize("fn, jac", [(quat.rotate, quat.rotate_jacobian),
-                                     (quat.rotate_inverse, quat.rotate_inverse_jacobian)])
+@pytest.mark.parametrize(
+    "fn, jac",
+    [(quat.rotate, quat.rotate_jacobian), (quat.rotate_inverse, quat.rotate_inverse_jacobian)],
+)
 def test_rotation_jacobians_match_finite_differences(fn, jac):
     q = rng.normal(size=4)  # not unit: the SCP iterates are not normalized either
     w = rng.normal(size=3)

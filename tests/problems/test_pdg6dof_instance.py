@@ -31,9 +31,9 @@ def test_bad_instance_fields_are_named_in_the_error(kwargs, message):
 
 
 def test_unknown_fields_are_rejected():
-    with pytest.raises(ValueError, match="unknown instance field.*r_0"):
+    with pytest.raises(ValueError, match=r"unknown instance field.*r_0"):
         PDGInstance.from_dict({"r_0": [1, 2, 3]})
-    with pytest.raises(ValueError, match="unknown constants field.*Tmax"):
+    with pytest.raises(ValueError, match=r"unknown constants field.*Tmax"):
         PDGInstance.from_dict({"constants": {"Tmax": 3}})
 
 
@@ -52,8 +52,9 @@ def test_instance_round_trips_through_json(tmp_path):
 
 
 def test_rotation_about_up_preserves_altitude_speed_and_tilt():
-    inst = PDGInstance(q0=tuple(np.array([0.98, 0.1, 0.1, 0.13]) / np.linalg.norm([0.98, 0.1, 0.1,
-                                                                                   0.13])))
+    inst = PDGInstance(
+        q0=tuple(np.array([0.98, 0.1, 0.1, 0.13]) / np.linalg.norm([0.98, 0.1, 0.1, 0.13]))
+    )
     rot = inst.rotated_about_up(math.radians(45.0))
     assert rot.r0[0] == pytest.approx(inst.r0[0])
     assert np.linalg.norm(rot.v0) == pytest.approx(np.linalg.norm(inst.v0))

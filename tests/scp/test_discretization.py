@@ -27,8 +27,14 @@ def reference():
 
 def integrate_interval(x0, u0, u1, tf, k):
     dt = tf / (N - 1)
-    sol = solve_ivp(lambda t, x: f(x, u0 + (t / dt) * (u1 - u0)), (0, dt), x0,
-                    method="DOP853", rtol=1e-12, atol=1e-12)
+    sol = solve_ivp(
+        lambda t, x: f(x, u0 + (t / dt) * (u1 - u0)),
+        (0, dt),
+        x0,
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-12,
+    )
     return sol.y[:, -1]
 
 
@@ -36,8 +42,9 @@ def test_flow_matches_adaptive_integration_of_each_interval():
     x, u, tf = reference()
     disc = foh_discretize(f, jac, x, u, tf, n_sub=4)
     for k in (0, 25, N - 2):
-        np.testing.assert_allclose(disc.x_next[k], integrate_interval(x[k], u[k], u[k + 1], tf, k),
-                                   atol=1e-8)
+        np.testing.assert_allclose(
+            disc.x_next[k], integrate_interval(x[k], u[k], u[k + 1], tf, k), atol=1e-8
+        )
 
 
 def test_linear_model_is_exact_at_the_reference_and_first_order_nearby():
@@ -48,8 +55,13 @@ def test_linear_model_is_exact_at_the_reference_and_first_order_nearby():
     k = 4
     for eps in (1e-2, 1e-3):
         exact = integrate_interval(x[k] + eps * dx, u[k] + eps * du, u[k + 1], tf + eps * ds, k)
-        linear = (disc.A[k] @ (x[k] + eps * dx) + disc.Bm[k] @ (u[k] + eps * du)
-                  + disc.Bp[k] @ u[k + 1] + disc.S[k] * (tf + eps * ds) + disc.z[k])
+        linear = (
+            disc.A[k] @ (x[k] + eps * dx)
+            + disc.Bm[k] @ (u[k] + eps * du)
+            + disc.Bp[k] @ u[k + 1]
+            + disc.S[k] * (tf + eps * ds)
+            + disc.z[k]
+        )
         # the remainder is second order: it shrinks 100x when eps shrinks 10x
         assert np.abs(exact - linear).max() < 0.5 * eps**2
 
@@ -65,7 +77,9 @@ def test_sensitivities_match_finite_differences_of_the_flow():
         return foh_discretize(f, jac, xs, us, s, n_sub=8).x_next[k]
 
     S_fd = (flow(s=tf + h) - flow(s=tf - h)) / (2 * h)
-    Bp_fd = np.stack([(flow(ukp=u[k + 1] + h * e) - flow(ukp=u[k + 1] - h * e)) / (2 * h)
-                      for e in np.eye(3)], axis=1)
+    Bp_fd = np.stack(
+        [(flow(ukp=u[k + 1] + h * e) - flow(ukp=u[k + 1] - h * e)) / (2 * h) for e in np.eye(3)],
+        axis=1,
+    )
     np.testing.assert_allclose(disc.S[k], S_fd, atol=1e-6)
     np.testing.assert_allclose(disc.Bp[k], Bp_fd, atol=1e-6)

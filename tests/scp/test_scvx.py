@@ -25,8 +25,13 @@ def test_defaults_are_table_1():
 
 @pytest.mark.parametrize(
     "kwargs, field",
-    [({"rho_1": 0.9}, "rho"), ({"eta_init": 100.0}, "eta"), ({"solver": "gurobi"}, "solver"),
-     ({"lambda_": -1.0}, "lambda_"), ({"iter_max": 0}, "iter_max")],
+    [
+        ({"rho_1": 0.9}, "rho"),
+        ({"eta_init": 100.0}, "eta"),
+        ({"solver": "gurobi"}, "solver"),
+        ({"lambda_": -1.0}, "lambda_"),
+        ({"iter_max": 0}, "iter_max"),
+    ],
 )
 def test_bad_parameters_name_the_field(kwargs, field):
     with pytest.raises(ValueError, match=field):

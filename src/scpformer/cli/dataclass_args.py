@@ -48,13 +48,20 @@ def add_dataclass_arguments(
         origin = typing.get_origin(hint)
         if origin is tuple:
             group.add_argument(
-                _flag(prefix, f.name), dest=dest, type=float, nargs=len(default),
-                metavar=f.name.upper(), help=help_text,
+                _flag(prefix, f.name),
+                dest=dest,
+                type=float,
+                nargs=len(default),
+                metavar=f.name.upper(),
+                help=help_text,
             )
         elif hint is bool:
             group.add_argument(
-                _flag(prefix, f.name), dest=dest, action=argparse.BooleanOptionalAction,
-                default=None, help=help_text,
+                _flag(prefix, f.name),
+                dest=dest,
+                action=argparse.BooleanOptionalAction,
+                default=None,
+                help=help_text,
             )
         else:
             group.add_argument(

@@ -54,8 +54,12 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
         description="Solve the 6-DoF minimum-fuel powered descent problem (T-SCvx paper, "
         "Eqs. 2-6, Table 1) with SCvx and verify it by nonlinear propagation.",
     )
-    parser.add_argument("--instance", type=Path, help="instance JSON (r0, v0, q0, omega0_deg, m0, "
-                        "gamma_gs_deg, theta_max_deg[, constants]); default: the nominal instance")
+    parser.add_argument(
+        "--instance",
+        type=Path,
+        help="instance JSON (r0, v0, q0, omega0_deg, m0, "
+        "gamma_gs_deg, theta_max_deg[, constants]); default: the nominal instance",
+    )
     parser.add_argument("--out", type=Path, help="write the solution to this .npz file")
     parser.add_argument("--plot", type=Path, help="write a trajectory figure to this .png file")
     add_config_arguments(parser)
@@ -112,8 +116,11 @@ def run_solve(args: argparse.Namespace) -> int:
             from scpformer.problems.pdg6dof.io import constants_record
 
             plot_trajectory(
-                solution.t, solution.trajectory.x, solution.trajectory.u,
-                constants_record(instance), path=args.plot,
+                solution.t,
+                solution.trajectory.x,
+                solution.trajectory.u,
+                constants_record(instance),
+                path=args.plot,
             )
             history_path = args.plot.with_name(args.plot.stem + "_history.png")
             plot_history([rec.summary() for rec in solution.history], path=history_path)
@@ -132,15 +139,28 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--n-nominal", type=int, default=20, help="nominal instances (20)")
     parser.add_argument("--n-table2", type=int, default=10, help="Table 2 instances (10)")
     parser.add_argument("--seed", type=int, default=0, help="sampling seed (0)")
-    parser.add_argument("--csv", type=Path, default=Path("bench_pdg6dof.csv"),
-                        help="per-instance CSV (bench_pdg6dof.csv)")
+    parser.add_argument(
+        "--csv",
+        type=Path,
+        default=Path("bench_pdg6dof.csv"),
+        help="per-instance CSV (bench_pdg6dof.csv)",
+    )
     add_config_arguments(parser)
     parser.set_defaults(handler=run_bench)
 
 
 BENCH_FIELDS = (
-    "set", "index", "status", "iterations", "wall_s", "discretization_s", "solver_s",
-    "verification_s", "other_s", "cost", "tf",
+    "set",
+    "index",
+    "status",
+    "iterations",
+    "wall_s",
+    "discretization_s",
+    "solver_s",
+    "verification_s",
+    "other_s",
+    "cost",
+    "tf",
 )
 
 
@@ -171,8 +191,10 @@ def summarize(rows: list[dict[str, object]]) -> list[str]:
         sel = [r for r in rows if r["set"] == name]
         wall = np.array([r["wall_s"] for r in sel], dtype=float)
         total = wall.sum() or 1.0
-        share = {k: sum(float(r[k]) for r in sel) / total
-                 for k in ("solver_s", "discretization_s", "verification_s", "other_s")}
+        share = {
+            k: sum(float(r[k]) for r in sel) / total
+            for k in ("solver_s", "discretization_s", "verification_s", "other_s")
+        }
         conv = np.mean([r["status"] == "converged" for r in sel])
         its = np.median([r["iterations"] for r in sel])
         lines.append(

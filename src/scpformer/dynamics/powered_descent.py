@@ -113,5 +113,7 @@ def jacobians(model: RigidBodyModel, x: Array, u: Array) -> tuple[Array, Array]:
     B[..., V, :] = inv_m * C
     B[..., W, :] = J_inv @ quat.skew(model.r_T_B)
     thrust = np.linalg.norm(u, axis=-1, keepdims=True)
-    B[..., M, :] = -model.alpha_mdot * np.where(thrust > 0.0, u / np.where(thrust > 0, thrust, 1), 0)
+    B[..., M, :] = -model.alpha_mdot * np.where(
+        thrust > 0.0, u / np.where(thrust > 0, thrust, 1), 0
+    )
     return A, B

@@ -1,4 +1,4 @@
-"""SCvx (Mao, Szmuk & Acikmese 2016; Algorithm 1 of the T-SCvx paper) over any convexifiable problem.
+"""SCvx (Mao, Szmuk & Acikmese 2016; Algorithm 1 of the T-SCvx paper) for any problem family.
 
 The algorithm object is stateless: parameters live in :class:`SCvxParameters`, the iterate and
 trust radius in local variables of :func:`solve_scvx`, and everything that happened in the
@@ -10,8 +10,10 @@ Per iteration (Alg. 1): solve the subproblem about ``z_bar`` with radius ``eta``
 update ``eta`` by Eq. 15, clipped to ``[eta_lb, eta_ub]``.
 
 Stopping test (Table 1's epsilon_abs, epsilon_rel, feas tol, read as in SCPToolbox.jl): an
-accepted step with ``|z* - z_bar|_inf <= eps_abs`` (scaled units) or ``|Delta J| <= eps_rel |J(z_bar)|``, whose
-nonlinear penalty is below ``feas_tol``. Because a loop can meet that test with virtual control
+accepted step with ``|z* - z_bar|_inf <= eps_abs`` (in the problem's scaled units) or
+``|Delta J| <= eps_rel |J(z_bar)|``, whose nonlinear penalty is below ``feas_tol``.
+
+Because a loop can meet that test with virtual control
 stuck on an unreachable state, it additionally requires the virtual control and buffers of the
 subproblem (``virtual_tol``) and the nonlinear defects (``defect_tol``) to be negligible; the
 problem's nonlinear verification then decides ``Status.CONVERGED``.

@@ -115,4 +115,3 @@ class VehicleConstants:
 DEFAULT_CONSTANTS = VehicleConstants()
 
 DEG = math.pi / 180.0
-

@@ -21,7 +21,9 @@ def upright_attitude(q0: np.ndarray) -> np.ndarray:
     return roll / norm if norm > 1e-9 else quat.IDENTITY.copy()
 
 
-def straight_line_guess(instance: PDGInstance, n_nodes: int) -> tuple[np.ndarray, np.ndarray, float]:
+def straight_line_guess(
+    instance: PDGInstance, n_nodes: int
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Initial guess ``(x (N, 14), u (N, 3), t_f)``."""
     c = instance.constants
     s = np.linspace(0.0, 1.0, n_nodes)[:, None]
@@ -51,4 +53,6 @@ def slerp(q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray) -> np.ndarray:
         out = q_a + s[:, None] * (q_b - q_a)
         return out / np.linalg.norm(out, axis=1, keepdims=True)
     angle = np.arccos(dot)
-    return (np.sin((1 - s) * angle)[:, None] * q_a + np.sin(s * angle)[:, None] * q_b) / np.sin(angle)
+    return (np.sin((1 - s) * angle)[:, None] * q_a + np.sin(s * angle)[:, None] * q_b) / np.sin(
+        angle
+    )

@@ -72,7 +72,7 @@ class PDGInstance:
 
     @property
     def tilt_bound(self) -> float:
-        """Bound ``|H_theta q| <= sin(theta_max / 2)`` equivalent to Eq. 5c; 1 (vacuous) past 180 deg."""
+        """``sin(theta_max / 2)``: Eq. 5c as ``|H_theta q| <= bound``; 1 (vacuous) past 180 deg."""
         return math.sin(math.radians(min(self.theta_max_deg, 180.0)) / 2.0)
 
     # -- construction and serialization --------------------------------------------------
