@@ -1,0 +1,51 @@
+import json
+
+import pytest
+
+from scpformer.cli.main import main
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("{not json", "malformed JSON"),
+        (json.dumps({"r0": [1, 2, 3], "speed": 3}), "unknown instance field(s): speed"),
+        (json.dumps({"r0": [1, "NaN", 3]}), "r0 must be finite"),
+        (json.dumps({"v0": [1, 2]}), "v0 must have shape (3,)"),
+        (json.dumps({"m0": 1.5}), "must exceed the dry mass"),
+        (json.dumps({"q0": [1, 1, 0, 0]}), "q0 must be a unit quaternion"),
+    ],
+)
+def test_bad_instance_file_ends_with_one_line_error(tmp_path, capsys, content, message):
+    path = tmp_path / "instance.json"
+    path.write_text(content)
+    assert main(["solve", "pdg6dof", "--instance", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("scpformer: error:") and message in err
+    assert "\n" not in err and "Traceback" not in err
+
+
+def test_missing_instance_file_is_a_clear_error(tmp_path, capsys):
+    assert main(["solve", "pdg6dof", "--instance", str(tmp_path / "nope.json")]) == 2
+    assert "instance file not found" in capsys.readouterr().err
+
+
+def test_out_of_range_parameter_flag_is_a_clear_error(capsys):
+    assert main(["solve", "pdg6dof", "--scvx-rho-1", "0.9"]) == 2
+    assert "rho_0 <= rho_1 < rho_2" in capsys.readouterr().err
+
+
+def test_infeasible_instance_reports_its_status(tmp_path, capsys):
+    path = tmp_path / "spin.json"
+    path.write_text(json.dumps({"omega0_deg": [120.0, 0.0, 0.0]}))
+    assert main(["solve", "pdg6dof", "--instance", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert "infeasible_instance" in out and "omega" in out
+
+
+def test_help_documents_table_1_defaults(capsys):
+    with pytest.raises(SystemExit):
+        main(["solve", "pdg6dof", "--help"])
+    out = capsys.readouterr().out
+    assert "penalty weight lambda (default: 500.0)" in out
+    assert "--const-T-max" in out
