@@ -71,3 +71,12 @@ def test_drag_opposes_inertial_velocity_for_unit_quaternion():
     v = np.array([-1.0, 0.5, 0.2])
     drag_I = quat.rotate(q, pd.aero_force(model, quat.rotate_inverse(q, v)))
     np.testing.assert_allclose(drag_I, -0.5 * model.rho_SA_CA * np.linalg.norm(v) * v, atol=1e-14)
+
+
+def test_scalar_truth_dynamics_agree_with_the_vectorized_model():
+    model = VehicleConstants(r_cp_B=(0.05, 0.02, -0.03), J_B_diag=(0.001, 0.01, 0.02)).model()
+    x, u = random_states(np.random.default_rng(6), 8)
+    for xi, ui in zip(x, u, strict=True):
+        np.testing.assert_allclose(
+            pd.dynamics_scalar(model, xi, ui), pd.dynamics(model, xi, ui), atol=1e-12
+        )

@@ -25,6 +25,16 @@ Array = NDArray[np.float64]
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
+def cross(a: ArrayLike, b: ArrayLike) -> Array:
+    """Cross product over the last axis (..., 3); several times faster than ``np.cross``."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
 def skew(w: ArrayLike) -> Array:
     """Cross-product matrices ``[w x]`` of shape (..., 3, 3) from vectors (..., 3)."""
     w = np.asarray(w, dtype=float)
@@ -41,7 +51,7 @@ def multiply(p: ArrayLike, q: ArrayLike) -> Array:
     p0, pv = p[..., :1], p[..., 1:]
     q0, qv = q[..., :1], q[..., 1:]
     scalar = p0 * q0 - np.sum(pv * qv, axis=-1, keepdims=True)
-    vector = p0 * qv + q0 * pv + np.cross(pv, qv)
+    vector = p0 * qv + q0 * pv + cross(pv, qv)
     return np.concatenate([scalar, vector], axis=-1)
 
 
@@ -71,8 +81,8 @@ def rotate(q: ArrayLike, w: ArrayLike) -> Array:
     """``C(q) w``: a body vector expressed in the inertial frame, shapes (..., 4), (..., 3)."""
     q, w = np.asarray(q, dtype=float), np.asarray(w, dtype=float)
     qv = q[..., 1:]
-    qxw = np.cross(qv, w)
-    return w + 2.0 * q[..., :1] * qxw + 2.0 * np.cross(qv, qxw)
+    qxw = cross(qv, w)
+    return w + 2.0 * q[..., :1] * qxw + 2.0 * cross(qv, qxw)
 
 
 def rotate_inverse(q: ArrayLike, w: ArrayLike) -> Array:
@@ -90,7 +100,7 @@ def rotate_jacobian(q: ArrayLike, w: ArrayLike) -> Array:
     q, w = np.asarray(q, dtype=float), np.asarray(w, dtype=float)
     q0, qv = q[..., 0], q[..., 1:]
     jac = np.empty((*np.broadcast_shapes(q.shape[:-1], w.shape[:-1]), 3, 4))
-    jac[..., 0] = 2.0 * np.cross(qv, w)
+    jac[..., 0] = 2.0 * cross(qv, w)
     qv_dot_w = np.sum(qv * w, axis=-1)[..., None, None]
     outer = qv[..., :, None] * w[..., None, :] - 2.0 * w[..., :, None] * qv[..., None, :]
     jac[..., 1:] = -2.0 * q0[..., None, None] * skew(w) + 2.0 * (qv_dot_w * np.eye(3) + outer)

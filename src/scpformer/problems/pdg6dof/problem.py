@@ -156,6 +156,8 @@ def propagate(
     """
     tol = tol or VerificationTolerances()
     model = instance.constants.model()
+    diagonal = np.count_nonzero(model.J_B - np.diag(np.diag(model.J_B))) == 0
+    rhs_model = pd.dynamics_scalar if diagonal else pd.dynamics
     n = z.x.shape[0]
     dt = float(z.p[0]) / (n - 1)
     fractions = np.linspace(0.0, 1.0, samples_per_interval + 1)
@@ -165,7 +167,7 @@ def propagate(
         u_k, du = z.u[k], z.u[k + 1] - z.u[k]
 
         def rhs(t: float, x: np.ndarray, u_k: np.ndarray = u_k, du: np.ndarray = du) -> np.ndarray:
-            return pd.dynamics(model, x, u_k + (t / dt) * du)
+            return rhs_model(model, x, u_k + (t / dt) * du)
 
         result = solve_ivp(
             rhs,
