@@ -2,8 +2,9 @@
 
 States are interpolated linearly between the initial and the final boundary conditions (mass
 from ``m0`` towards ``m_dry``; the attitude slerped to upright, keeping the initial roll), the
-thrust hovers, ``T = -m g`` along the body x axis, and the final time is the descent time at
-the mean of the initial and final vertical speeds, clipped to the final-time bounds.
+thrust hovers, ``T = -m g`` along the body x axis, and the final time is the one that minimizes
+the fuel of the cubic position profile joining (r0, v0) to (r_f, v_f) flown at mass ``m0``
+within ``T_max`` (:func:`cubic_final_time`).
 """
 
 from __future__ import annotations
@@ -38,10 +39,46 @@ def straight_line_guess(
     mean_mass = 0.5 * (instance.m0 + c.m_dry)
     u = np.tile([-mean_mass * c.g_I[0], 0.0, 0.0], (n_nodes, 1))
     u[:, 0] = np.clip(u[:, 0], c.T_min, c.T_max)
-    descent_speed = 0.5 * (abs(instance.v0[0]) + abs(c.v_f[0]))
-    tf = np.clip(2.0 * instance.r0[0] / max(descent_speed, 1e-3), c.tf_min, c.tf_max)
-    tf = float(np.clip(tf, c.tf_min + 0.5 * (c.tf_max - c.tf_min) * 0, c.tf_max))
+    tf = cubic_final_time(instance)
     return x, u, tf
+
+
+def cubic_profile(
+    instance: PDGInstance, tf: float, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cubic r(t) meeting (r0, v0) at 0 and (r_f, v_f) at ``tf``: r, v, a at times ``t`` (M, 3)."""
+    c = instance.constants
+    r0, v0 = np.asarray(instance.r0), np.asarray(instance.v0)
+    rf, vf = np.asarray(c.r_f), np.asarray(c.v_f)
+    a2, a3 = np.linalg.solve(
+        np.array([[tf**2, tf**3], [2.0 * tf, 3.0 * tf**2]]), np.stack([rf - r0 - v0 * tf, vf - v0])
+    )
+    t = np.asarray(t, dtype=float)[:, None]
+    r = r0 + v0 * t + a2 * t**2 + a3 * t**3
+    return r, v0 + 2.0 * a2 * t + 3.0 * a3 * t**2, 2.0 * a2 + 6.0 * a3 * t
+
+
+def cubic_final_time(instance: PDGInstance, n_grid: int = 200, n_t: int = 51) -> float:
+    """Final time minimizing the fuel ``int alpha m0 |a - g| + beta dt`` of the cubic profile.
+
+    Grid search over ``[tf_min, tf_max]`` among the profiles whose thrust ``m0 |a - g|`` stays
+    below ``T_max``; ``tf_max`` when none does. On the nominal instance it gives 4.81 (the
+    converged t_f is 4.7-5.0), where the former descent-time rule gave 14.6, and 20 (tf_max)
+    on most sampled instances, far beyond the fuel they carry.
+    """
+    c = instance.constants
+    g = np.asarray(c.g_I)
+    best_tf, best_fuel = float(c.tf_max), np.inf
+    for tf in np.linspace(c.tf_min, c.tf_max, n_grid):
+        t = np.linspace(0.0, tf, n_t)
+        _, _, acc = cubic_profile(instance, tf, t)
+        thrust = instance.m0 * np.linalg.norm(acc - g, axis=1)
+        if thrust.max() > c.T_max:
+            continue
+        fuel = np.trapezoid(c.alpha_mdot * thrust + c.beta_mdot, t)
+        if fuel < best_fuel:
+            best_tf, best_fuel = float(tf), float(fuel)
+    return best_tf
 
 
 def slerp(q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -180,14 +180,17 @@ class SampleRanges:
 
     @classmethod
     def nominal(cls) -> SampleRanges:
-        """A sub-range of Table 2 where most instances are feasible (positive East/North)."""
+        """A sub-range of Table 2 around Szmuk & Acikmese's example where most instances are
+        feasible (positive East/North). The binding resource is fuel: with m_dry = 2 and
+        m0 <= 3, descents from higher or farther away run out of propellant.
+        """
         return cls(
             gamma_gs_deg=(5.0, 30.0),
             theta_max_deg=(60.0, 90.0),
-            r0=((3.0, 6.0), (0.0, 4.0), (0.0, 4.0)),
-            v0=((-1.5, -0.2), (-1.0, 1.0), (-1.0, 1.0)),
+            r0=((3.0, 5.0), (0.0, 3.0), (0.0, 3.0)),
+            v0=((-1.2, -0.3), (-0.8, 0.8), (-0.8, 0.8)),
             omega0_deg=((-10.0, 10.0), (-10.0, 10.0), (-10.0, 10.0)),
-            m0=(2.6, 3.0),
+            m0=(2.8, 3.0),
             q0_tilt_max_deg=20.0,
         )
 

@@ -49,12 +49,20 @@ class PDGSolverConfig:
     the dynamics need: 4 RK4 steps per interval already match an adaptive DOP853 propagation to
     ~1e-8 (tests/problems/test_pdg6dof.py), so the default is 4 and the paper's value remains
     one flag away.
+
+    ``prox_weight`` adds ``prox_weight |z - z_bar|^2`` to the subproblem cost, the prox-linear
+    extension of SCvx the paper cites ([50]). With a linear cost and a hard box every step of
+    Algorithm 1 lands on the box and converges only as fast as eta halves (measured: 1 of 11
+    nominal instances within 20 iterations); the proximal term lets steps shrink by themselves
+    near the solution (9 of 11, median 11 iterations) at about 0.5% of final mass. The ratio
+    test still compares the nonlinear J with the linear L without the proximal term.
+    ``prox_weight = 0`` is Algorithm 1 exactly.
     """
 
     n_nodes: int = 50  # N, number of temporal nodes
     n_sub: int = 4  # RK4 steps per interval
     fix_roll: bool = False  # impose q_f = q_id and w_f = 0 literally (see constants docstring)
-    prox_weight: float = 0.0  # proximal weight on |z - z_bar|^2 (0: Algorithm 1 exactly)
+    prox_weight: float = 1e-2  # weight of |z - z_bar|^2 in the subproblem (0: Algorithm 1)
     tight_tol: float = 1e-5  # a row is tight when g >= -tight_tol
     scvx: SCvxParameters = field(default_factory=SCvxParameters)
     verification: VerificationTolerances = field(default_factory=VerificationTolerances)
@@ -64,6 +72,8 @@ class PDGSolverConfig:
             raise ValueError(f"n_nodes must be at least 3, got {self.n_nodes}")
         if self.n_sub < 1:
             raise ValueError(f"n_sub must be at least 1, got {self.n_sub}")
+        if not self.prox_weight >= 0.0:
+            raise ValueError(f"prox_weight must be nonnegative, got {self.prox_weight}")
 
 
 class PDGProblem:
@@ -73,7 +83,7 @@ class PDGProblem:
         self.instance = instance
         self.config = config
         self.model = instance.constants.model()
-        self.subproblem = compiled_subproblem(config.n_nodes, config.fix_roll)
+        self.subproblem = compiled_subproblem(config.n_nodes, config.fix_roll, config.prox_weight)
 
     def dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return pd.dynamics(self.model, x, u)
@@ -123,7 +133,7 @@ class PDGProblem:
         assert isinstance(disc, FOHDiscretization)
         self.subproblem.set_instance(self.instance)
         self.subproblem.set_linearization(disc, z.x, z.u, float(z.p[0]))
-        sol = self.subproblem.solve(eta, lambda_, solver, self.config.prox_weight)
+        sol = self.subproblem.solve(eta, lambda_, solver)
         if sol.status not in SOLVED or sol.x is None:
             return Candidate(None, np.nan, np.nan, np.nan, sol.status, sol.solve_time, False)
         virtual_max = max(float(np.abs(sol.nu).max()), float(sol.buffers.max()))

@@ -9,7 +9,7 @@ iteration only writes numbers into parameters before calling the conic solver.
 
 Subproblem (Eq. 7 with Eqs. 10-11):
 
-    min   -m_N + lambda (|nu|_1 + sum s)
+    min   -m_N + lambda (|nu|_1 + sum s) [+ w_prox |z - z_bar|^2, see PDGSolverConfig]
     s.t.  X_{k+1} = A_k X_k + Bm_k U_k + Bp_k U_{k+1} + S_k sigma + z_k + nu_k       (10)
           T_min - d_k . U_k <= s_k,  d_k = U_bar_k / |U_bar_k|                       (11, 6a)
           convex rows of 5a-5d, 6a (upper), 6b at every node
@@ -55,24 +55,27 @@ class SubproblemSolution:
 class PDGSubproblem:
     """Parametric convex subproblem for ``n_nodes`` nodes; see the module docstring."""
 
-    def __init__(self, n_nodes: int, fix_roll: bool = False) -> None:
+    def __init__(self, n_nodes: int, fix_roll: bool = False, prox_weight: float = 0.0) -> None:
         if n_nodes < 3:
             raise ValueError(f"n_nodes must be at least 3, got {n_nodes}")
+        if not prox_weight >= 0.0:
+            raise ValueError(f"prox_weight must be nonnegative, got {prox_weight}")
         self.n_nodes = n_nodes
         self.fix_roll = fix_roll
+        self.prox_weight = float(prox_weight)
         n, k = n_nodes, n_nodes - 1
         P = cp.Parameter
-        self.A = [P((14, 14), name=f"A{i}") for i in range(k)]
-        self.Bm = [P((14, 3), name=f"Bm{i}") for i in range(k)]
-        self.Bp = [P((14, 3), name=f"Bp{i}") for i in range(k)]
+        self.A = P((k, 14, 14), name="A")
+        self.Bm = P((k, 14, 3), name="Bm")
+        self.Bp = P((k, 14, 3), name="Bp")
         self.S = P((k, 14), name="S")
         self.z = P((k, 14), name="z")
         self.x_ref = P((n, 14), name="x_ref")
         self.u_ref = P((n, 3), name="u_ref")
         self.sigma_ref = P(name="sigma_ref")
         self.thrust_dir = P((n, 3), name="thrust_dir")
-        self.eta_x = P((n, 14), nonneg=True, name="eta_x")
-        self.eta_u = P((n, 3), nonneg=True, name="eta_u")
+        self.eta_x = P(14, nonneg=True, name="eta_x")  # eta * scale per state component
+        self.eta_u = P(3, nonneg=True, name="eta_u")
         self.eta_sigma = P(nonneg=True, name="eta_sigma")
         self.lambda_ = P(nonneg=True, name="lambda")
         self.x0 = P(14, name="x0")
@@ -92,10 +95,6 @@ class PDGSubproblem:
         self.sigma = cp.Variable(name="sigma")
         self.nu = cp.Variable((k, 14), name="nu")
         self.buffers = cp.Variable(n, nonneg=True, name="s")
-        self.dX = cp.Variable((n, 14), name="dX")
-        self.dU = cp.Variable((n, 3), name="dU")
-        self.dsigma = cp.Variable(name="dsigma")
-        self.prox_weight = P(nonneg=True, name="prox_weight")
         self.problem = self._build()
 
     def _build(self) -> cp.Problem:
@@ -111,6 +110,7 @@ class PDGSubproblem:
             for i in range(self.n_nodes - 1)
         ]
         thrust = cp.norm(U, 2, axis=1)
+        ones = np.ones((self.n_nodes, 1))
         terminal_q = [6, 7, 8, 9] if self.fix_roll else [8, 9]
         terminal_w = [10, 11, 12] if self.fix_roll else [11, 12]
         constraints = [
@@ -129,21 +129,22 @@ class PDGSubproblem:
             cp.multiply(self.cos_delta, thrust) <= U[:, 0],  # 6b
             sigma >= self.tf_bounds[0],
             sigma <= self.tf_bounds[1],
-            X - self.x_ref <= self.eta_x,
-            self.x_ref - X <= self.eta_x,
-            U - self.u_ref <= self.eta_u,
-            self.u_ref - U <= self.eta_u,
+            X - self.x_ref <= ones @ self.eta_x[None, :],
+            self.x_ref - X <= ones @ self.eta_x[None, :],
+            U - self.u_ref <= ones @ self.eta_u[None, :],
+            self.u_ref - U <= ones @ self.eta_u[None, :],
             sigma - self.sigma_ref <= self.eta_sigma,
             self.sigma_ref - sigma <= self.eta_sigma,
         ]
         penalty = cp.sum(cp.abs(self.nu)) + cp.sum(self.buffers)
-        constraints += [
-            self.dX == X - self.x_ref,
-            self.dU == U - self.u_ref,
-            self.dsigma == sigma - self.sigma_ref,
-        ]
-        prox = cp.sum_squares(self.dX) + cp.sum_squares(self.dU) + cp.square(self.dsigma)
-        cost = -X[-1, 13] + self.lambda_ * penalty + self.prox_weight * prox
+        cost = -X[-1, 13] + self.lambda_ * penalty
+        if self.prox_weight > 0.0:  # a constant, so that the product stays DPP
+            deviation = (
+                cp.sum_squares(X - self.x_ref)
+                + cp.sum_squares(U - self.u_ref)
+                + cp.square(sigma - self.sigma_ref)
+            )
+            cost = cost + self.prox_weight * deviation
         return cp.Problem(cp.Minimize(cost), constraints)
 
     def set_instance(self, instance: PDGInstance) -> None:
@@ -166,10 +167,9 @@ class PDGSubproblem:
         self, disc: FOHDiscretization, x: np.ndarray, u: np.ndarray, sigma: float
     ) -> None:
         """Write the FOH matrices and the reference trajectory of the current iterate."""
-        for i in range(self.n_nodes - 1):
-            self.A[i].value = disc.A[i]
-            self.Bm[i].value = disc.Bm[i]
-            self.Bp[i].value = disc.Bp[i]
+        self.A.value = disc.A
+        self.Bm.value = disc.Bm
+        self.Bp.value = disc.Bp
         self.S.value = disc.S
         self.z.value = disc.z
         self.x_ref.value = x
@@ -179,15 +179,12 @@ class PDGSubproblem:
         safe = np.where(norms > 0.0, norms, 1.0)
         self.thrust_dir.value = np.where(norms > 0.0, u / safe, np.array([1.0, 0.0, 0.0]))
 
-    def solve(
-        self, eta: float, lambda_: float, solver: str = "clarabel", prox_weight: float = 0.0
-    ) -> SubproblemSolution:
+    def solve(self, eta: float, lambda_: float, solver: str = "clarabel") -> SubproblemSolution:
         """Solve with trust radius ``eta`` and penalty weight ``lambda_``; failures are statuses."""
-        self.eta_x.value = np.broadcast_to(eta * self.scale_x, (self.n_nodes, 14))
-        self.eta_u.value = np.broadcast_to(eta * self.scale_u, (self.n_nodes, 3))
+        self.eta_x.value = eta * self.scale_x
+        self.eta_u.value = eta * self.scale_u
         self.eta_sigma.value = eta * self.scale_sigma
         self.lambda_.value = lambda_
-        self.prox_weight.value = prox_weight
         start = time.perf_counter()
         try:
             with warnings.catch_warnings():  # "inaccurate" is reported as a status instead
@@ -220,23 +217,25 @@ class PDGSubproblem:
 def trust_region_scales(instance: PDGInstance) -> tuple[np.ndarray, np.ndarray, float]:
     """Per-variable scales of the trust region: ``|x_i - x_bar_i| <= eta * scale_i``.
 
-    The paper scales its variables to their ranges (Sec. III.E.1) without listing the scales; a
-    unit trust radius here spans a typical excursion of each quantity: position 10 U_L,
-    velocity 2 U_L/U_T, quaternion 1, rates omega_max, mass m0 - m_dry, thrust T_max and the
-    final time (tf_max - tf_min) / 2. Without it the final time, ten times larger than the
-    other variables, creeps towards its optimum by eta per iteration.
+    The paper scales its variables to their ranges (Sec. III.E.1) without listing the scales.
+    A unit trust radius here spans position 1 U_L, velocity 0.5 U_L/U_T, quaternion 0.25, rates
+    omega_max / 2, mass m0 - m_dry, thrust T_max / 4 and final time 0.5 U_T. These are tighter
+    than the variable ranges on the thrust, rate and final-time axes, where the linearization
+    error is largest (measured: the steps sat on those faces of the box and were rejected),
+    and balanced so that no axis is left effectively unconstrained. Unscaled, the final time,
+    ten times larger than the other variables, creeps towards its optimum by eta per iteration.
     """
     c = instance.constants
     scale_x = np.concatenate(
         [
-            np.full(3, 10.0),
-            np.full(3, 2.0),
-            np.ones(4),
-            np.full(3, math.radians(c.omega_max_deg)),
+            np.full(3, 1.0),
+            np.full(3, 0.5),
+            np.full(4, 0.25),
+            np.full(3, 0.5 * math.radians(c.omega_max_deg)),
             [instance.m0 - c.m_dry],
         ]
     )
-    return scale_x, np.full(3, c.T_max), 0.5 * (c.tf_max - c.tf_min)
+    return scale_x, np.full(3, 0.25 * c.T_max), 0.5
 
 
 def _failed(status: str, wall: float, solve_time: float | None = None) -> SubproblemSolution:
@@ -255,6 +254,8 @@ def _failed(status: str, wall: float, solve_time: float | None = None) -> Subpro
 
 
 @functools.lru_cache(maxsize=8)
-def compiled_subproblem(n_nodes: int, fix_roll: bool = False) -> PDGSubproblem:
-    """The process-wide compiled subproblem for ``n_nodes`` (canonicalized on first solve)."""
-    return PDGSubproblem(n_nodes, fix_roll)
+def compiled_subproblem(
+    n_nodes: int, fix_roll: bool = False, prox_weight: float = 0.0
+) -> PDGSubproblem:
+    """The process-wide subproblem per structure (canonicalized on its first solve)."""
+    return PDGSubproblem(n_nodes, fix_roll, prox_weight)
