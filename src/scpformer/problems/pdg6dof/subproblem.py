@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
+from scpformer.cache import cached_pickle
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.scp.discretization import FOHDiscretization
 
@@ -257,5 +258,18 @@ def _failed(status: str, wall: float, solve_time: float | None = None) -> Subpro
 def compiled_subproblem(
     n_nodes: int, fix_roll: bool = False, prox_weight: float = 0.0
 ) -> PDGSubproblem:
-    """The process-wide subproblem per structure (canonicalized on its first solve)."""
-    return PDGSubproblem(n_nodes, fix_roll, prox_weight)
+    """The process-wide subproblem per structure, canonicalized for Clarabel.
+
+    cvxpy's parametric canonicalization of this problem takes about 10 s. The canonicalized
+    problem is therefore kept on disk (see :func:`scpformer.cache.cached_pickle`), keyed by
+    the structure, the cvxpy and scpformer versions and this module's source, so that it is
+    built once per machine rather than once per process.
+    """
+    key = f"pdg6dof-subproblem-N{n_nodes}-roll{int(fix_roll)}-prox{prox_weight:g}"
+
+    def build() -> PDGSubproblem:
+        sub = PDGSubproblem(n_nodes, fix_roll, prox_weight)
+        sub.problem.get_problem_data(cp.CLARABEL)  # canonicalize now, before any solver exists
+        return sub
+
+    return cached_pickle(key, build, source=__file__)
