@@ -55,3 +55,13 @@ def test_instance_violating_a_state_constraint_is_a_status_not_a_crash():
     sol = solve(PDGInstance(omega0_deg=(95.0, 0.0, 0.0)))
     assert sol.status is Status.INFEASIBLE_INSTANCE
     assert "omega" in sol.message
+
+
+def test_infeasible_subproblem_is_a_solver_failed_status_with_the_reason():
+    from scpformer.problems.pdg6dof.constants import VehicleConstants
+
+    # a landing target off the glideslope cone's axis at zero altitude: Eq. 5b cannot hold there
+    instance = PDGInstance(constants=VehicleConstants(r_f=(0.0, 1.0, 0.0)))
+    sol = solve(instance)
+    assert sol.status is Status.SOLVER_FAILED
+    assert "infeasible" in sol.message

@@ -1,0 +1,49 @@
+"""Check the 6-DoF performance targets of the foundation issue on this machine.
+
+Runs ``scpformer bench pdg6dof`` (20 nominal + 10 Table 2 instances, seed 0) and compares
+the nominal set with the targets: median wall time under 1 s and at least 70% of the wall
+time inside the conic solver. Prints the summary and PASS/FAIL per target; exit status 1 on a
+miss. Timings depend on the machine and its load: run it on an otherwise idle machine.
+
+Usage: python benchmarks/pdg6dof_targets.py [--csv bench_pdg6dof.csv]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import subprocess
+import sys
+
+import numpy as np
+
+TARGET_MEDIAN_S = 1.0
+TARGET_SOLVER_SHARE = 0.70
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--csv", default="bench_pdg6dof.csv")
+    args = parser.parse_args()
+    subprocess.run(["scpformer", "bench", "pdg6dof", "--csv", args.csv], check=True)
+    with open(args.csv, newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["set"] == "nominal"]
+    wall = np.array([float(r["wall_s"]) for r in rows])
+    share = sum(float(r["solver_s"]) for r in rows) / wall.sum()
+    checks = [
+        (
+            f"median wall time {np.median(wall):.3f} s < {TARGET_MEDIAN_S} s",
+            np.median(wall) < TARGET_MEDIAN_S,
+        ),
+        (
+            f"conic solver share {share:.0%} >= {TARGET_SOLVER_SHARE:.0%}",
+            share >= TARGET_SOLVER_SHARE,
+        ),
+    ]
+    for text, ok in checks:
+        print(("PASS " if ok else "FAIL ") + text)
+    return 0 if all(ok for _, ok in checks) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
