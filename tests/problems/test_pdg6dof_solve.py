@@ -65,3 +65,14 @@ def test_infeasible_subproblem_is_a_solver_failed_status_with_the_reason():
     sol = solve(instance)
     assert sol.status is Status.SOLVER_FAILED
     assert "infeasible" in sol.message
+
+
+@pytest.mark.parametrize("solver", ["ecos", "qoco"])
+def test_every_conic_solver_reaches_the_same_trajectory(nominal, solver):
+    from scpformer.problems.pdg6dof.problem import PDGSolverConfig
+    from scpformer.scp.scvx import SCvxParameters
+
+    other = solve(PDGInstance(), PDGSolverConfig(scvx=SCvxParameters(solver=solver)))
+    assert other.status is Status.CONVERGED
+    assert other.cost == pytest.approx(nominal.cost, abs=1e-4)
+    assert other.trajectory.p[0] == pytest.approx(nominal.trajectory.p[0], abs=1e-3)

@@ -83,7 +83,9 @@ class PDGProblem:
         self.instance = instance
         self.config = config
         self.model = instance.constants.model()
-        self.subproblem = compiled_subproblem(config.n_nodes, config.fix_roll, config.prox_weight)
+        self.subproblem = compiled_subproblem(
+            config.n_nodes, config.fix_roll, config.prox_weight, config.scvx.solver
+        )
 
     def dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return pd.dynamics(self.model, x, u)

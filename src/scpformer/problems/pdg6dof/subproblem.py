@@ -256,20 +256,23 @@ def _failed(status: str, wall: float, solve_time: float | None = None) -> Subpro
 
 @functools.lru_cache(maxsize=8)
 def compiled_subproblem(
-    n_nodes: int, fix_roll: bool = False, prox_weight: float = 0.0
+    n_nodes: int, fix_roll: bool = False, prox_weight: float = 0.0, solver: str = "clarabel"
 ) -> PDGSubproblem:
-    """The process-wide subproblem per structure, canonicalized for Clarabel.
+    """The process-wide subproblem per structure, canonicalized for ``solver``.
 
-    cvxpy's parametric canonicalization of this problem takes about 10 s. The canonicalized
-    problem is therefore kept on disk (see :func:`scpformer.cache.cached_pickle`), keyed by
-    the structure, the cvxpy and scpformer versions and this module's source, so that it is
-    built once per machine rather than once per process.
+    cvxpy's parametric canonicalization of this problem takes about 10 s (Clarabel, ECOS) or
+    3 s (QOCO). The canonicalized problem is therefore kept on disk (see
+    :func:`scpformer.cache.cached_pickle`), keyed by the structure, the solver, the cvxpy and
+    scpformer versions and this module's source, so that it is built once per machine rather
+    than once per process.
     """
-    key = f"pdg6dof-subproblem-N{n_nodes}-roll{int(fix_roll)}-prox{prox_weight:g}"
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    key = f"pdg6dof-subproblem-N{n_nodes}-roll{int(fix_roll)}-prox{prox_weight:g}-{solver}"
 
     def build() -> PDGSubproblem:
         sub = PDGSubproblem(n_nodes, fix_roll, prox_weight)
-        sub.problem.get_problem_data(cp.CLARABEL)  # canonicalize now, before any solver exists
+        sub.problem.get_problem_data(SOLVERS[solver])  # canonicalize before any solver exists
         return sub
 
     return cached_pickle(key, build, source=__file__)
