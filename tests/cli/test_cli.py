@@ -49,3 +49,16 @@ def test_help_documents_table_1_defaults(capsys):
     out = capsys.readouterr().out
     assert "penalty weight lambda (default: 500.0)" in out
     assert "--const-T-max" in out
+
+
+@pytest.mark.slow
+def test_bench_writes_a_csv_row_per_instance_and_a_summary(tmp_path, capsys):
+    import csv
+
+    out = tmp_path / "bench.csv"
+    assert main(["bench", "pdg6dof", "--n-nominal", "1", "--n-table2", "2", "--csv", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [r["set"] for r in rows] == ["nominal", "table2", "table2"]
+    assert {"status", "iterations", "wall_s", "solver_s", "discretization_s"} <= set(rows[0])
+    text = capsys.readouterr().out
+    assert "med s" in text and "p95 s" in text

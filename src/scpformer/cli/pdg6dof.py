@@ -206,6 +206,21 @@ def summarize(rows: list[dict[str, object]]) -> list[str]:
     return lines
 
 
+def per_instance_lines(rows: list[dict[str, object]]) -> list[str]:
+    """One line per solve: set, index, status, iterations, wall time and its split."""
+    lines = [
+        f"{'set':<8} {'#':>3} {'status':<20} {'it':>3} {'wall s':>7} {'solver':>7} "
+        f"{'discr':>7} {'cost':>8} {'tf':>6}"
+    ]
+    for r in rows:
+        lines.append(
+            f"{r['set']:<8} {r['index']:>3} {r['status']:<20} {r['iterations']:>3} "
+            f"{r['wall_s']:>7.3f} {r['solver_s']:>7.3f} {r['discretization_s']:>7.3f} "
+            f"{r['cost']:>8.4f} {r['tf']:>6.3f}"
+        )
+    return lines
+
+
 def run_bench(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     rng = np.random.default_rng(args.seed)
@@ -231,6 +246,7 @@ def run_bench(args: argparse.Namespace) -> int:
         writer = csv.DictWriter(fh, fieldnames=BENCH_FIELDS)
         writer.writeheader()
         writer.writerows(rows)
+    print("\n".join(per_instance_lines(rows)))
     print("\n".join(summarize(rows)))
     print(f"wrote {args.csv}")
     return 0
