@@ -16,9 +16,12 @@ def random_states(rng, n):
     return x, rng.uniform(-3, 3, (n, 3))
 
 
-@pytest.mark.parametrize("r_cp", [(0.0, 0.0, 0.0), (0.05, 0.02, -0.03)])
-def test_jacobians_match_central_finite_differences(r_cp):
-    model = VehicleConstants(r_cp_B=r_cp, J_B_diag=(0.001, 0.01, 0.02)).model()
+@pytest.mark.parametrize(
+    "r_cp, rho_SA_CA",
+    [((0.0, 0.0, 0.0), 0.2), ((0.05, 0.02, -0.03), 0.2), ((0.05, 0.02, -0.03), 0.0)],
+)
+def test_jacobians_match_central_finite_differences(r_cp, rho_SA_CA):
+    model = VehicleConstants(r_cp_B=r_cp, rho_SA_CA=rho_SA_CA, J_B_diag=(0.001, 0.01, 0.02)).model()
     x, u = random_states(np.random.default_rng(2), 6)
     A, B = pd.jacobians(model, x, u)
     h = 1e-6

@@ -90,26 +90,29 @@ def jacobians(model: RigidBodyModel, x: Array, u: Array) -> tuple[Array, Array]:
     batch = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
     A = np.zeros((*batch, N_STATE, N_STATE))
     B = np.zeros((*batch, N_STATE, N_CONTROL))
-    v_B = quat.rotate_inverse(q, x[..., V])
-    aero = aero_force(model, v_B)
-    dA_dvB = aero_force_jacobian(model, v_B)
-    dvB_dv = np.swapaxes(quat.dcm(q), -1, -2)
-    dvB_dq = quat.rotate_inverse_jacobian(q, x[..., V])
     C = quat.dcm(q)
+    Ct = np.swapaxes(C, -1, -2)  # d v_B / d v_I
+    v_B = np.einsum("...ij,...j->...i", Ct, x[..., V])
+    aero = aero_force(model, v_B)
     inv_m = (1.0 / m)[..., None, None]
-
     A[..., R, V] = np.eye(3)
-    A[..., V, V] = inv_m * C @ dA_dvB @ dvB_dv
-    A[..., V, Q] = inv_m * (quat.rotate_jacobian(q, u + aero) + C @ dA_dvB @ dvB_dq)
-    A[..., V, M] = -quat.rotate(q, u + aero) / m[..., None] ** 2
+    A[..., V, Q] = inv_m * quat.rotate_jacobian(q, u + aero)
+    A[..., V, M] = -np.einsum("...ij,...j->...i", C, u + aero) / m[..., None] ** 2
     A[..., Q, Q] = 0.5 * quat.omega_matrix(w)
     A[..., Q, W] = 0.5 * quat.xi_matrix(q)
-    r_cp_cross_dA = quat.skew(model.r_cp_B) @ dA_dvB
     J_inv = model.J_B_inv
-    A[..., W, V] = J_inv @ r_cp_cross_dA @ dvB_dv
-    A[..., W, Q] = J_inv @ r_cp_cross_dA @ dvB_dq
     gyro = quat.skew(w) @ model.J_B - quat.skew(w @ model.J_B.T)
     A[..., W, W] = -J_inv @ gyro
+    if model.rho_SA_CA != 0.0:  # the aerodynamic terms, skipped in vacuum
+        dA_dvB = aero_force_jacobian(model, v_B)
+        dvB_dq = quat.rotate_inverse_jacobian(q, x[..., V])
+        C_dA = C @ dA_dvB
+        A[..., V, V] = inv_m * C_dA @ Ct
+        A[..., V, Q] += inv_m * C_dA @ dvB_dq
+        if np.any(model.r_cp_B):  # aerodynamic torque
+            r_cp_cross_dA = J_inv @ quat.skew(model.r_cp_B) @ dA_dvB
+            A[..., W, V] = r_cp_cross_dA @ Ct
+            A[..., W, Q] = r_cp_cross_dA @ dvB_dq
 
     B[..., V, :] = inv_m * C
     B[..., W, :] = J_inv @ quat.skew(model.r_T_B)
