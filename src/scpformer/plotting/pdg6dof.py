@@ -32,6 +32,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FormatStrFormatter
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
+from scpformer.dynamics import quaternion as quat
+
 __all__ = ["REQUIRED_CONSTANTS", "plot_history", "plot_trajectory"]
 
 #: Keys that ``constants`` must provide for :func:`plot_trajectory`.
@@ -58,28 +60,6 @@ _BOUND_STYLE = {"color": "red", "linestyle": "--", "linewidth": 1.2}
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-def _dcm_inertial_from_body(q: np.ndarray) -> np.ndarray:
-    """``C_{I<-B}`` for each row of ``q`` (scalar-first, Hamilton); shape (N, 3, 3).
-
-    Quaternions are normalised first, so slightly non-unit SCP iterates are fine.
-    """
-    q = np.asarray(q, dtype=float)
-    norm = np.linalg.norm(q, axis=1, keepdims=True)
-    q = q / np.where(norm > 0.0, norm, 1.0)
-    q0, q1, q2, q3 = q.T
-    c = np.empty((q.shape[0], 3, 3))
-    c[:, 0, 0] = 1.0 - 2.0 * (q2**2 + q3**2)
-    c[:, 0, 1] = 2.0 * (q1 * q2 - q0 * q3)
-    c[:, 0, 2] = 2.0 * (q1 * q3 + q0 * q2)
-    c[:, 1, 0] = 2.0 * (q1 * q2 + q0 * q3)
-    c[:, 1, 1] = 1.0 - 2.0 * (q1**2 + q3**2)
-    c[:, 1, 2] = 2.0 * (q2 * q3 - q0 * q1)
-    c[:, 2, 0] = 2.0 * (q1 * q3 - q0 * q2)
-    c[:, 2, 1] = 2.0 * (q2 * q3 + q0 * q1)
-    c[:, 2, 2] = 1.0 - 2.0 * (q1**2 + q2**2)
-    return c
 
 
 def _validate(t: Any, x: Any, u: Any, constants: Any) -> tuple[np.ndarray, ...]:
@@ -131,7 +111,7 @@ def _draw_3d(ax, x: np.ndarray, u: np.ndarray, constants: Mapping[str, Any]) -> 
     # Thrust plumes: segments from each node opposite the inertial thrust direction,
     # with length proportional to the thrust magnitude (T_max -> 12 % of the trajectory
     # extent).
-    thrust_i = np.einsum("nij,nj->ni", _dcm_inertial_from_body(x[:, 6:10]), u)
+    thrust_i = quat.rotate(quat.normalize(x[:, 6:10]), u)
     extent = max(float(np.max(np.ptp(x[:, 0:3], axis=0))), float(np.max(np.abs(x[:, 0:3]))))
     t_ref = float(constants["T_max"])
     if not t_ref > 0.0:
@@ -280,7 +260,7 @@ def plot_trajectory(
         gimbal = np.rad2deg(np.arccos(np.clip(u[:, 0] / thrust, -1.0, 1.0)))
     gimbal[thrust == 0.0] = np.nan
     q = x[:, 6:10] / np.linalg.norm(x[:, 6:10], axis=1, keepdims=True).clip(min=1e-300)
-    tilt = np.rad2deg(np.arccos(np.clip(1.0 - 2.0 * (q[:, 2] ** 2 + q[:, 3] ** 2), -1.0, 1.0)))
+    tilt = np.rad2deg(quat.tilt_angle(q))
     rate = np.rad2deg(np.linalg.norm(x[:, 10:13], axis=1))
     mass = x[:, 13]
     speed = np.linalg.norm(x[:, 3:6], axis=1)
