@@ -81,3 +81,11 @@ def test_initial_rate_above_omega_max_is_reported_infeasible():
     inst = PDGInstance(omega0_deg=(0.0, 100.0, 0.0))
     assert initial_state_violations(inst) == ["omega"]
     assert initial_state_violations(PDGInstance()) == []
+
+
+def test_shipped_example_instance_is_valid():
+    from pathlib import Path
+
+    path = Path(__file__).parents[2] / "examples" / "pdg6dof_instance.json"
+    inst = PDGInstance.from_json(path)
+    assert inst.gamma_gs_deg == 15.0 and initial_state_violations(inst) == []
