@@ -1,4 +1,4 @@
-"""The ``scpformer`` command: ``solve`` and ``bench`` per problem family."""
+"""The ``scpformer`` command: ``solve`` and ``bench`` per problem family, ``generate`` and ``dataset``."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from scpformer import __version__
-from scpformer.cli import pdg6dof
+from scpformer.cli import data, pdg6dof, rendezvous
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -22,6 +22,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench_families = bench.add_subparsers(dest="family", required=True, metavar="FAMILY")
     pdg6dof.add_solve_parser(solve_families)
     pdg6dof.add_bench_parser(bench_families)
+    rendezvous.add_solve_parser(solve_families)
+    rendezvous.add_bench_parser(bench_families)
+    data.add_generate_parser(commands)
+    data.add_dataset_parser(commands)
     return parser
 
 

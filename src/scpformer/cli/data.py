@@ -1,0 +1,420 @@
+"""``scpformer generate FAMILY`` and ``scpformer dataset info|verify|augment|split``.
+
+Register with :func:`add_generate_parser` and :func:`add_dataset_parser` on the top-level
+subparsers; ``python -m scpformer.cli.data`` runs both on their own. A family gets the common
+generation flags; its own flags (e.g. solver settings) come from :data:`FAMILY_ARGUMENTS`,
+where a family that lands registers them with :func:`register_family_arguments`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from scpformer.data.errors import DatasetError
+from scpformer.data.family import (
+    ERROR,
+    TIMEOUT,
+    WORKER_CRASHED,
+    DatasetFamily,
+    build_family,
+    family_names,
+    get_family_spec,
+)
+from scpformer.data.generate import GenerateConfig, GenerationReport, Progress, generate
+from scpformer.data.storage import Manifest, read_manifest, verify_dataset
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+@dataclass(frozen=True)
+class FamilyArguments:
+    """A family's own ``generate`` flags and how to build the family from them."""
+
+    add: Callable[[argparse.ArgumentParser], None]
+    build: Callable[[argparse.Namespace], DatasetFamily]
+
+
+FAMILY_ARGUMENTS: dict[str, FamilyArguments] = {}
+
+
+def register_family_arguments(
+    name: str,
+    add: Callable[[argparse.ArgumentParser], None],
+    build: Callable[[argparse.Namespace], DatasetFamily],
+) -> None:
+    """Give family ``name`` its own ``generate`` flags (e.g. ``--mode`` of robust-rendezvous)."""
+    FAMILY_ARGUMENTS[name] = FamilyArguments(add=add, build=build)
+
+
+def _add_pdg6dof_arguments(parser: argparse.ArgumentParser) -> None:
+    from scpformer.cli.pdg6dof import add_config_arguments
+    from scpformer.data.pdg6dof_family import RANGE_PRESETS
+
+    parser.add_argument(
+        "--ranges",
+        choices=sorted(RANGE_PRESETS),
+        default="table2",
+        help="sampling ranges of theta: Table 2 of the T-SCvx paper, or the nominal sub-range "
+        "where most instances are feasible (default: table2)",
+    )
+    add_config_arguments(parser)
+
+
+def _build_pdg6dof(args: argparse.Namespace) -> DatasetFamily:
+    from scpformer.cli.dataclass_args import overrides
+    from scpformer.cli.pdg6dof import config_from_args
+    from scpformer.data.pdg6dof_family import RANGE_PRESETS, PDG6DoFDataConfig, PDG6DoFFamily
+    from scpformer.problems.pdg6dof.constants import VehicleConstants
+
+    constants = VehicleConstants(**overrides(args, VehicleConstants, "const"))
+    config = PDG6DoFDataConfig(
+        ranges=RANGE_PRESETS[args.ranges](), constants=constants, solver=config_from_args(args)
+    )
+    return PDG6DoFFamily(config)
+
+
+register_family_arguments("pdg6dof", _add_pdg6dof_arguments, _build_pdg6dof)
+
+
+def _clear_errors(handler: Handler) -> Handler:
+    """Turn operating-system errors (permissions, missing paths) into one-line errors."""
+
+    @functools.wraps(handler)
+    def wrapped(args: argparse.Namespace) -> int:
+        try:
+            return handler(args)
+        except OSError as err:
+            where = f": {err.filename}" if err.filename else ""
+            raise DatasetError(f"{err.strerror or err}{where}") from None
+
+    return wrapped
+
+
+# -- generate ----------------------------------------------------------------------------------
+def add_generate_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``generate FAMILY`` with one sub-command per known family."""
+    parser = subparsers.add_parser(
+        "generate",
+        help="sample, solve and store a dataset of a problem family",
+        description="Sample N instances with the family's sampler, solve them on a local "
+        "process pool (or a Ray cluster with --ray) and store them as HDF5 shards with a "
+        "manifest. Re-running the same command resumes an interrupted run.",
+    )
+    families = parser.add_subparsers(dest="family", required=True, metavar="FAMILY")
+    for name in family_names():
+        try:
+            summary = get_family_spec(name).summary
+        except DatasetError:
+            summary = "(not available yet)"
+        sub = families.add_parser(name, help=summary, description=summary)
+        _add_common_generate_arguments(sub)
+        if name in FAMILY_ARGUMENTS:
+            FAMILY_ARGUMENTS[name].add(sub)
+        sub.set_defaults(handler=run_generate, family_name=name)
+
+
+def _add_common_generate_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("generation")
+    group.add_argument("--n", type=int, required=True, help="number of instances to solve")
+    group.add_argument("--out", type=Path, required=True, help="dataset folder")
+    group.add_argument("--seed", type=int, default=0, help="root seed of the dataset (0)")
+    group.add_argument(
+        "--workers", type=int, help="worker processes or Ray actors (default: every CPU)"
+    )
+    group.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run on the Ray cluster at ADDRESS ('auto', 'ray://host:port'; 'local' starts one)",
+    )
+    group.add_argument("--shard-size", type=int, default=64, help="instances per shard (64)")
+    group.add_argument(
+        "--time-limit",
+        type=float,
+        default=300.0,
+        metavar="SECONDS",
+        help="per-instance limit; past it the worker is restarted and the instance stored "
+        "with status timeout (300)",
+    )
+    group.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+class _ProgressBar:
+    """tqdm bar with solved and failed counts; rate and time left are tqdm's own."""
+
+    def __init__(self, desc: str, disable: bool) -> None:
+        self.desc, self.disable = desc, disable
+        self.bar: tqdm | None = None
+
+    def __call__(self, progress: Progress) -> None:
+        if self.bar is None:
+            self.bar = tqdm(
+                total=progress.total,
+                initial=progress.done,
+                desc=self.desc,
+                unit="inst",
+                file=sys.stderr,
+                dynamic_ncols=True,
+                disable=self.disable,
+            )
+        self.bar.set_postfix(solved=progress.solved, failed=progress.failed, refresh=False)
+        if progress.result is not None:
+            self.bar.update(1)
+        result = progress.result
+        if result is not None and result.status in (TIMEOUT, WORKER_CRASHED, ERROR):
+            self.write(f"instance {result.index}: {result.status}: {result.message}")
+
+    def write(self, text: str) -> None:
+        tqdm.write(f"scpformer: {text}", file=sys.stderr)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+@_clear_errors
+def run_generate(args: argparse.Namespace) -> int:
+    """Handler of ``generate FAMILY``."""
+    name = args.family_name
+    if name in FAMILY_ARGUMENTS:
+        get_family_spec(name)  # a clear error if the family has not landed
+        family = FAMILY_ARGUMENTS[name].build(args)
+    else:
+        family = build_family(name)
+    config = GenerateConfig(
+        n=args.n,
+        out=args.out,
+        seed=args.seed,
+        shard_size=args.shard_size,
+        workers=args.workers,
+        ray_address=args.ray,
+        time_limit=args.time_limit,
+    )
+    bar = _ProgressBar(name, disable=args.quiet)
+    try:
+        report = generate(family, config, on_progress=bar, on_notice=bar.write)
+    finally:
+        bar.close()
+    print("\n".join(report_lines(report)))
+    return 0
+
+
+def report_lines(report: GenerationReport) -> list[str]:
+    """A few lines on what a generate run did."""
+    counts = report.manifest.counts()
+    lines = [
+        f"wrote {report.folder}: {counts['samples']} of {report.manifest.n} instances in "
+        f"{counts['shards']} shard(s)",
+        _solved_line(report.manifest),
+    ]
+    if report.generated:
+        rate = report.generated / report.wall_time
+        lines.append(
+            f"this run: {report.generated} instances in {report.wall_time:.1f} s "
+            f"({rate:.2f}/s, {report.workers} {report.backend} worker(s), warm-up "
+            f"{report.startup_time:.1f} s); solver busy {report.solver_share:.0%} of worker time"
+        )
+    return lines
+
+
+def _solved_line(manifest: Manifest) -> str:
+    counts = manifest.counts()
+    total = max(counts["samples"], 1)
+    statuses = ", ".join(f"{k} {v}" for k, v in counts["by_status"].items()) or "none"
+    return (
+        f"solved {counts['solved']} ({counts['solved'] / total:.1%}), failed "
+        f"{counts['failed']} ({counts['failed'] / total:.1%}): {statuses}"
+    )
+
+
+# -- dataset -----------------------------------------------------------------------------------
+def add_dataset_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``dataset info|verify|augment|split``."""
+    parser = subparsers.add_parser("dataset", help="inspect, check, augment and split datasets")
+    commands = parser.add_subparsers(dest="dataset_command", required=True, metavar="COMMAND")
+    info = commands.add_parser("info", help="summarize a dataset")
+    info.add_argument("dir", type=Path, metavar="DIR")
+    info.set_defaults(handler=run_info)
+    verify = commands.add_parser("verify", help="check checksums, fields and shapes")
+    verify.add_argument("dir", type=Path, metavar="DIR")
+    verify.set_defaults(handler=run_verify)
+    _add_augment_parser(commands)
+    _add_split_parser(commands)
+
+
+def _add_augment_parser(commands: argparse._SubParsersAction) -> None:
+    from scpformer.data.augment import ROTATION_ANGLES_DEG
+
+    parser = commands.add_parser(
+        "augment",
+        help="rotate a pdg6dof dataset about Up (T-SCvx augmentation)",
+        description="Write the rotated copies of every converged sample as a new dataset; "
+        "each rotated solution is checked with the nonlinear model and its tight flags.",
+    )
+    parser.add_argument("source", type=Path, metavar="SRC")
+    parser.add_argument("--out", type=Path, required=True, help="augmented dataset folder")
+    parser.add_argument(
+        "--angles",
+        type=float,
+        nargs="+",
+        default=list(ROTATION_ANGLES_DEG),
+        help="rotation angles about Up in degrees (0 45 ... 315)",
+    )
+    parser.add_argument("--no-verify", action="store_true", help="skip the nonlinear check")
+    parser.add_argument(
+        "--all-statuses", action="store_true", help="rotate failed samples too (default: drop)"
+    )
+    parser.add_argument("--workers", type=int, default=1, help="processes (1)")
+    parser.set_defaults(handler=run_augment)
+
+
+def _add_split_parser(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser(
+        "split",
+        help="grouped train/validation/test splits and training statistics",
+        description="Split by base instance (augmented copies stay together) and store the "
+        "training split's normalization statistics in DIR/splits.h5.",
+    )
+    parser.add_argument("dir", type=Path, metavar="DIR")
+    parser.add_argument(
+        "--fractions",
+        type=float,
+        nargs=3,
+        default=[0.8, 0.0, 0.2],
+        metavar=("TRAIN", "VALIDATION", "TEST"),
+        help="shares of the groups (0.8 0 0.2)",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the group permutation (0)")
+    parser.set_defaults(handler=run_split)
+
+
+@_clear_errors
+def run_info(args: argparse.Namespace) -> int:
+    """Handler of ``dataset info DIR``."""
+    print("\n".join(info_lines(args.dir, read_manifest(args.dir))))
+    return 0
+
+
+def info_lines(folder: Path, manifest: Manifest) -> list[str]:
+    """A human-readable summary of a dataset."""
+    from scpformer.data.splits import SPLITS_NAME, load_splits
+
+    counts = manifest.counts()
+    kind = manifest.kind
+    if manifest.transform is not None:
+        kind += f" by {manifest.transform['name']} from {manifest.source['path']}"
+    state = "complete" if manifest.complete else "incomplete: re-run generate to finish"
+    size = sum(s.bytes for s in manifest.shards) / 1e6
+    rows = [
+        ("dataset", str(folder)),
+        ("family", f"{manifest.family} ({kind})"),
+        ("seed", str(manifest.seed)),
+        ("samples", f"{counts['samples']} from {manifest.n} planned instances ({state})"),
+        ("shards", f"{counts['shards']} of {counts['planned_shards']}, {size:.1f} MB"),
+        ("outcome", _solved_line(manifest)),
+        ("written by", f"scpformer {manifest.package_version}, {manifest.versions}"),
+    ]
+    if (folder / SPLITS_NAME).is_file():
+        try:
+            splits = load_splits(folder)
+            sizes = ", ".join(f"{k} {len(v)}" for k, v in splits.indices.items())
+            rows.append(("splits", f"{sizes} (grouped by {splits.config.group_field})"))
+        except DatasetError as err:
+            rows.append(("splits", str(err)))
+    rows += [(f"field {f.name}", f"{f.dtype} {f.shape}  {f.doc}".rstrip()) for f in manifest.schema]
+    width = max(len(k) for k, _ in rows)
+    return [f"{k:<{width}}  {v}" for k, v in rows]
+
+
+@_clear_errors
+def run_verify(args: argparse.Namespace) -> int:
+    """Handler of ``dataset verify DIR``: exit 0 when clean, 1 with one line per problem."""
+    from scpformer.data.splits import check_splits
+
+    manifest = read_manifest(args.dir)
+    problems = verify_dataset(args.dir) + check_splits(args.dir)
+    for problem in problems:
+        print(f"{args.dir}: {problem}")
+    if problems:
+        print(f"{len(problems)} problem(s) found")
+        return 1
+    counts = manifest.counts()
+    print(
+        f"ok: {args.dir}: {counts['shards']} shard(s), {counts['samples']} samples; "
+        "checksums, fields and shapes verified"
+    )
+    return 0
+
+
+@_clear_errors
+def run_augment(args: argparse.Namespace) -> int:
+    """Handler of ``dataset augment SRC --out DST``."""
+    from scpformer.data.augment import RotationAugmentation, augment_dataset
+
+    transform = RotationAugmentation(
+        angles_deg=tuple(args.angles),
+        converged_only=not args.all_statuses,
+        verify=not args.no_verify,
+    )
+    with tqdm(desc="augment", unit="shard", file=sys.stderr, dynamic_ncols=True) as bar:
+
+        def on_shard(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+        manifest = augment_dataset(
+            args.source,
+            args.out,
+            transform,
+            workers=args.workers,
+            on_shard=on_shard,
+            on_notice=lambda text: tqdm.write(f"scpformer: {text}", file=sys.stderr),
+        )
+    print(f"wrote {args.out}: {manifest.counts()['samples']} samples")
+    print(_solved_line(manifest))
+    return 0
+
+
+@_clear_errors
+def run_split(args: argparse.Namespace) -> int:
+    """Handler of ``dataset split DIR``."""
+    from scpformer.data.splits import SplitConfig, make_splits
+
+    splits = make_splits(args.dir, SplitConfig(fractions=tuple(args.fractions), seed=args.seed))
+    sizes = ", ".join(f"{k} {len(v)}" for k, v in splits.indices.items())
+    print(f"wrote {args.dir}/splits.h5: {sizes} samples; statistics of {sorted(splits.stats)}")
+    return 0
+
+
+# -- standalone entry point --------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    """A parser with only ``generate`` and ``dataset`` (what ``scpformer`` adds them to)."""
+    parser = argparse.ArgumentParser(prog="scpformer", description="scpformer datasets")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_generate_parser(commands)
+    add_dataset_parser(commands)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``generate`` or ``dataset``; bad input ends with one ``error:`` line and status 2."""
+    args: Any = build_parser().parse_args(argv)
+    try:
+        return args.handler(args)
+    except ValueError as err:
+        print(f"scpformer: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("scpformer: interrupted; finished shards are kept", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,401 @@
+"""``scpformer solve rendezvous`` and ``scpformer bench rendezvous`` (ART paper, Sec. 4-5)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
+from scpformer.problems.rendezvous.instance import RendezvousInstance, sample_instances
+from scpformer.problems.rendezvous.problem import (
+    PROBLEMS,
+    WARMSTARTS,
+    constraint_to_go,
+    linear_model,
+    solve,
+)
+from scpformer.problems.rendezvous.scenario import (
+    RendezvousScenario,
+    RendezvousSolverConfig,
+    SCPParameters,
+    TargetOrbit,
+    VerificationTolerances,
+)
+from scpformer.scp.solution import Solution, Status
+
+
+# ======================================================================================
+# shared flags
+# ======================================================================================
+def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+    """Flags for every solver setting and scenario constant (Table 1 defaults)."""
+    add_dataclass_arguments(parser, RendezvousSolverConfig, title="formulation")
+    add_dataclass_arguments(parser, SCPParameters, prefix="scp", title="SCP (Table 1, Eqs. 17-19)")
+    add_dataclass_arguments(
+        parser, VerificationTolerances, prefix="verify", title="verification (nonlinear replay)"
+    )
+    add_dataclass_arguments(parser, RendezvousScenario, prefix="scenario", title="OCP (Table 1)")
+    add_dataclass_arguments(parser, TargetOrbit, prefix="target", title="target orbit (Table 1)")
+
+
+def config_from_args(args: argparse.Namespace) -> RendezvousSolverConfig:
+    """The solver configuration with the command-line overrides applied."""
+    return RendezvousSolverConfig(
+        scp=SCPParameters(**overrides(args, SCPParameters, "scp")),
+        verification=VerificationTolerances(**overrides(args, VerificationTolerances, "verify")),
+        **overrides(args, RendezvousSolverConfig),
+    )
+
+
+def _merged(base: Any, args: argparse.Namespace, cls: type, prefix: str) -> Any:
+    changes = overrides(args, cls, prefix)
+    return dataclasses.replace(base, **changes) if changes else base
+
+
+def scenario_from_args(
+    args: argparse.Namespace, base: RendezvousInstance | None = None
+) -> tuple[RendezvousScenario, TargetOrbit]:
+    """Scenario and target orbit (of ``base`` or Table 1) with the command-line overrides."""
+    scenario = _merged(
+        base.scenario if base else RendezvousScenario(), args, RendezvousScenario, "scenario"
+    )
+    target = _merged(base.target if base else TargetOrbit(), args, TargetOrbit, "target")
+    return scenario, target
+
+
+# ======================================================================================
+# solve
+# ======================================================================================
+def add_solve_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "rendezvous",
+        help="ISS rendezvous in relative orbital elements (ART paper, Problems 1-3)",
+        description="Solve Problem 1 (two-point boundary value), 2 (convex: waypoint and "
+        "approach cone) or 3 (keep-out ellipsoid, SCP of Section 4) of the ART paper for an "
+        "ISS rendezvous (Table 1), and verify it by replaying the impulses through a "
+        "two-body + J2 propagator.",
+    )
+    parser.add_argument(
+        "--problem",
+        choices=PROBLEMS,
+        default="scp",
+        help="which OCP: tpbvp (1), convex (2) or scp (3) (default: scp)",
+    )
+    parser.add_argument(
+        "--warmstart",
+        choices=WARMSTARTS,
+        default="convex",
+        help="initial guess of Problem 3 (default: convex)",
+    )
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument(
+        "--instance", type=Path, help="instance JSON (roe0_m, horizon_orbits[, target, scenario])"
+    )
+    source.add_argument(
+        "--seed", type=int, help="sample the instance from Table 1's last column with this seed"
+    )
+    parser.add_argument(
+        "--roe0",
+        type=float,
+        nargs=6,
+        metavar="M",
+        help="initial mean ROE a*dalpha (da, dlambda, dex, dey, dix, diy) [m]",
+    )
+    parser.add_argument("--horizon-orbits", type=float, help="OCP horizon [orbits]")
+    parser.add_argument("--out", type=Path, help="write the solution to this .npz file")
+    parser.add_argument("--plot", type=Path, help="write Figs. 7-8 style plots to this .png")
+    parser.add_argument(
+        "--no-verify", action="store_true", help="skip the nonlinear replay of the impulses"
+    )
+    add_config_arguments(parser)
+    parser.set_defaults(handler=run_solve)
+
+
+def instance_from_args(args: argparse.Namespace) -> RendezvousInstance:
+    """``--instance FILE``, ``--seed S`` or the default instance, with overrides applied."""
+    base = RendezvousInstance.from_json(args.instance) if args.instance else None
+    scenario, target = scenario_from_args(args, base)
+    if base is None and args.seed is not None:
+        rng = np.random.default_rng(args.seed)
+        base = sample_instances(rng, 1, scenario=scenario, target=target)[0]
+    changes: dict[str, Any] = {"scenario": scenario, "target": target}
+    if args.roe0 is not None:
+        changes["roe0_m"] = tuple(args.roe0)
+    if args.horizon_orbits is not None:
+        changes["horizon_orbits"] = args.horizon_orbits
+    if base is None:
+        return RendezvousInstance(**changes)
+    return dataclasses.replace(base, **changes)
+
+
+def summary_rows(solution: Solution, instance: RendezvousInstance) -> list[tuple[str, str]]:
+    """Human-readable (key, value) rows of a solution."""
+    rows = [("status", solution.status.value), ("iterations", str(solution.iterations))]
+    if solution.message:
+        rows.append(("message", solution.message))
+    if solution.trajectory is not None:
+        rtn = linear_model(instance).rtn(solution.trajectory.x)
+        rows += [
+            ("cost sum |dv|", f"{1e3 * solution.cost:.3f} mm/s"),
+            ("constraint-to-go C(t_0)", str(int(constraint_to_go(rtn, instance.scenario)[0]))),
+        ]
+    ver = solution.verification
+    if ver is not None:
+        te = ver.terminal_error
+        rows += [
+            ("verified (replay)", "yes" if ver.passed else f"no ({ver.message})"),
+            ("terminal miss", f"{te['position_m']:.3f} m, {1e3 * te['velocity_m_s']:.3f} mm/s"),
+            ("  RTN position", f"({te['r_m']:.3f}, {te['t_m']:.3f}, {te['n_m']:.3f}) m"),
+            ("max linear-vs-truth gap", f"{ver.max_defect:.3f} m"),
+        ]
+        rows += [(f"node {k}", f"{v:.3g}") for k, v in ver.node_violations.items()]
+    if solution.timing is not None:
+        tm = solution.timing
+        rows += [
+            ("wall time", f"{tm.total:.3f} s"),
+            ("  model + linearization", f"{tm.discretization:.3f} s"),
+            ("  conic solver", f"{tm.solver:.3f} s"),
+            ("  verification", f"{tm.verification:.3f} s"),
+            ("  other", f"{tm.other:.3f} s"),
+        ]
+    return rows
+
+
+def print_rows(rows: list[tuple[str, str]]) -> None:
+    width = max(len(k) for k, _ in rows)
+    for key, value in rows:
+        print(f"{key:<{width}}  {value}")
+
+
+def run_solve(args: argparse.Namespace) -> int:
+    instance = instance_from_args(args)
+    config = config_from_args(args)
+    verify = not args.no_verify
+    warm = None
+    if args.problem == "scp":
+        warm = solve(instance, args.warmstart, config=config, verify=False)
+        print(f"warm start ({args.warmstart}): {warm.status.value} in {warm.timing.total:.3f} s")
+        solution = solve(instance, "scp", warm, config=config, verify=verify)
+    else:
+        solution = solve(instance, args.problem, config=config, verify=verify)
+    print_rows(summary_rows(solution, instance))
+    if solution.trajectory is not None:
+        if args.out:
+            from scpformer.problems.rendezvous.io import save_solution
+
+            save_solution(args.out, solution, instance)
+            print(f"wrote {args.out}")
+        if args.plot:
+            _plot(args.plot, solution, instance, warm, args.warmstart)
+            print(f"wrote {args.plot}")
+    return 0 if solution.converged else 1
+
+
+def _plot(
+    path: Path,
+    solution: Solution,
+    instance: RendezvousInstance,
+    warm: Solution | None,
+    warm_name: str,
+) -> None:
+    from scpformer.plotting.rendezvous import plot_trajectory
+    from scpformer.problems.rendezvous.io import constants_record
+
+    model = linear_model(instance)
+    reference = None
+    if warm is not None and warm.trajectory is not None:
+        x = warm.trajectory.x
+        reference = {"rtn": model.rtn(x), "roe": x, "label": f"warm start ({warm_name})"}
+    x = solution.trajectory.x
+    constants = constants_record(instance)
+    constants["period_s"] = instance.target.period_s
+    path.parent.mkdir(parents=True, exist_ok=True)
+    plot_trajectory(
+        model.t, x, model.rtn(x), solution.trajectory.u, constants, path=path, reference=reference
+    )
+
+
+# ======================================================================================
+# bench
+# ======================================================================================
+def add_bench_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "rendezvous",
+        help="benchmark Problems 1-3 on seeded Table 1 instances",
+        description="Solve Problems 1, 2 and 3 (the SCP warm-started from Problem 1 or 2) on a "
+        "seeded set of instances sampled from Table 1; report wall time (median, p95), SCP "
+        "iterations, failure rate, the share of time inside the conic solver and C_CVX(t_1), "
+        "the constraint-to-go of the convex solution. Wall times exclude the verification.",
+    )
+    parser.add_argument("--n", type=int, default=20, help="number of instances (20)")
+    parser.add_argument("--seed", type=int, default=0, help="sampling seed (0)")
+    parser.add_argument(
+        "--warmstart", choices=WARMSTARTS, default="convex", help="warm start of Problem 3 (convex)"
+    )
+    parser.add_argument(
+        "--csv",
+        type=Path,
+        default=Path("bench_rendezvous.csv"),
+        help="per-instance CSV (bench_rendezvous.csv)",
+    )
+    parser.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="skip the nonlinear replay (the default replays every solution)",
+    )
+    add_config_arguments(parser)
+    parser.set_defaults(handler=run_bench)
+
+
+BENCH_FIELDS = (
+    "index",
+    "horizon_orbits",
+    "C_cvx_t1",
+    *(f"{p}_{k}" for p in ("p1", "p2") for k in ("status", "wall_s", "solver_s", "cost")),
+    "p3_status",
+    "p3_iterations",
+    "p3_wall_s",
+    "p3_solver_s",
+    "p3_ws_plus_scp_s",
+    "p3_cost",
+    "p3_terminal_miss_m",
+    "p3_terminal_miss_m_s",
+    "p3_max_gap_m",
+    "p3_keep_out",
+    "verification_s",
+)
+FAILED = {
+    Status.SOLVER_FAILED.value,
+    Status.INFEASIBLE_INSTANCE.value,
+    Status.VERIFICATION_FAILED.value,
+}
+
+
+def _wall(solution: Solution) -> float:
+    """Solve time without the verification replay [s]."""
+    tm = solution.timing
+    return tm.total - tm.verification if tm else float("nan")
+
+
+def bench_row(
+    index: int,
+    instance: RendezvousInstance,
+    p1: Solution,
+    p2: Solution,
+    p3: Solution,
+    warm: Solution,
+) -> dict[str, Any]:
+    """One CSV row: the three problems on one instance."""
+    row: dict[str, Any] = {"index": index, "horizon_orbits": instance.horizon_orbits}
+    model = linear_model(instance)
+    row["C_cvx_t1"] = (
+        int(constraint_to_go(model.rtn(p2.trajectory.x), instance.scenario)[0])
+        if p2.trajectory is not None
+        else -1
+    )
+    for name, sol in (("p1", p1), ("p2", p2)):
+        row.update(
+            {
+                f"{name}_status": sol.status.value,
+                f"{name}_wall_s": _wall(sol),
+                f"{name}_solver_s": sol.timing.solver,
+                f"{name}_cost": sol.cost,
+            }
+        )
+    ver = p3.verification
+    row.update(
+        p3_status=p3.status.value,
+        p3_iterations=p3.iterations,
+        p3_wall_s=_wall(p3),
+        p3_solver_s=p3.timing.solver,
+        p3_ws_plus_scp_s=_wall(p3) + _wall(warm),
+        p3_cost=p3.cost,
+        p3_terminal_miss_m=ver.terminal_error["position_m"] if ver else float("nan"),
+        p3_terminal_miss_m_s=ver.terminal_error["velocity_m_s"] if ver else float("nan"),
+        p3_max_gap_m=ver.max_defect if ver else float("nan"),
+        p3_keep_out=ver.node_violations["keep_out"] if ver else float("nan"),
+        verification_s=sum(s.timing.verification for s in (p1, p2, p3)),
+    )
+    return row
+
+
+def summarize(rows: list[dict[str, Any]]) -> list[str]:
+    """Median/p95 wall times, failure rates, iterations, solver share and C_CVX(t_1)."""
+    lines = [
+        f"{'problem':<22} {'n':>3} {'fail':>6} {'conv':>6} {'med s':>7} {'p95 s':>7} "
+        f"{'mean s':>7} {'solver':>7}"
+    ]
+    for label, key in (("1 tpbvp", "p1"), ("2 convex", "p2"), ("3 scp (from warm st.)", "p3")):
+        wall = np.array([r[f"{key}_wall_s"] for r in rows], dtype=float)
+        solver = np.array([r[f"{key}_solver_s"] for r in rows], dtype=float)
+        status = [r[f"{key}_status"] for r in rows]
+        lines.append(
+            f"{label:<22} {len(rows):>3} {np.mean([s in FAILED for s in status]):>6.0%} "
+            f"{np.mean([s == 'converged' for s in status]):>6.0%} {np.median(wall):>7.3f} "
+            f"{np.percentile(wall, 95):>7.3f} {wall.mean():>7.3f} "
+            f"{solver.sum() / max(wall.sum(), 1e-12):>7.0%}"
+        )
+    total = np.array([r["p3_ws_plus_scp_s"] for r in rows], dtype=float)
+    its = np.array([r["p3_iterations"] for r in rows], dtype=float)
+    ctg = np.array([r["C_cvx_t1"] for r in rows], dtype=float)
+    miss = np.array([r["p3_terminal_miss_m"] for r in rows], dtype=float)
+    lines += [
+        f"{'3 warm start + scp':<22} {len(rows):>3} {'':>6} {'':>6} {np.median(total):>7.3f} "
+        f"{np.percentile(total, 95):>7.3f} {total.mean():>7.3f}",
+        f"SCP iterations: median {np.median(its):.0f}, mean {its.mean():.1f}, max {its.max():.0f}",
+        f"C_CVX(t_1): > 0 for {np.mean(ctg > 0):.0%} of instances, median {np.median(ctg):.0f}, "
+        f"max {ctg.max():.0f}",
+    ]
+    if np.any(np.isfinite(miss)):
+        lines.append(
+            f"Problem 3 terminal miss under the nonlinear replay: median "
+            f"{np.nanmedian(miss):.3f} m, max {np.nanmax(miss):.3f} m"
+        )
+    return lines
+
+
+def _warm_up(config: RendezvousSolverConfig, instance: RendezvousInstance) -> float:
+    """Canonicalize (or load) the three parametric subproblems, untimed by the bench."""
+    start = time.perf_counter()
+    for problem in PROBLEMS:
+        solve(instance, problem, config=config, verify=False)
+    return time.perf_counter() - start
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    if args.n < 1:
+        raise ValueError(f"--n must be at least 1, got {args.n}")
+    config = config_from_args(args)
+    scenario, target = scenario_from_args(args)
+    instances = sample_instances(
+        np.random.default_rng(args.seed), args.n, scenario=scenario, target=target
+    )
+    print(
+        f"compiled or loaded the subproblems (N = {scenario.n_nodes}) in "
+        f"{_warm_up(config, instances[0]):.1f} s"
+    )
+    verify, rows = not args.no_verify, []
+    with tqdm(total=len(instances), desc="rendezvous", unit="instance") as bar:
+        for index, instance in enumerate(instances):
+            p1 = solve(instance, "tpbvp", config=config, verify=verify)
+            p2 = solve(instance, "convex", config=config, verify=verify)
+            warm = p2 if args.warmstart == "convex" else p1
+            p3 = solve(instance, "scp", warm, config=config, verify=verify)
+            rows.append(bench_row(index, instance, p1, p2, p3, warm))
+            bar.set_postfix(status=p3.status.value, it=p3.iterations)
+            bar.update()
+    args.csv.parent.mkdir(parents=True, exist_ok=True)
+    with args.csv.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=BENCH_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+    print("\n".join(summarize(rows)))
+    print(f"wrote {args.csv}")
+    return 0

@@ -1,0 +1,26 @@
+"""Errors of the dataset engine.
+
+Every error a user can cause (a wrong folder, a corrupt shard, a full disk, a missing optional
+package) is a :class:`DatasetError`. It subclasses ``ValueError`` so that the ``scpformer``
+command prints it as one ``error:`` line (see :mod:`scpformer.cli.main`).
+"""
+
+from __future__ import annotations
+
+import errno
+
+
+class DatasetError(ValueError):
+    """Bad dataset input or state, with a message that says what to do about it."""
+
+
+class DiskFullError(DatasetError):
+    """The disk filled up while writing; finished shards are kept and the run can resume."""
+
+
+def is_disk_full(err: BaseException) -> bool:
+    """Whether ``err`` reports a full disk (``ENOSPC``/``EDQUOT``, also as h5py words it)."""
+    if isinstance(err, OSError) and err.errno in (errno.ENOSPC, errno.EDQUOT):
+        return True
+    text = str(err)
+    return "No space left on device" in text or "errno = 28" in text or "Disk quota" in text

@@ -1,0 +1,228 @@
+"""The 6-DoF powered descent family (T-SCvx paper) as a dataset family.
+
+theta (16,) holds the parameters the paper samples (Sec. IV.A, Table 2), in the order of
+:data:`THETA_NAMES`: glideslope and tilt bounds [deg], r0 (3) [U_L], v0 (3) [U_L/U_T],
+q0 (4, scalar first), omega0 (3) [deg/U_T], m0 [U_M]. With N nodes, R = 7 N inequality rows
+(name-major, :func:`scpformer.problems.pdg6dof.constraints.constraint_index`) and I = iter_max
+SCvx iterations, a sample holds:
+
+=============  ===========  ================================================================
+field          shape        meaning
+=============  ===========  ================================================================
+theta          (16,)        instance parameters (see above)
+cost           ()           C = -m(t_f) of the returned iterate (Eq. 2)
+iterations     ()           subproblem solves k = 1..iterations
+tf, t          (), (N,)     final time [U_T] and node times
+x, u           (N,14),(N,3) states (r, v, q, omega [rad/U_T], m) and body-frame thrust
+guess_*        as x, u, tf  the warm start SCvx started from (straight-line guess)
+tight_flags    (I, R)       tight rows g >= -tight_tol at SCvx iteration k (row k - 1)
+accepted       (I,)         whether iteration k's step was accepted
+verified       ()           nonlinear verification passed
+max_defect     ()           max |propagated - solution| over the nodes
+rotation_deg   ()           rotation about Up applied by the augmentation (0 when solved)
+solve_time     ()           s in :func:`~scpformer.problems.pdg6dof.problem.solve`
+solver_time    ()           s inside the conic solver
+=============  ===========  ================================================================
+
+Rows of ``tight_flags`` past ``iterations``, and every trajectory field of an instance without
+a trajectory, hold fill values (False, NaN).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import metadata
+from typing import Any, ClassVar
+
+import numpy as np
+
+from scpformer.data.family import FamilySpec, Field, SampleResult, dataclass_from_dict
+from scpformer.problems.pdg6dof.constants import VehicleConstants
+from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
+from scpformer.problems.pdg6dof.guess import straight_line_guess
+from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
+from scpformer.problems.pdg6dof.problem import PDGSolverConfig, solve
+from scpformer.scp.solution import Solution, Status, Trajectory
+
+THETA_NAMES: tuple[str, ...] = (
+    "gamma_gs_deg",
+    "theta_max_deg",
+    "r0_up",
+    "r0_east",
+    "r0_north",
+    "v0_up",
+    "v0_east",
+    "v0_north",
+    "q0_w",
+    "q0_x",
+    "q0_y",
+    "q0_z",
+    "omega0_x_deg",
+    "omega0_y_deg",
+    "omega0_z_deg",
+    "m0",
+)
+RANGE_PRESETS = {"table2": SampleRanges.table2, "nominal": SampleRanges.nominal}
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDG6DoFDataConfig:
+    """What a 6-DoF dataset samples and how it solves; defaults are Tables 1 and 2."""
+
+    ranges: SampleRanges = field(default_factory=SampleRanges.table2)  # theta ranges (Table 2)
+    constants: VehicleConstants = field(default_factory=VehicleConstants)  # model (Table 1)
+    solver: PDGSolverConfig = field(default_factory=PDGSolverConfig)  # SCvx settings (Table 1)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> PDG6DoFDataConfig:
+        """Rebuild from :func:`dataclasses.asdict` output (e.g. a manifest's ``config``)."""
+        return dataclass_from_dict(cls, data)
+
+
+def theta_vector(instance: PDGInstance) -> np.ndarray:
+    """theta (16,) of ``instance`` in the order of :data:`THETA_NAMES`."""
+    return np.array(
+        [
+            instance.gamma_gs_deg,
+            instance.theta_max_deg,
+            *instance.r0,
+            *instance.v0,
+            *instance.q0,
+            *instance.omega0_deg,
+            instance.m0,
+        ]
+    )
+
+
+def instance_from_theta(theta: np.ndarray, constants: VehicleConstants) -> PDGInstance:
+    """Inverse of :func:`theta_vector` (validated by :class:`PDGInstance`)."""
+    theta = np.asarray(theta, dtype=float)
+    return PDGInstance(
+        gamma_gs_deg=float(theta[0]),
+        theta_max_deg=float(theta[1]),
+        r0=tuple(theta[2:5]),
+        v0=tuple(theta[5:8]),
+        q0=tuple(theta[8:12]),
+        omega0_deg=tuple(theta[12:15]),
+        m0=float(theta[15]),
+        constants=constants,
+    )
+
+
+@dataclass(frozen=True)
+class PDG6DoFFamily:
+    """The 6-DoF powered descent family (a :class:`~scpformer.data.family.DatasetFamily`)."""
+
+    config: PDG6DoFDataConfig = field(default_factory=PDG6DoFDataConfig)
+    name: ClassVar[str] = "pdg6dof"
+    success_statuses: ClassVar[frozenset[str]] = frozenset({Status.CONVERGED.value})
+
+    @property
+    def n_nodes(self) -> int:
+        """N, the number of temporal nodes."""
+        return self.config.solver.n_nodes
+
+    def config_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self.config)
+
+    def schema(self) -> tuple[Field, ...]:
+        n, rows = self.n_nodes, len(CONSTRAINT_NAMES) * self.n_nodes
+        iters = self.config.solver.scvx.iter_max
+        f64 = "float64"
+        return (
+            Field(name="theta", dtype=f64, shape=(16,), normalize=True, doc="instance parameters"),
+            Field(name="cost", dtype=f64, doc="-m(t_f) of the returned iterate (Eq. 2)"),
+            Field(name="iterations", dtype="int64", doc="SCvx subproblem solves"),
+            Field(name="tf", dtype=f64, normalize=True, doc="final time t_f [U_T]"),
+            Field(name="t", dtype=f64, shape=(n,), doc="node times [U_T]"),
+            Field(name="x", dtype=f64, shape=(n, 14), normalize=True, doc="states (Eq. 24)"),
+            Field(name="u", dtype=f64, shape=(n, 3), normalize=True, doc="body-frame thrust"),
+            Field(name="guess_tf", dtype=f64, doc="final time of the warm start"),
+            Field(name="guess_x", dtype=f64, shape=(n, 14), doc="states of the warm start"),
+            Field(name="guess_u", dtype=f64, shape=(n, 3), doc="thrust of the warm start"),
+            Field(name="tight_flags", dtype="bool", shape=(iters, rows), doc="tight rows per k"),
+            Field(name="accepted", dtype="bool", shape=(iters,), doc="step k accepted"),
+            Field(name="verified", dtype="bool", doc="nonlinear verification passed"),
+            Field(name="max_defect", dtype=f64, doc="max propagated node defect"),
+            Field(name="rotation_deg", dtype=f64, doc="augmentation rotation about Up [deg]"),
+            Field(name="solve_time", dtype=f64, deterministic=False, doc="s in solve()"),
+            Field(name="solver_time", dtype=f64, deterministic=False, doc="s in the conic solver"),
+        )
+
+    def versions(self) -> dict[str, str]:
+        packages = ("numpy", "scipy", "cvxpy", self.config.solver.scvx.solver)
+        return {name: _version(name) for name in packages}
+
+    def warm_up(self) -> None:
+        from scpformer.problems.pdg6dof.subproblem import compiled_subproblem
+
+        cfg = self.config.solver
+        compiled_subproblem(cfg.n_nodes, cfg.fix_roll, cfg.prox_weight, cfg.scvx.solver)
+
+    def sample(self, rng: np.random.Generator) -> PDGInstance:
+        return sample_instances(rng, 1, self.config.ranges, self.config.constants)[0]
+
+    def encode_instance(self, instance: PDGInstance) -> dict[str, Any]:
+        return {"theta": theta_vector(instance)}
+
+    def solve(self, instance: PDGInstance) -> SampleResult:
+        x_g, u_g, tf_g = straight_line_guess(instance, self.n_nodes)
+        guess = Trajectory(x=x_g, u=u_g, p=np.array([tf_g]))
+        start = time.perf_counter()
+        solution = solve(instance, self.config.solver, guess=guess)
+        solve_time = time.perf_counter() - start
+        fields = {
+            **self.encode_instance(instance),
+            **self._solution_fields(solution),
+            "guess_x": x_g,
+            "guess_u": u_g,
+            "guess_tf": tf_g,
+            "rotation_deg": 0.0,
+            "solve_time": solve_time,
+        }
+        return SampleResult(solution.status.value, solution.message, fields, solve_time)
+
+    def _solution_fields(self, solution: Solution) -> dict[str, Any]:
+        n, iters = self.n_nodes, self.config.solver.scvx.iter_max
+        flags = np.zeros((iters, len(CONSTRAINT_NAMES) * n), dtype=bool)
+        accepted = np.zeros(iters, dtype=bool)
+        for k, record in enumerate(solution.history[:iters]):
+            flags[k], accepted[k] = record.tight_flags, record.accepted
+        out: dict[str, Any] = {
+            "cost": solution.cost,
+            "iterations": solution.iterations,
+            "tight_flags": flags,
+            "accepted": accepted,
+            "solver_time": solution.timing.solver if solution.timing else 0.0,
+        }
+        if solution.verification is not None:
+            out["verified"] = solution.verification.passed
+            out["max_defect"] = solution.verification.max_defect
+        z = solution.trajectory
+        if z is not None:
+            out.update(x=z.x, u=z.u, tf=float(z.p[0]), t=solution.t)
+        return out
+
+
+def _version(package: str) -> str:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def build(config: Mapping[str, Any] | None = None) -> PDG6DoFFamily:
+    """The family from a resolved config dict (a manifest's), or Tables 1 and 2 defaults."""
+    if not config:
+        return PDG6DoFFamily()
+    return PDG6DoFFamily(PDG6DoFDataConfig.from_dict(config))
+
+
+SPEC = FamilySpec(
+    name="pdg6dof",
+    summary="6-DoF free-final-time Mars powered descent solved with SCvx (T-SCvx dataset)",
+    build=build,
+)

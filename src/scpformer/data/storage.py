@@ -1,0 +1,550 @@
+"""Self-describing, sharded, crash-safe dataset storage: HDF5 shards and a JSON manifest.
+
+A dataset is a folder::
+
+    DIR/manifest.json        family, full resolved config, seed, versions, schema, shard list,
+                             counts and checksums (rewritten atomically after every shard)
+    DIR/shard-00000.h5       samples [start, stop): one HDF5 dataset per field, shape
+                             (count, *field.shape); attributes repeat the shard's identity
+    DIR/splits.h5            (optional) grouped splits and training-set statistics
+
+Every file is written under a temporary name (``*.tmp``), flushed to disk and renamed, so a
+killed process leaves either a whole file or a temporary one that the next run deletes. A
+shard's ``sha256`` covers its bytes; its ``content_sha256`` covers the values of the
+deterministic fields only (timings excluded), so two runs with the same seed have equal content
+digests whatever the worker count or backend.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full
+from scpformer.data.family import Field
+
+FORMAT_VERSION = 1
+MANIFEST_NAME = "manifest.json"
+TMP_SUFFIX = ".tmp"
+SHARD_GLOB = "shard-*.h5"
+_CHUNK_BYTES = 1 << 16  # target HDF5 chunk size of compressed fields
+_COMPRESS_MIN = 16  # compress fields with at least this many elements per sample
+
+
+def shard_name(number: int) -> str:
+    """File name of shard ``number``."""
+    return f"shard-{number:05d}.h5"
+
+
+@dataclass(frozen=True, kw_only=True)
+class ShardInfo:
+    """One finished shard as listed in the manifest."""
+
+    file: str  # file name inside the dataset folder
+    start: int  # first base index covered
+    stop: int  # one past the last base index covered
+    count: int  # samples stored (stop - start for generated datasets)
+    sha256: str  # of the file's bytes
+    content_sha256: str  # of the deterministic field values (see module docstring)
+    bytes: int  # file size
+    status_counts: dict[str, int] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Manifest:
+    """The manifest of a dataset folder (see the module docstring)."""
+
+    family: str  # registry name of the problem family
+    seed: int  # root of the SeedSequence every instance stream is spawned from
+    n: int  # planned number of base instances
+    shard_size: int  # base instances per shard
+    config: dict[str, Any]  # the family's full resolved configuration
+    schema: tuple[Field, ...]  # every per-sample field (common ones first)
+    package_version: str  # scpformer version that wrote the data
+    versions: dict[str, str]  # libraries the results depend on
+    success_statuses: tuple[str, ...]  # statuses counted as solved
+    kind: str = "generated"  # "generated" or "transformed"
+    transform: dict[str, Any] | None = None  # name and config of the transform (if transformed)
+    source: dict[str, Any] | None = None  # the dataset a transform read (path, checksum)
+    plan: tuple[tuple[int, int], ...] | None = None  # shard ranges when not from n, shard_size
+    shards: tuple[ShardInfo, ...] = ()
+    runs: tuple[dict[str, Any], ...] = ()  # one record per (re)start: backend, workers, limits
+    format_version: int = FORMAT_VERSION
+
+    # -- plan and progress -------------------------------------------------------------------
+    def planned_ranges(self) -> list[tuple[int, int]]:
+        """``(start, stop)`` of every planned shard, in order."""
+        if self.plan is not None:
+            return [tuple(r) for r in self.plan]
+        n_shards = math.ceil(self.n / self.shard_size)
+        return [
+            (s * self.shard_size, min((s + 1) * self.shard_size, self.n)) for s in range(n_shards)
+        ]
+
+    @property
+    def complete(self) -> bool:
+        """Whether every planned shard is finished."""
+        return len(self.shards) == len(self.planned_ranges())
+
+    def counts(self) -> dict[str, Any]:
+        """Samples in finished shards, solved and failed, and per status."""
+        by_status: Counter[str] = Counter()
+        for shard in self.shards:
+            by_status.update(shard.status_counts)
+        solved = sum(v for k, v in by_status.items() if k in self.success_statuses)
+        samples = sum(s.count for s in self.shards)
+        return {
+            "samples": samples,
+            "solved": solved,
+            "failed": samples - solved,
+            "shards": len(self.shards),
+            "planned_shards": len(self.planned_ranges()),
+            "by_status": dict(sorted(by_status.items())),
+        }
+
+    def with_shard(self, info: ShardInfo) -> Manifest:
+        """A copy listing ``info`` (replacing a shard of the same file), in plan order."""
+        shards = [s for s in self.shards if s.file != info.file] + [info]
+        return dataclasses.replace(self, shards=tuple(sorted(shards, key=lambda s: s.file)))
+
+    def without_shard(self, file: str) -> Manifest:
+        """A copy without shard ``file``."""
+        return dataclasses.replace(self, shards=tuple(s for s in self.shards if s.file != file))
+
+    def identity(self) -> dict[str, Any]:
+        """What must match for a run to resume into this folder (JSON-normalized)."""
+        identity = {
+            "format_version": self.format_version,
+            "family": self.family,
+            "kind": self.kind,
+            "seed": self.seed,
+            "n": self.n,
+            "shard_size": self.shard_size,
+            "config": self.config,
+            "transform": self.transform,
+            "source": (self.source or {}).get("content_id"),
+        }
+        return json.loads(json.dumps(identity))
+
+    # -- serialization -----------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        out = {
+            "format_version": self.format_version,
+            "family": self.family,
+            "kind": self.kind,
+            "seed": self.seed,
+            "n": self.n,
+            "shard_size": self.shard_size,
+            "package_version": self.package_version,
+            "versions": self.versions,
+            "config": self.config,
+            "success_statuses": list(self.success_statuses),
+            "transform": self.transform,
+            "source": self.source,
+            "plan": [list(r) for r in self.plan] if self.plan is not None else None,
+            "counts": self.counts(),
+            "complete": self.complete,
+            "schema": [f.to_dict() for f in self.schema],
+            "runs": list(self.runs),
+            "shards": [s.to_dict() for s in self.shards],
+        }
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Manifest:
+        data = dict(data)
+        data.pop("counts", None)
+        data.pop("complete", None)
+        data["schema"] = tuple(Field.from_dict(f) for f in data["schema"])
+        data["shards"] = tuple(ShardInfo(**s) for s in data.get("shards", ()))
+        data["runs"] = tuple(data.get("runs", ()))
+        data["success_statuses"] = tuple(data["success_statuses"])
+        if data.get("plan") is not None:
+            data["plan"] = tuple(tuple(r) for r in data["plan"])
+        return cls(**data)
+
+    def field(self, name: str) -> Field:
+        """The schema entry of ``name``."""
+        for f in self.schema:
+            if f.name == name:
+                return f
+        raise DatasetError(f"the {self.family} dataset has no field {name!r}")
+
+
+def describe_mismatch(old: Manifest, new: Manifest) -> str | None:
+    """Why ``new`` cannot resume into a folder holding ``old`` (``None`` when it can)."""
+    a, b = old.identity(), new.identity()
+    for key in a:
+        if a[key] != b[key]:
+            if key == "config":
+                diff = _first_difference(a[key], b[key])
+                return f"a different {old.family} configuration ({diff})"
+            return f"{key} {a[key]!r} (this run: {b[key]!r})"
+    return None
+
+
+def _first_difference(a: Any, b: Any, path: str = "config") -> str:
+    if isinstance(a, dict) and isinstance(b, dict):
+        for key in sorted(set(a) | set(b)):
+            if a.get(key) != b.get(key):
+                return _first_difference(a.get(key), b.get(key), f"{path}.{key}")
+    return f"{path}: {a!r} there, {b!r} here"
+
+
+# -- atomic files ----------------------------------------------------------------------------
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _fsync_file(path: Path) -> None:
+    with path.open("rb+") as fh:
+        os.fsync(fh.fileno())
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file, fsync and rename."""
+    tmp = path.with_name(path.name + TMP_SUFFIX)
+    try:
+        with tmp.open("w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        if is_disk_full(err):
+            raise DiskFullError(
+                f"disk full while writing {path}; finished shards are kept: free space and "
+                "re-run the same command to resume"
+            ) from None
+        raise
+
+
+def write_manifest(folder: Path, manifest: Manifest) -> None:
+    """Write ``folder/manifest.json`` atomically."""
+    atomic_write_text(folder / MANIFEST_NAME, json.dumps(manifest.to_dict(), indent=1) + "\n")
+
+
+def read_manifest(folder: Path) -> Manifest:
+    """The manifest of the dataset in ``folder``.
+
+    Raises
+    ------
+    DatasetError
+        When ``folder`` holds no manifest or an unreadable one.
+    """
+    path = Path(folder) / MANIFEST_NAME
+    if not path.is_file():
+        raise DatasetError(f"no dataset in {folder} ({MANIFEST_NAME} not found)")
+    try:
+        return Manifest.from_dict(json.loads(path.read_text()))
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+        raise DatasetError(f"{path} is corrupt: {err}") from None
+
+
+def content_id(manifest: Manifest) -> str:
+    """Identity of a dataset's values: sha256 over its shards' content digests, in order.
+
+    Unlike the manifest's own bytes it ignores run records and timings, so it is the same for
+    every run that produced the same data (any worker count or backend).
+    """
+    text = "|".join(s.content_sha256 for s in manifest.shards)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def file_sha256(path: Path) -> str:
+    """sha256 of a file's bytes, read in 1 MiB blocks."""
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+# -- shards ----------------------------------------------------------------------------------
+def content_digest(columns: Mapping[str, np.ndarray], schema: Sequence[Field]) -> str:
+    """sha256 over the deterministic fields' values, in schema order."""
+    digest = hashlib.sha256()
+    for f in schema:
+        if not f.deterministic:
+            continue
+        values = columns[f.name]
+        digest.update(f"{f.name}|{f.dtype}|{values.shape}|".encode())
+        if f.dtype == "str":
+            digest.update("\0".join(str(v) for v in values.reshape(-1)).encode())
+        else:
+            digest.update(np.ascontiguousarray(values, dtype=f.numpy_dtype).tobytes())
+    return digest.hexdigest()
+
+
+def stack_records(records: Sequence[Mapping[str, Any]], schema: Sequence[Field]) -> dict:
+    """Columns (count, *shape) of the given per-sample records, validated against ``schema``."""
+    columns = {}
+    for f in schema:
+        column = f.empty(len(records))
+        for i, record in enumerate(records):
+            if f.name not in record:
+                raise ValueError(f"sample {i} lacks field {f.name!r}")
+            column[i] = f.coerce(record[f.name])
+        columns[f.name] = column
+    return columns
+
+
+def _create(h5: h5py.File, f: Field, values: np.ndarray) -> None:
+    if f.dtype == "str":
+        data = np.array([str(v) for v in values], dtype=h5py.string_dtype("utf-8"))
+        h5.create_dataset(f.name, data=data)
+        return
+    per_sample = int(np.prod(f.shape, dtype=np.int64))
+    if per_sample < _COMPRESS_MIN or len(values) == 0:
+        h5.create_dataset(f.name, data=values)
+        return
+    rows = max(1, min(len(values), _CHUNK_BYTES // max(per_sample * values.itemsize, 1)))
+    h5.create_dataset(
+        f.name,
+        data=values,
+        chunks=(rows, *f.shape),
+        compression="gzip",
+        compression_opts=4,
+        shuffle=True,
+    )
+
+
+def write_shard(
+    path: Path,
+    columns: Mapping[str, np.ndarray],
+    schema: Sequence[Field],
+    *,
+    start: int,
+    stop: int,
+    attrs: Mapping[str, Any],
+) -> ShardInfo:
+    """Write one shard atomically and return its manifest entry.
+
+    Raises
+    ------
+    DiskFullError
+        When the disk fills up; the temporary file is removed, earlier shards are untouched.
+    """
+    path = Path(path)
+    tmp = path.with_name(path.name + TMP_SUFFIX)
+    count = len(columns[schema[0].name])
+    content = content_digest(columns, schema)
+    try:
+        with h5py.File(tmp, "w") as h5:
+            for key, value in {**attrs, "start": start, "stop": stop, "count": count}.items():
+                h5.attrs[key] = value
+            h5.attrs["content_sha256"] = content
+            for f in schema:
+                _create(h5, f, columns[f.name])
+        _fsync_file(tmp)
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    except (OSError, RuntimeError) as err:
+        tmp.unlink(missing_ok=True)
+        if is_disk_full(err):
+            raise DiskFullError(
+                f"disk full while writing {path.name} in {path.parent}; finished shards are "
+                "kept: free space and re-run the same command to resume"
+            ) from None
+        raise
+    statuses = Counter(str(s) for s in columns["status"]) if "status" in columns else Counter()
+    return ShardInfo(
+        file=path.name,
+        start=start,
+        stop=stop,
+        count=count,
+        sha256=file_sha256(path),
+        content_sha256=content,
+        bytes=path.stat().st_size,
+        status_counts=dict(sorted(statuses.items())),
+    )
+
+
+def read_columns(path: Path, schema: Sequence[Field], names: Iterable[str] | None = None) -> dict:
+    """Whole columns of one shard, as written (strings as object arrays of ``str``).
+
+    Raises
+    ------
+    DatasetError
+        When the file cannot be read (truncated, corrupt) or lacks a field.
+    """
+    wanted = [f for f in schema if names is None or f.name in set(names)]
+    try:
+        with h5py.File(path, "r") as h5:
+            return {f.name: _read(h5, f, ()) for f in wanted}
+    except (OSError, KeyError, RuntimeError) as err:
+        raise DatasetError(f"{path} is corrupt or truncated ({_short(err)})") from None
+
+
+def _read(h5: h5py.File, f: Field, where: Any) -> np.ndarray:
+    ds = h5[f.name]
+    if f.dtype == "str":
+        return np.asarray(ds.asstr()[where], dtype=object)
+    return np.asarray(ds[where])
+
+
+def _short(err: BaseException) -> str:
+    return str(err).splitlines()[0][:200] if str(err) else type(err).__name__
+
+
+def shard_attrs(path: Path) -> dict[str, Any]:
+    """The attributes of a shard file (its identity and content digest)."""
+    try:
+        with h5py.File(path, "r") as h5:
+            return {k: (v.item() if hasattr(v, "item") else v) for k, v in h5.attrs.items()}
+    except (OSError, RuntimeError) as err:
+        raise DatasetError(f"{path} is corrupt or truncated ({_short(err)})") from None
+
+
+def check_shard(folder: Path, info: ShardInfo, schema: Sequence[Field]) -> list[str]:
+    """Problems of one listed shard: missing, size, checksum, fields, shapes, content digest."""
+    path = Path(folder) / info.file
+    if not path.is_file():
+        return [f"{info.file}: missing"]
+    size = path.stat().st_size
+    if size != info.bytes:
+        return [f"{info.file}: truncated or altered ({size} bytes, manifest says {info.bytes})"]
+    if file_sha256(path) != info.sha256:
+        return [f"{info.file}: corrupt (sha256 differs from the manifest)"]
+    try:
+        with h5py.File(path, "r") as h5:
+            problems = [p for f in schema for p in _check_field(h5, f, info)]
+    except (OSError, RuntimeError) as err:
+        return [f"{info.file}: unreadable ({_short(err)})"]
+    if problems:
+        return problems
+    columns = read_columns(path, schema)
+    if content_digest(columns, schema) != info.content_sha256:
+        return [f"{info.file}: content digest differs from the manifest"]
+    return []
+
+
+def _check_field(h5: h5py.File, f: Field, info: ShardInfo) -> list[str]:
+    if f.name not in h5:
+        return [f"{info.file}: field {f.name!r} missing"]
+    ds = h5[f.name]
+    if ds.shape != (info.count, *f.shape):
+        return [
+            f"{info.file}: field {f.name!r} has shape {ds.shape}, expected {(info.count, *f.shape)}"
+        ]
+    is_str = h5py.check_string_dtype(ds.dtype) is not None
+    if (f.dtype == "str") != is_str or (not is_str and ds.dtype != np.dtype(f.dtype)):
+        return [f"{info.file}: field {f.name!r} has dtype {ds.dtype}, expected {f.dtype}"]
+    return []
+
+
+def stray_files(folder: Path, manifest: Manifest) -> tuple[list[Path], list[Path]]:
+    """Temporary files and shard files that the manifest does not list."""
+    folder = Path(folder)
+    listed = {s.file for s in manifest.shards}
+    temps = sorted(folder.glob("*" + TMP_SUFFIX))
+    unlisted = sorted(p for p in folder.glob(SHARD_GLOB) if p.name not in listed)
+    return temps, unlisted
+
+
+def verify_dataset(folder: Path) -> list[str]:
+    """Every problem found in the dataset at ``folder`` (empty when it checks out).
+
+    Checks each listed shard (presence, size, sha256, fields, shapes, dtypes, content digest),
+    the manifest's counts, and reports temporary or unlisted files and missing shards.
+    """
+    folder = Path(folder)
+    manifest = read_manifest(folder)
+    problems = [p for info in manifest.shards for p in check_shard(folder, info, manifest.schema)]
+    temps, unlisted = stray_files(folder, manifest)
+    problems += [f"{p.name}: leftover temporary file of an interrupted run" for p in temps]
+    problems += [f"{p.name}: shard file not listed in the manifest" for p in unlisted]
+    counts = manifest.counts()
+    if not manifest.complete:
+        problems.append(
+            f"incomplete: {counts['shards']} of {counts['planned_shards']} shards finished "
+            "(re-run the same generate command to finish)"
+        )
+    return problems
+
+
+class ShardedSamples:
+    """Random access to the samples of a dataset, reading HDF5 lazily (nothing preloaded).
+
+    Sample positions run over the finished shards in manifest order. File handles are opened
+    on first use and per process, so an object can be handed to ``DataLoader`` workers.
+    """
+
+    def __init__(self, folder: Path | str) -> None:
+        self.folder = Path(folder)
+        self.manifest = read_manifest(self.folder)
+        counts = [s.count for s in self.manifest.shards]
+        self.offsets = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
+        self._handles: dict[int, h5py.File] = {}
+        self._pid = os.getpid()
+
+    def __len__(self) -> int:
+        return int(self.offsets[-1])
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_handles"] = {}
+        return state
+
+    def locate(self, position: int) -> tuple[int, int]:
+        """(shard number in the manifest, row inside it) of a sample position."""
+        if not 0 <= position < len(self):
+            raise IndexError(f"sample {position} out of range [0, {len(self)})")
+        shard = int(np.searchsorted(self.offsets, position, side="right") - 1)
+        return shard, int(position - self.offsets[shard])
+
+    def _handle(self, shard: int) -> h5py.File:
+        if os.getpid() != self._pid:
+            self._handles, self._pid = {}, os.getpid()
+        if shard not in self._handles:
+            info = self.manifest.shards[shard]
+            try:
+                self._handles[shard] = h5py.File(self.folder / info.file, "r")
+            except OSError as err:
+                raise DatasetError(
+                    f"{self.folder / info.file} is corrupt or truncated ({_short(err)}); "
+                    f"run: scpformer dataset verify {self.folder}"
+                ) from None
+        return self._handles[shard]
+
+    def read(self, name: str, position: int, *index: int | slice) -> np.ndarray:
+        """One sample's value of field ``name`` (``index`` selects inside it, read lazily)."""
+        shard, row = self.locate(position)
+        return _read(self._handle(shard), self.manifest.field(name), (row, *index))
+
+    def column(self, name: str) -> np.ndarray:
+        """A whole column, shard by shard (meant for small per-sample fields)."""
+        f = self.manifest.field(name)
+        parts = [_read(self._handle(s), f, ()) for s in range(len(self.manifest.shards))]
+        return np.concatenate(parts) if parts else f.empty(0)
+
+    def close(self) -> None:
+        """Close every open file."""
+        for handle in self._handles.values():
+            handle.close()
+        self._handles = {}

@@ -1,0 +1,139 @@
+"""Every bad input of generation gets a clear message, and no finished shard is lost."""
+
+import errno
+
+import numpy as np
+import pytest
+from toy_families import MisbehavingFamily, ToyFamily
+
+from scpformer.data import storage
+from scpformer.data.errors import DatasetError, DiskFullError
+from scpformer.data.generate import GenerateConfig, generate
+from scpformer.data.pdg6dof_family import PDG6DoFFamily
+
+
+def config(out, **kwargs):
+    return GenerateConfig(**(dict(n=5, out=out, shard_size=2, workers=1) | kwargs))
+
+
+@pytest.fixture
+def toy_folder(tmp_path):
+    generate(ToyFamily(), config(tmp_path / "ds"))
+    return tmp_path / "ds"
+
+
+def test_a_folder_holding_another_familys_dataset_is_refused(toy_folder):
+    with pytest.raises(DatasetError, match=r"holds another dataset \(toy, seed 0.*family 'toy'"):
+        generate(PDG6DoFFamily(), config(toy_folder))
+
+
+def test_a_folder_holding_another_seeds_dataset_is_refused(toy_folder):
+    with pytest.raises(DatasetError, match=r"differs in seed 0 .this run: 3.*another --out"):
+        generate(ToyFamily(), config(toy_folder, seed=3))
+
+
+def test_a_folder_holding_another_configuration_names_the_difference(toy_folder):
+    with pytest.raises(DatasetError, match=r"config\.sleep: 0\.0 there, 0\.5 here"):
+        generate(ToyFamily(sleep=0.5), config(toy_folder))
+    with pytest.raises(DatasetError, match=r"differs in n 5"):
+        generate(ToyFamily(), config(toy_folder, n=6))
+
+
+def test_a_refused_folder_is_left_untouched(toy_folder):
+    before = {p.name: p.read_bytes() for p in toy_folder.iterdir()}
+    with pytest.raises(DatasetError):
+        generate(ToyFamily(), config(toy_folder, seed=3))
+    assert {p.name: p.read_bytes() for p in toy_folder.iterdir()} == before
+
+
+def test_a_non_empty_folder_without_a_manifest_is_refused(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(DatasetError, match=r"not empty and holds no dataset.*notes.txt"):
+        generate(ToyFamily(), config(tmp_path))
+
+
+def test_an_output_path_that_is_a_file_is_refused(tmp_path):
+    (tmp_path / "file").write_text("")
+    with pytest.raises(DatasetError, match=r"is a file, not a folder"):
+        generate(ToyFamily(), config(tmp_path / "file"))
+
+
+def test_a_corrupt_manifest_is_a_clear_error(toy_folder):
+    (toy_folder / storage.MANIFEST_NAME).write_text('{"family": ')
+    with pytest.raises(DatasetError, match=r"manifest.json is corrupt"):
+        generate(ToyFamily(), config(toy_folder))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"n": 0}, "n must be a positive integer"),
+        ({"shard_size": 0}, "shard_size must be a positive integer"),
+        ({"workers": 0}, "workers must be a positive integer"),
+        ({"seed": -1}, "seed must be a nonnegative integer"),
+        ({"time_limit": 0.0}, "time_limit must be a positive number"),
+        ({"start_method": "thread"}, "start_method must be one of"),
+    ],
+)
+def test_invalid_settings_name_the_field(tmp_path, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        config(tmp_path, **kwargs)
+
+
+def test_a_full_disk_stops_with_a_clear_message_and_keeps_finished_shards(tmp_path, monkeypatch):
+    real_create, calls = storage._create, []
+
+    def fill_up_on_second_shard(h5, field, values):
+        if h5.filename.endswith("shard-00001.h5.tmp"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        calls.append(field.name)
+        return real_create(h5, field, values)
+
+    monkeypatch.setattr(storage, "_create", fill_up_on_second_shard)
+    with pytest.raises(DiskFullError, match=r"disk full while writing shard-00001.h5.*resume"):
+        generate(ToyFamily(), config(tmp_path / "ds"))
+    manifest = storage.read_manifest(tmp_path / "ds")
+    assert [s.file for s in manifest.shards] == ["shard-00000.h5"]
+    assert not list((tmp_path / "ds").glob("*.tmp"))
+    monkeypatch.setattr(storage, "_create", real_create)
+    resumed = generate(ToyFamily(), config(tmp_path / "ds"))
+    reference = generate(ToyFamily(), config(tmp_path / "ref"))
+    assert resumed.resumed == 2 and resumed.generated == 3
+    assert storage.content_id(resumed.manifest) == storage.content_id(reference.manifest)
+
+
+def statuses(report):
+    manifest = report.manifest
+    parts = [storage.read_columns(report.folder / s.file, manifest.schema) for s in manifest.shards]
+    return {name: np.concatenate([p[name] for p in parts]) for name in ("status", "message")}
+
+
+def test_a_hanging_instance_times_out_and_the_run_goes_on(tmp_path):
+    notices = []
+    report = generate(
+        MisbehavingFamily(hang_index=1),
+        config(tmp_path / "ds", workers=2, time_limit=1.0),
+        on_progress=lambda p: p.result and notices.append(p.result.status),
+    )
+    got = statuses(report)
+    assert got["status"][1] == "timeout" and "1 s time limit" in got["message"][1]
+    assert set(np.delete(got["status"], 1)) <= {"ok", "bad"}
+    assert report.manifest.complete and "timeout" in notices
+
+
+def test_a_crashing_worker_is_recorded_and_replaced(tmp_path):
+    report = generate(MisbehavingFamily(crash_index=2), config(tmp_path / "ds", workers=2))
+    got = statuses(report)
+    assert got["status"][2] == "worker_crashed" and "exit code 3" in got["message"][2]
+    assert set(np.delete(got["status"], 2)) <= {"ok", "bad"}
+    assert report.manifest.counts()["samples"] == 5
+
+
+def test_an_exception_on_one_instance_is_a_status(tmp_path):
+    got = statuses(generate(MisbehavingFamily(raise_index=0), config(tmp_path / "ds")))
+    assert got["status"][0] == "error" and "ZeroDivisionError: toy bug" in got["message"][0]
+
+
+def test_a_worker_that_cannot_warm_up_stops_the_run_clearly(tmp_path):
+    with pytest.raises(DatasetError, match=r"worker failed to warm up: RuntimeError: toy warm-up"):
+        generate(ToyFamily(fail_warm_up=True), config(tmp_path / "ds"))

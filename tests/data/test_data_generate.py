@@ -1,0 +1,143 @@
+"""Generation: determinism, independence of streams, resumption after a kill."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from toy_families import ToyFamily
+
+from scpformer.data import storage
+from scpformer.data.executors import instance_rng
+from scpformer.data.generate import GenerateConfig, generate
+
+HERE = Path(__file__).parent
+
+
+def run(out, family=None, **kwargs):
+    config = dict(n=7, out=out, shard_size=3, workers=1) | kwargs
+    return generate(family or ToyFamily(), GenerateConfig(**config))
+
+
+def all_columns(folder):
+    manifest = storage.read_manifest(folder)
+    parts = [storage.read_columns(folder / s.file, manifest.schema) for s in manifest.shards]
+    return {f.name: np.concatenate([p[f.name] for p in parts]) for f in manifest.schema}
+
+
+def test_same_seed_gives_the_same_data_for_any_worker_count(tmp_path):
+    one = run(tmp_path / "one", workers=1)
+    two = run(tmp_path / "two", workers=2)
+    assert storage.content_id(one.manifest) == storage.content_id(two.manifest)
+    assert [s.content_sha256 for s in one.manifest.shards] == [
+        s.content_sha256 for s in two.manifest.shards
+    ]
+
+
+def test_instance_i_draws_from_child_i_of_the_seed_sequence(tmp_path):
+    run(tmp_path / "ds", seed=5)
+    theta = all_columns(tmp_path / "ds")["theta"]
+    children = np.random.SeedSequence(5).spawn(7)
+    expected = [np.random.default_rng(child).uniform(size=3) for child in children]
+    np.testing.assert_array_equal(theta, expected)
+    assert len({row.tobytes() for row in theta}) == 7  # no two samples repeat
+
+
+def test_a_larger_dataset_extends_a_smaller_one_with_the_same_seed(tmp_path):
+    small = all_columns(run(tmp_path / "small", n=4).folder)
+    large = all_columns(run(tmp_path / "large", n=7).folder)
+    np.testing.assert_array_equal(small["theta"], large["theta"][:4])
+    assert not np.array_equal(
+        instance_rng(0, 0).uniform(size=3), instance_rng(1, 0).uniform(size=3)
+    )
+
+
+def test_failed_instances_are_stored_with_their_status(tmp_path):
+    report = run(tmp_path / "ds", n=20, shard_size=20)
+    data = all_columns(tmp_path / "ds")
+    bad = data["theta"][:, 0] >= 0.8
+    assert bad.any() and (~bad).any()
+    assert set(data["status"][bad]) == {"bad"} and set(data["status"][~bad]) == {"ok"}
+    counts = report.manifest.counts()
+    assert counts["failed"] == bad.sum() and counts["solved"] == (~bad).sum()
+
+
+def test_rerunning_a_finished_dataset_solves_nothing(tmp_path):
+    first = run(tmp_path / "ds")
+    again = run(tmp_path / "ds")
+    assert again.generated == 0 and again.resumed == 7
+    assert storage.content_id(again.manifest) == storage.content_id(first.manifest)
+
+
+KILLED_RUN = textwrap.dedent(
+    """
+    import sys
+    sys.path.insert(0, {here!r})
+    from toy_families import ToyFamily
+    from scpformer.data.generate import GenerateConfig, generate
+
+    if __name__ == "__main__":
+        config = GenerateConfig(n=8, out=sys.argv[1], shard_size=3, workers=2)
+        generate(ToyFamily(sleep=0.3), config)
+    """
+)
+
+
+def test_a_run_killed_mid_shard_resumes_to_the_same_bytes(tmp_path):
+    script = tmp_path / "killed_run.py"
+    script.write_text(KILLED_RUN.format(here=str(HERE)))
+    out = tmp_path / "ds"
+    proc = subprocess.Popen([sys.executable, str(script), str(out)], start_new_session=True)
+    first = out / storage.shard_name(0)
+    deadline = time.monotonic() + 60
+    while not first.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)  # the run and its workers, mid-way through shard 1
+    proc.wait()
+    assert first.exists() and not (out / storage.shard_name(2)).exists()
+    kept = first.stat().st_ino, storage.file_sha256(first)
+
+    resumed = generate(ToyFamily(sleep=0.3), GenerateConfig(n=8, out=out, shard_size=3, workers=2))
+    assert resumed.resumed == 3 and resumed.generated == 5
+    assert (first.stat().st_ino, storage.file_sha256(first)) == kept  # kept, not rewritten
+    reference = run(tmp_path / "ref", family=ToyFamily(sleep=0.3), n=8)
+    assert storage.content_id(resumed.manifest) == storage.content_id(reference.manifest)
+    assert storage.verify_dataset(out) == []
+
+
+def test_resume_repairs_leftovers_adopts_unlisted_shards_and_redoes_corrupt_ones(tmp_path):
+    reference = run(tmp_path / "ds")
+    folder = tmp_path / "ds"
+    manifest = storage.read_manifest(folder)
+    storage.write_manifest(folder, manifest.without_shard(storage.shard_name(0)))  # unlisted
+    (folder / "shard-00001.h5.tmp").write_bytes(b"half-written")  # killed during a write
+    last = folder / storage.shard_name(2)
+    last.write_bytes(last.read_bytes()[:-64])  # truncated
+    notices = []
+    again = generate(
+        ToyFamily(),
+        GenerateConfig(n=7, out=folder, shard_size=3, workers=1),
+        on_notice=notices.append,
+    )
+    assert again.generated == 1  # only the truncated shard's single instance
+    assert any("removed shard-00001.h5.tmp" in n for n in notices)
+    assert any("shard-00002.h5: truncated" in n and "regenerating" in n for n in notices)
+    assert storage.content_id(again.manifest) == storage.content_id(reference.manifest)
+    assert storage.verify_dataset(folder) == []
+
+
+@pytest.mark.slow
+def test_pdg6dof_data_are_identical_with_one_and_two_workers(tmp_path, pdg_family, pdg_dataset):
+    config = GenerateConfig(n=4, out=tmp_path / "one", shard_size=2, workers=1, seed=7)
+    one = generate(pdg_family, config)
+    assert storage.content_id(one.manifest) == storage.content_id(pdg_dataset.manifest)
+    a, b = all_columns(one.folder), all_columns(pdg_dataset.folder)
+    for name in ("theta", "x", "u", "tf", "tight_flags", "guess_x", "status", "iterations"):
+        np.testing.assert_array_equal(a[name], b[name])
+    assert (a["status"] == "converged").all()
+    assert a["tight_flags"][np.arange(4), a["iterations"] - 1].any(axis=1).all()
