@@ -5,6 +5,7 @@ import pytest
 
 from scpformer.data.errors import DatasetError
 from scpformer.data.family import (
+    BUILTIN_MODULES,
     COMMON_FIELDS,
     DatasetFamily,
     Field,
@@ -28,9 +29,10 @@ def test_every_planned_family_is_known_by_name():
     assert {"pdg6dof", "rendezvous", "robust-rendezvous"} <= set(family_names())
 
 
-def test_a_family_that_has_not_landed_is_a_clear_error():
-    with pytest.raises(DatasetError, match=r"'rendezvous' is not available yet"):
-        get_family_spec("rendezvous")
+def test_a_family_that_has_not_landed_is_a_clear_error(monkeypatch):
+    monkeypatch.setitem(BUILTIN_MODULES, "future", "scpformer.data.future_family")
+    with pytest.raises(DatasetError, match=r"'future' is not available yet"):
+        get_family_spec("future")
 
 
 def test_an_unknown_family_names_the_known_ones():

@@ -84,6 +84,51 @@ def _build_pdg6dof(args: argparse.Namespace) -> DatasetFamily:
 register_family_arguments("pdg6dof", _add_pdg6dof_arguments, _build_pdg6dof)
 
 
+def _add_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
+    from scpformer.cli.dataclass_args import add_dataclass_arguments
+    from scpformer.cli.rendezvous import add_config_arguments
+    from scpformer.problems.rendezvous.instance import SampleRanges
+    from scpformer.problems.rendezvous.problem import WARMSTARTS
+
+    parser.add_argument(
+        "--warmstart",
+        choices=WARMSTARTS,
+        default="convex",
+        help="initial reference of Problem 3 (default: convex, the stored convex twin)",
+    )
+    parser.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="skip the nonlinear replay of both twins (about 4x faster; statuses then rest on "
+        "the linear model alone)",
+    )
+    add_dataclass_arguments(
+        parser, SampleRanges, prefix="range", title="sampling ranges of theta (Table 1)"
+    )
+    add_config_arguments(parser)
+
+
+def _build_rendezvous(args: argparse.Namespace) -> DatasetFamily:
+    from scpformer.cli.dataclass_args import overrides
+    from scpformer.cli.rendezvous import config_from_args, scenario_from_args
+    from scpformer.data.rendezvous_family import RendezvousDataConfig, RendezvousFamily
+    from scpformer.problems.rendezvous.instance import SampleRanges
+
+    scenario, target = scenario_from_args(args)
+    config = RendezvousDataConfig(
+        ranges=SampleRanges(**overrides(args, SampleRanges, "range")),
+        scenario=scenario,
+        target=target,
+        solver=config_from_args(args),
+        warmstart=args.warmstart,
+        verify=not args.no_verify,
+    )
+    return RendezvousFamily(config)
+
+
+register_family_arguments("rendezvous", _add_rendezvous_arguments, _build_rendezvous)
+
+
 def _clear_errors(handler: Handler) -> Handler:
     """Turn operating-system errors (permissions, missing paths) into one-line errors."""
 
