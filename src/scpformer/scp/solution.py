@@ -103,6 +103,7 @@ class Solution:
     verification: Verification | None = None
     timing: Timing | None = None
     message: str = ""
+    extras: dict[str, Any] = field(default_factory=dict)  # family-specific facts (e.g. stage)
 
     @property
     def converged(self) -> bool:

@@ -1,0 +1,383 @@
+"""Solving the robust rendezvous: convex TPBVP, SCvx* on Eq. 17, the three-stage procedure.
+
+Stages (robust ART paper, Section 5, "Dataset generation"):
+
+1. ``"tpbvp"``: the convex two-point boundary value problem (min ``sum |u|``, dynamics and
+   boundary states only), the rendezvous family's compiled Problem 1;
+2. ``"collision_avoidance"``: SCvx* with the deterministic collision-avoidance constraint
+   (``T_safety = 0``, ``X = 0``), warm-started by stage 1;
+3. ``"passive_safety"``: SCvx* with passive safety over ``T_safety`` (deterministic, ``X = 0``,
+   or chance-constrained with the margin of Eq. 16), warm-started by stage 2.
+
+The final feasible solution is kept: :func:`solve` returns stage 3 when it converged, and
+otherwise the latest converged earlier stage, with ``extras["stage"]`` naming the stage that
+produced the trajectory; the ``status`` is always that of the requested problem (stage 3), so
+``Solution.converged`` is true only for a verified passively safe trajectory.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from scpformer.dynamics.truth import propagate_relative
+from scpformer.problems.rendezvous.problem import LinearModel, osculating_initial_state
+from scpformer.problems.rendezvous.subproblems import compiled_subproblem
+from scpformer.problems.robust_rendezvous.instance import RobustInstance
+from scpformer.problems.robust_rendezvous.safety import (
+    DriftGeometry,
+    SafetyEvaluation,
+    constraint_violation_budget,
+    drift_geometry,
+    evaluate_safety,
+    linear_model,
+)
+from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig, check_mode
+from scpformer.problems.robust_rendezvous.subproblem import compiled_safety_subproblem
+from scpformer.scp.scvx_star import NonlinearEvaluation, SCvxStar, SubproblemResult
+from scpformer.scp.solution import (
+    IterationRecord,
+    Solution,
+    Status,
+    Timing,
+    Trajectory,
+    Verification,
+)
+
+STAGES = ("tpbvp", "collision_avoidance", "passive_safety")
+WARMSTARTS = ("three_stage", "tpbvp")
+
+
+@dataclass(frozen=True)
+class Boundary:
+    """Boundary states of the instance in scaled mean ROE [m]."""
+
+    x_init: np.ndarray  # (6,) Psi(t_0)^-1 x_0,rtn
+    x_final: np.ndarray  # (6,) Psi(t_N)^-1 x_f,rtn
+
+
+def boundary(instance: RobustInstance, model: LinearModel) -> Boundary:
+    """``x = Psi^{-1} x_rtn`` at both ends (see :mod:`.instance`)."""
+    return Boundary(
+        x_init=np.linalg.solve(model.Psi[0], np.asarray(instance.x0_rtn)),
+        x_final=np.linalg.solve(model.Psi[-1], instance.xf_rtn),
+    )
+
+
+# ======================================================================================
+# stage 1: convex TPBVP (the rendezvous family's compiled Problem 1)
+# ======================================================================================
+def solve_tpbvp(instance: RobustInstance, config: RobustSolverConfig | None = None) -> Solution:
+    """The convex TPBVP ("CVX" of the paper): lower bound of the cost, no safety constraint."""
+    config = config or RobustSolverConfig()
+    start = time.perf_counter()
+    model = linear_model(instance)
+    bnd = boundary(instance, model)
+    n, solver = instance.n_nodes, config.scvx.solver
+    sub = compiled_subproblem("tpbvp", n, max(1, n - 2), solver)
+    sub.set_dynamics(model.Phi, model.Phi @ model.B, bnd.x_init, bnd.x_final)
+    t_setup = time.perf_counter() - start
+    sol = sub.solve(solver)
+    if sol.ok:
+        status, traj = Status.CONVERGED, Trajectory(x=sol.x, u=sol.dv, p=np.zeros(0))
+    else:
+        infeasible = sol.status.startswith("infeasible")
+        status = Status.INFEASIBLE_INSTANCE if infeasible else Status.SOLVER_FAILED
+        traj = None
+    timing = Timing(time.perf_counter() - start, t_setup, sol.solver_time, 0.0)
+    return Solution(
+        status=status,
+        trajectory=traj,
+        t=model.t,
+        cost=sol.cost,
+        iterations=1,
+        timing=timing,
+        message=f"convex TPBVP: {sol.status}",
+        extras={"stage": "tpbvp"},
+    )
+
+
+# ======================================================================================
+# stages 2-3: SCvx* on Eq. 17
+# ======================================================================================
+class PassiveSafetyProblem:
+    """The CC-OCP of Eq. 1 in the form SCvx* expects (:class:`AugmentedLagrangianProblem`).
+
+    ``z = (x, u)``: ``x`` (N+1, 6) [m], ``u`` (N, 3) [m/s]; ``f0 = sum |u_i|_2``; no ``g``
+    (linear dynamics and boundary states are exact subproblem constraints); ``h`` (N,) the
+    normalized safety constraints of :mod:`.safety`.
+    """
+
+    def __init__(
+        self,
+        instance: RobustInstance,
+        config: RobustSolverConfig,
+        mode: str,
+        *,
+        collision_only: bool = False,
+        model: LinearModel | None = None,
+    ) -> None:
+        self.instance, self.config = instance, config
+        self.mode = "deterministic" if collision_only else check_mode(mode)
+        self.model = model or linear_model(instance)
+        self.geometry: DriftGeometry = drift_geometry(instance, 0.0 if collision_only else None)
+        self.bounds = boundary(instance, self.model)
+        self.sub = compiled_safety_subproblem(instance.n_nodes, config.scvx.solver)
+        Gamma = self.model.Phi @ self.model.B
+        self.sub.set_dynamics(self.model.Phi, Gamma, self.bounds.x_init, self.bounds.x_final)
+
+    def safety(self, z: Trajectory) -> SafetyEvaluation:
+        """Eqs. 14-16 at ``z``."""
+        return evaluate_safety(self.geometry, self.model, z.x, z.u, self.instance, self.mode)
+
+    def evaluate(self, z: Trajectory) -> NonlinearEvaluation:
+        t0 = time.perf_counter()
+        ev = self.safety(z)
+        cost = float(np.linalg.norm(z.u, axis=1).sum())
+        return NonlinearEvaluation(
+            cost=cost,
+            g=np.zeros(0),
+            h=ev.h,
+            linearization=ev,
+            tight_flags=ev.h >= -self.config.tight_tol,
+            time=time.perf_counter() - t0,
+        )
+
+    def solve_subproblem(
+        self,
+        z: Trajectory,
+        evaluation: NonlinearEvaluation,
+        *,
+        lambda_: np.ndarray,
+        mu: np.ndarray,
+        w: float,
+        r: float,
+        solver: str,
+    ) -> SubproblemResult:
+        ev: SafetyEvaluation = evaluation.linearization
+        scale = self.config.u_trust_scale
+        self.sub.set_iterate(
+            z.x, z.u, ev.a_hat, ev.c_u, 1.0 + ev.beta, mu=mu, w=w, r=r, u_trust_scale=scale
+        )
+        res = self.sub.solve(solver)
+        if not res.ok:
+            return SubproblemResult(False, res.status, None, math.nan, None, None, math.nan,
+                                    res.solver_time, message=res.status)  # fmt: skip
+        step = max(float(np.abs(res.x - z.x).max()), float(np.abs(res.u - z.u).max()) / scale)
+        return SubproblemResult(
+            ok=True,
+            status=res.status,
+            z=Trajectory(x=res.x, u=res.u, p=np.zeros(0)),
+            cost=res.cost,
+            xi=None,
+            zeta=res.zeta,
+            step_norm=step,
+            solver_time=res.solver_time,
+        )
+
+    def verify(self, z: Trajectory) -> Verification:
+        """Linear-model residual, boundary misses and the safety rows; optional truth replay."""
+        tol = self.config.verification
+        ev = self.safety(z)
+        residual = max(
+            self.model.residual(z.x, z.u),
+            float(np.abs(z.x[0] - self.bounds.x_init).max()),
+            float(np.abs(z.x[-1] - self.bounds.x_final).max()),
+        )
+        worst = float(max(0.0, ev.h.max()))
+        node = {"model_residual_m": residual, "passive_safety": worst}
+        problems = []
+        if residual > tol.model_residual_m:
+            problems.append(f"model residual {residual:.3g} m > {tol.model_residual_m:.3g} m")
+        if worst > tol.safety_tol:
+            problems.append(f"safety violation {worst:.3g} > {tol.safety_tol:.3g}")
+        terminal: dict[str, float] = {}
+        max_gap = 0.0
+        if tol.truth_replay:
+            terminal, max_gap = self._replay(z)
+            if terminal["position_m"] > tol.terminal_position_m:
+                problems.append(f"replay terminal miss {terminal['position_m']:.3g} m")
+        return Verification(
+            passed=not problems,
+            terminal_error=terminal,
+            max_defect=max_gap,
+            node_violations=node,
+            path_violations={},
+            message="; ".join(problems),
+        )
+
+    def _replay(self, z: Trajectory) -> tuple[dict[str, float], float]:
+        truth = replay(self.instance, z.u)
+        rtn_model = self.model.rtn(z.x)
+        miss = truth.rtn[-1] - self.instance.xf_rtn
+        gap = float(np.linalg.norm(truth.rtn[:, :3] - rtn_model[:, :3], axis=1).max())
+        terminal = {
+            "position_m": float(np.linalg.norm(miss[:3])),
+            "velocity_m_s": float(np.linalg.norm(miss[3:])),
+        }
+        return terminal, gap
+
+    def node_times(self, z: Trajectory) -> np.ndarray:
+        return self.model.t
+
+
+def replay(instance: RobustInstance, u: np.ndarray):
+    """Impulses through the two-body + J2 propagator from the consistent osculating state.
+
+    Uses :func:`scpformer.problems.rendezvous.problem.osculating_initial_state` (it reads only
+    ``target``, ``roe0`` and ``scenario.j2``). Outputs the pre-impulse state at every node.
+    """
+    oe_c, rtn0 = osculating_initial_state(instance)  # type: ignore[arg-type]
+    t = instance.times()
+    return propagate_relative(oe_c, rtn0, t[:-1], np.asarray(u, dtype=float), t_out=t,
+                              j2=instance.scenario.j2)  # fmt: skip
+
+
+def _as_trajectory(warm: Any, n: int) -> Trajectory:
+    if isinstance(warm, Solution):
+        if warm.trajectory is None:
+            raise ValueError(f"warm start has no trajectory (status {warm.status.value})")
+        warm = warm.trajectory
+    if not isinstance(warm, Trajectory):
+        raise ValueError(f"warm start must be a Solution or a Trajectory, got {type(warm)}")
+    x, u = np.asarray(warm.x, dtype=float), np.asarray(warm.u, dtype=float)
+    if x.shape != (n + 1, 6) or u.shape != (n, 3):
+        raise ValueError(f"warm start must have x ({n + 1}, 6) and u ({n}, 3), got {x.shape}, "
+                         f"{u.shape}")  # fmt: skip
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
+        raise ValueError("warm start must be finite")
+    return Trajectory(x=x, u=u, p=np.zeros(0))
+
+
+def solve_safety(
+    instance: RobustInstance,
+    warm: Solution | Trajectory,
+    config: RobustSolverConfig | None = None,
+    mode: str = "chance",
+    *,
+    collision_only: bool = False,
+    verify: bool = True,
+) -> Solution:
+    """SCvx* (Table 1) on Eq. 17 from ``warm``; one stage of the procedure.
+
+    ``collision_only`` gives stage 2 (``T_safety = 0``, ``X = 0``); otherwise passive safety in
+    ``mode``. ``verify=False`` skips the final check (it is then reported as passed=None-like:
+    the ``verification`` field holds only the SCvx* feasibility). Returns the SCvx*
+    :class:`Solution` with ``extras``: ``stage``, ``mode``, ``records`` (SCvx* per-iteration
+    ``delta_J``, ``chi``, ``w``).
+    """
+    config = config or RobustSolverConfig()
+    mode = check_mode(mode)
+    problem = PassiveSafetyProblem(instance, config, mode, collision_only=collision_only)
+    if not verify:
+        problem.verify = _skip_verify  # type: ignore[method-assign]
+    z0 = _as_trajectory(warm, instance.n_nodes)
+    result = SCvxStar(config.scvx).solve(problem, z0)
+    stage = "collision_avoidance" if collision_only else "passive_safety"
+    extras = {
+        "stage": stage,
+        "mode": problem.mode,
+        "records": [r.__dict__ for r in result.records],
+    }
+    return replace(result.solution, extras=extras)
+
+
+def _skip_verify(z: Trajectory) -> Verification:
+    return Verification(True, {}, 0.0, {}, {}, "not verified")
+
+
+# ======================================================================================
+# the three-stage solve
+# ======================================================================================
+def solve(
+    instance: RobustInstance,
+    config: RobustSolverConfig | None = None,
+    mode: str = "chance",
+    *,
+    warmstart: str | Solution | Trajectory = "three_stage",
+    verify: bool = True,
+) -> Solution:
+    """Solve the passively safe rendezvous (Eq. 1) and keep the final feasible solution.
+
+    Parameters
+    ----------
+    instance
+        The robust rendezvous instance.
+    config
+        SCvx* parameters (robust Table 1), conic solver and verification.
+    mode
+        ``"deterministic"`` (``X = 0``) or ``"chance"`` (margin of Eq. 16, ``Delta`` of the
+        instance's uncertainty model).
+    warmstart
+        ``"three_stage"`` (TPBVP -> collision avoidance -> passive safety, the dataset
+        procedure), ``"tpbvp"`` (passive safety straight from the TPBVP: PS-CVX of the paper),
+        or a :class:`Solution` / :class:`Trajectory` (e.g. a learned warm start: PS-ART).
+    verify
+        Check the final trajectory (:meth:`PassiveSafetyProblem.verify`).
+
+    Returns
+    -------
+    Solution
+        ``trajectory.x`` (N+1, 6) [m], ``trajectory.u`` (N, 3) [m/s], ``cost = sum |u|``
+        [m/s]; ``status`` is that of the passive-safety problem; ``extras``: ``stage`` (which
+        stage produced the trajectory), ``stage_status``, ``stage_iterations``,
+        ``stage_wall_s``, ``mode``, ``violation_budget`` (Eq. 7, ``C(t_i)``, (N+1,)). A
+        failing conic solve is a status with the solver's reason, never an exception.
+    """
+    if not isinstance(instance, RobustInstance):
+        raise ValueError(f"instance must be a RobustInstance, got {type(instance).__name__}")
+    config = config or RobustSolverConfig()
+    mode = check_mode(mode)
+    if isinstance(warmstart, str) and warmstart not in WARMSTARTS:
+        raise ValueError(f"warmstart must be one of {', '.join(WARMSTARTS)}, got {warmstart!r}")
+    stages: dict[str, Solution] = {}
+    warm: Solution | Trajectory = warmstart  # type: ignore[assignment]
+    if isinstance(warmstart, str):
+        stages["tpbvp"] = warm = solve_tpbvp(instance, config)
+        if warm.trajectory is None:
+            return _assemble(instance, mode, stages, "passive_safety")
+        if warmstart == "three_stage":
+            ca = solve_safety(instance, warm, config, mode, collision_only=True, verify=verify)
+            stages["collision_avoidance"] = ca
+            if ca.converged:
+                warm = ca
+    stages["passive_safety"] = solve_safety(instance, warm, config, mode, verify=verify)
+    return _assemble(instance, mode, stages, "passive_safety")
+
+
+def _assemble(
+    instance: RobustInstance, mode: str, stages: dict[str, Solution], requested: str
+) -> Solution:
+    """The final feasible stage's trajectory under the requested stage's status."""
+    final = stages.get(requested)
+    kept = next(
+        (name for name in reversed(STAGES) if name in stages and stages[name].converged), None
+    )
+    source = stages[kept] if kept else (final or stages["tpbvp"])
+    status = final.status if final is not None else stages["tpbvp"].status
+    if final is None:  # the TPBVP itself failed: the instance or the solver is at fault
+        message = f"{stages['tpbvp'].message}; passive-safety stage not attempted"
+    elif kept == requested:
+        message = final.message
+    else:
+        message = f"{requested}: {final.message or final.status.value}; kept stage {kept}"
+    extras: dict[str, Any] = {
+        "stage": kept,
+        "mode": mode,
+        "stage_status": {k: s.status.value for k, s in stages.items()},
+        "stage_iterations": {k: s.iterations for k, s in stages.items()},
+        "stage_wall_s": {k: s.timing.total if s.timing else math.nan for k, s in stages.items()},
+    }
+    if final is not None and "records" in final.extras:
+        extras["records"] = final.extras["records"]
+    if source.trajectory is not None:
+        geometry, model = drift_geometry(instance), linear_model(instance)
+        ev = evaluate_safety(geometry, model, source.trajectory.x, source.trajectory.u,
+                             instance, mode)  # fmt: skip
+        extras["violation_budget"] = constraint_violation_budget(ev.h)
+    history: list[IterationRecord] = source.history
+    return replace(source, status=status, message=message, extras=extras, history=history)

@@ -1,0 +1,175 @@
+"""The SCvx* subproblem of Eq. 17 as one parametric (DPP) cvxpy problem, compiled once per N.
+
+Notation: nodes ``i = 0 .. N`` (see :mod:`.scenario`); variables ``X`` (N+1, 6) scaled mean
+ROE [m] and ``U = 1e3 u`` (N, 3) [mm/s] (so that ``Phi B U`` is of order metres like ``X``)::
+
+    min   sum_i |u_i|_2 + mu^T zeta + w/2 |zeta|^2                    (Eq. 17, J_pen of Oguri)
+    s.t.  x_{i+1} = Phi_i x_i + Phi_i B_i u_i                 i = 0 .. N-1
+          x_0 = x_init,  x_N = x_f
+          c_i - a_i^T x_i - e_i^T u_i <= zeta_i,  zeta >= 0   i = 0 .. N-1   (Eq. 15 / b_ps)
+          |x_i - x_bar_i|_inf <= r                            i = 1 .. N-1
+          |u_i - u_bar_i|_inf <= s_u r                        i = 0 .. N-1
+
+with ``a_i = a_hat_i``, ``e_i = B_i^T a_hat_i`` and ``c_i = 1 + beta_hat_i`` from
+:func:`.safety.evaluate_safety` at the reference. The buffers ``zeta`` of the inequality rows
+are the virtual buffers of Eq. 17 (the dynamics and boundary conditions are linear, hence
+exact, so SCvx* has no equality constraints ``g`` here). The state trust region skips the two
+fixed boundary nodes so that a reference that misses them (a learned warm start) still gives a
+feasible subproblem. ``s_u`` is 1 m/s per unit of ``r`` by default (the paper's single
+radius ``rho`` for both).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+import warnings
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+from scpformer.cache import cached_pickle
+from scpformer.problems.rendezvous.subproblems import _batched_matvec
+from scpformer.scp.scvx_star import PenaltyTerm
+
+SOLVERS = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
+U_SCALE = 1e3  # decision variable U = U_SCALE * u (mm/s)
+
+
+@dataclass(frozen=True)
+class ConicResult:
+    """One conic solve; ``status`` is cvxpy's status string (or ``solver_error: ...``)."""
+
+    status: str
+    x: np.ndarray | None  # (N+1, 6) [m]
+    u: np.ndarray | None  # (N, 3) [m/s]
+    zeta: np.ndarray | None  # (N,) virtual buffers
+    cost: float  # sum |u_i|_2 [m/s]
+    solver_time: float  # s inside the conic solver
+
+    @property
+    def ok(self) -> bool:
+        """Optimal or optimal_inaccurate with values."""
+        return self.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) and self.x is not None
+
+
+class SafetySubproblem:
+    """Eq. 17 for ``n_nodes`` impulses; parameters are written before each re-solve."""
+
+    def __init__(self, n_nodes: int) -> None:
+        n = self.n_nodes = int(n_nodes)
+        P = cp.Parameter
+        self.phi = P((n, 36), name="Phi")  # row-major Phi_i
+        self.gamma = P((n, 18), name="Phi_B")  # row-major Phi_i B_i / U_SCALE
+        self.x_init = P(6, name="x_init")
+        self.x_final = P(6, name="x_f")
+        self.a_x = P((n, 6), name="a_hat")  # gradient of d* w.r.t. x_i [1/m]
+        self.a_u = P((n, 3), name="B_T_a_hat")  # gradient w.r.t. U_i (already / U_SCALE)
+        self.c = P(n, name="one_plus_beta")  # 1 + beta_hat_i
+        self.x_ref = P((n + 1, 6), name="x_bar")
+        self.u_ref = P((n, 3), name="U_bar")
+        self.u_radius = P(nonneg=True, name="r_u")  # U_SCALE * s_u * r
+        self.term = PenaltyTerm(n_g=0, n_h=n)
+        self.X = cp.Variable((n + 1, 6), name="X")
+        self.U = cp.Variable((n, 3), name="U")
+        self.problem = self._build()
+
+    def _build(self) -> cp.Problem:
+        X, U, n, term = self.X, self.U, self.n_nodes, self.term
+        dynamics = _batched_matvec(self.phi, X[:-1], 6, 6) + _batched_matvec(self.gamma, U, 6, 3)
+        safety = (
+            self.c
+            - cp.sum(cp.multiply(self.a_x, X[:n]), axis=1)
+            - cp.sum(cp.multiply(self.a_u, U), axis=1)
+        )
+        constraints = [
+            X[1:] == dynamics,
+            X[0] == self.x_init,
+            X[n] == self.x_final,
+            safety <= term.zeta,
+            cp.abs(X[1:n] - self.x_ref[1:n]) <= term.r,
+            cp.abs(U - self.u_ref) <= self.u_radius,
+        ]
+        cost = cp.sum(cp.norm(U, 2, axis=1)) / U_SCALE + term.expression
+        return cp.Problem(cp.Minimize(cost), constraints)
+
+    # -- parameter updates ---------------------------------------------------------------
+    def set_dynamics(
+        self, Phi: np.ndarray, Gamma: np.ndarray, x_init: np.ndarray, x_final: np.ndarray
+    ) -> None:
+        """Write ``Phi_i`` (N, 6, 6), ``Phi_i B_i`` (N, 6, 3) [s] and the boundary ROE [m]."""
+        n = self.n_nodes
+        self.phi.value = np.asarray(Phi, dtype=float).reshape(n, 36)
+        self.gamma.value = np.asarray(Gamma, dtype=float).reshape(n, 18) / U_SCALE
+        self.x_init.value = np.asarray(x_init, dtype=float)
+        self.x_final.value = np.asarray(x_final, dtype=float)
+
+    def set_iterate(
+        self,
+        x_ref: np.ndarray,
+        u_ref: np.ndarray,
+        a_x: np.ndarray,
+        a_u: np.ndarray,
+        c: np.ndarray,
+        *,
+        mu: np.ndarray,
+        w: float,
+        r: float,
+        u_trust_scale: float,
+    ) -> None:
+        """Write the reference, the linearized safety rows, multipliers, weight and radius."""
+        self.x_ref.value = np.asarray(x_ref, dtype=float)
+        self.u_ref.value = U_SCALE * np.asarray(u_ref, dtype=float)
+        self.a_x.value = np.asarray(a_x, dtype=float)
+        self.a_u.value = np.asarray(a_u, dtype=float) / U_SCALE
+        self.c.value = np.asarray(c, dtype=float)
+        self.u_radius.value = U_SCALE * u_trust_scale * float(r)
+        self.term.assign(lambda_=np.zeros(0), mu=mu, w=w, r=r)
+
+    # -- solve ---------------------------------------------------------------------------
+    def solve(self, solver: str = "clarabel") -> ConicResult:
+        """Solve with the current parameters; a failing solve is a status, never a raise."""
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+        solver_time = 0.0
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)
+                data, chain, inverse = self.problem.get_problem_data(
+                    SOLVERS[solver], solver_opts={}
+                )
+                t0 = time.perf_counter()
+                raw = chain.solve_via_data(self.problem, data, False, False, {})
+                solver_time = time.perf_counter() - t0
+                self.problem.unpack_results(raw, chain, inverse)
+        except cp.SolverError as err:
+            return ConicResult(f"solver_error: {err}", None, None, None, math.nan, solver_time)
+        status = self.problem.status
+        if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or self.X.value is None:
+            return ConicResult(str(status), None, None, None, math.nan, solver_time)
+        u = self.U.value / U_SCALE
+        _, zeta = self.term.buffers()
+        return ConicResult(
+            status=status,
+            x=self.X.value.copy(),
+            u=u,
+            zeta=zeta,
+            cost=float(np.linalg.norm(u, axis=1).sum()),
+            solver_time=solver_time,
+        )
+
+
+@functools.lru_cache(maxsize=8)
+def compiled_safety_subproblem(n_nodes: int, solver: str = "clarabel") -> SafetySubproblem:
+    """The process-wide Eq. 17 subproblem per ``N`` and solver, canonicalized (disk-cached)."""
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+
+    def build() -> SafetySubproblem:
+        sub = SafetySubproblem(n_nodes)
+        sub.problem.get_problem_data(SOLVERS[solver], solver_opts={})  # canonicalize now
+        return sub
+
+    return cached_pickle(f"robust-rendezvous-eq17-N{n_nodes}-{solver}", build, source=__file__)
