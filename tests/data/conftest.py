@@ -40,3 +40,25 @@ def ray_local():
     ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield ray
     ray.shutdown()
+
+
+N_RDV = 4  # instances of the shared rendezvous dataset
+RDV_SHARD = 2
+RDV_SEED = 3
+
+
+@pytest.fixture(scope="session")
+def rdv_family():
+    from scpformer.data.rendezvous_family import RendezvousFamily
+
+    family = RendezvousFamily()  # ART Table 1
+    family.warm_up()  # build the on-disk subproblem cache once, before any worker needs it
+    return family
+
+
+@pytest.fixture(scope="session")
+def rdv_dataset(tmp_path_factory, rdv_family):
+    """4 sampled rendezvous instances solved by 2 local workers, shards of 2."""
+    out = tmp_path_factory.mktemp("rdv") / "ds"
+    config = GenerateConfig(n=N_RDV, out=out, shard_size=RDV_SHARD, workers=2, seed=RDV_SEED)
+    return generate(rdv_family, config)
