@@ -5,12 +5,13 @@ module             role
 =================  =========================================================================
 family             the :class:`DatasetFamily` protocol a problem family implements; registry
 pdg6dof_family     the 6-DoF powered descent family (T-SCvx)
+rendezvous_family  the ISS rendezvous family (ART): convex and SCP twins of each instance
 executors          local process pool and Ray actors; per-instance seeds and time limits
 generate           sharded, resumable generation (:func:`generate.generate`)
 storage            HDF5 shards, manifest, checksums, verification, lazy random access
 augment            the T-SCvx rotation augmentation as a checked dataset transform
 splits             splits grouped by base instance; training-set normalization statistics
-torch_views        PyTorch ``Dataset`` views (imports torch; not imported here)
+torch_views        PyTorch ``Dataset`` views for T-SCvx and ART (imports torch; not here)
 =================  =========================================================================
 """
 
