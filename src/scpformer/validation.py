@@ -6,6 +6,9 @@ instance file or command-line value fails fast with one clear line (DESIGN.md, i
 
 from __future__ import annotations
 
+import json
+from dataclasses import fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -53,3 +56,27 @@ def check_in_range(name: str, value: Any, low: float, high: float) -> float:
     if not low <= number <= high:
         raise ValueError(f"{name} must lie in [{low}, {high}], got {number}")
     return number
+
+
+def known_fields(cls: type, data: Any, what: str) -> dict[str, Any]:
+    """``data`` as a dict after checking it is a mapping of ``cls``'s dataclass fields only.
+
+    Raises ``ValueError`` naming ``what`` and every unknown key.
+    """
+    if not isinstance(data, dict):
+        raise ValueError(f"{what} must be a JSON object, got {type(data).__name__}")
+    unknown = sorted(set(data) - {f.name for f in fields(cls)})
+    if unknown:
+        raise ValueError(f"unknown {what} field(s): {', '.join(unknown)}")
+    return dict(data)
+
+
+def read_json(path: str | Path, what: str = "instance") -> Any:
+    """The JSON value in ``path``; a missing file or malformed JSON is a one-line ``ValueError``."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{what} file not found: {path}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"malformed JSON in {path}: {err}") from None

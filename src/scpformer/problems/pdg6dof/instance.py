@@ -6,7 +6,6 @@ theta = (gamma_gs, theta_max, r0, v0, q0, omega0, m0): the parameters the T-SCvx
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
@@ -16,7 +15,7 @@ import numpy as np
 
 from scpformer.dynamics import quaternion as quat
 from scpformer.problems.pdg6dof.constants import VehicleConstants
-from scpformer.validation import check_finite, check_in_range
+from scpformer.validation import check_finite, check_in_range, known_fields, read_json
 
 UNIT_QUATERNION_TOL = 1e-6
 
@@ -82,13 +81,7 @@ class PDGInstance:
 
         ``data["constants"]``, if present, is a dict of :class:`VehicleConstants` overrides.
         """
-        if not isinstance(data, dict):
-            raise ValueError(f"instance must be a JSON object, got {type(data).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(f"unknown instance field(s): {', '.join(unknown)}")
-        kwargs = dict(data)
+        kwargs = known_fields(cls, data, "instance")
         if "constants" in kwargs:
             kwargs["constants"] = constants_from_dict(kwargs["constants"])
         return cls(**kwargs)
@@ -96,14 +89,7 @@ class PDGInstance:
     @classmethod
     def from_json(cls, path: str | Path) -> PDGInstance:
         """Read an instance from a JSON file (keys as in :meth:`from_dict`)."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"instance file not found: {path}") from None
-        except json.JSONDecodeError as err:
-            raise ValueError(f"malformed JSON in {path}: {err}") from None
-        return cls.from_dict(data)
+        return cls.from_dict(read_json(path))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-value dictionary that :meth:`from_dict` reads back."""

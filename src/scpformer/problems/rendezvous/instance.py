@@ -10,9 +10,8 @@ with ``(dex, dey) = de (cos phi, sin phi)`` and ``(dix, diy) = di (cos theta, si
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +19,7 @@ import numpy as np
 
 from scpformer.dynamics.roe import psi_matrix
 from scpformer.problems.rendezvous.scenario import RendezvousScenario, TargetOrbit
-from scpformer.validation import check_finite
+from scpformer.validation import check_finite, known_fields, read_json
 
 #: Default initial relative orbit: a de = 80 m and a di = 140 m, both at 90 deg (e/i vector
 #: separation, Table 1), 50 m ahead; its Problem 2 solution crosses the keep-out zone.
@@ -94,12 +93,7 @@ class RendezvousInstance:
         Keys: ``roe0_m`` (6 numbers), ``horizon_orbits``, and optionally ``target`` (keys of
         :class:`TargetOrbit`) and ``scenario`` (keys of :class:`RendezvousScenario`).
         """
-        if not isinstance(data, dict):
-            raise ValueError(f"instance must be a JSON object, got {type(data).__name__}")
-        unknown = sorted(set(data) - {f.name for f in fields(cls)})
-        if unknown:
-            raise ValueError(f"unknown instance field(s): {', '.join(unknown)}")
-        kwargs = dict(data)
+        kwargs = known_fields(cls, data, "instance")
         if "target" in kwargs:
             kwargs["target"] = TargetOrbit.from_dict(kwargs["target"])
         if "scenario" in kwargs:
@@ -109,14 +103,7 @@ class RendezvousInstance:
     @classmethod
     def from_json(cls, path: str | Path) -> RendezvousInstance:
         """Read an instance from a JSON file (keys as in :meth:`from_dict`)."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"instance file not found: {path}") from None
-        except json.JSONDecodeError as err:
-            raise ValueError(f"malformed JSON in {path}: {err}") from None
-        return cls.from_dict(data)
+        return cls.from_dict(read_json(path))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-value dictionary that :meth:`from_dict` reads back."""

@@ -31,21 +31,12 @@ from typing import Any
 import numpy as np
 
 from scpformer.dynamics.orbits import R_EARTH, OrbitalElements
-from scpformer.validation import check_finite, check_in_range, check_positive
+from scpformer.validation import check_finite, check_in_range, check_positive, known_fields
 
 SOLVER_NAMES = ("clarabel", "ecos", "qoco")
 STOP_TESTS = ("step", "radius")
 UNIT_AXIS_TOL = 1e-6
 MIN_SIN_INCLINATION = 1e-6
-
-
-def _reject_unknown(cls: type, data: Any, what: str) -> dict[str, Any]:
-    if not isinstance(data, dict):
-        raise ValueError(f"{what} must be a JSON object, got {type(data).__name__}")
-    unknown = sorted(set(data) - {f.name for f in fields(cls)})
-    if unknown:
-        raise ValueError(f"unknown {what} field(s): {', '.join(unknown)}")
-    return dict(data)
 
 
 def _vector(name: str, value: Any, size: int) -> tuple[float, ...]:
@@ -106,7 +97,7 @@ class TargetOrbit:
         """Build from plain values; unknown keys raise ``ValueError`` naming them."""
         if isinstance(data, cls):
             return data
-        return cls(**_reject_unknown(cls, data, "target"))
+        return cls(**known_fields(cls, data, "target"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -236,7 +227,7 @@ class RendezvousScenario:
         """Build from plain values; unknown keys raise ``ValueError`` naming them."""
         if isinstance(data, cls):
             return data
-        kwargs = _reject_unknown(cls, data, "scenario")
+        kwargs = known_fields(cls, data, "scenario")
         for key, value in kwargs.items():
             if isinstance(value, list):
                 kwargs[key] = tuple(value)
