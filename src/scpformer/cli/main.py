@@ -1,4 +1,4 @@
-"""The ``scpformer`` command: ``solve`` and ``bench`` per problem family, ``generate`` and ``dataset``."""
+"""The ``scpformer`` command: ``solve`` and ``bench`` per family, ``generate``, ``dataset``."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from scpformer import __version__
-from scpformer.cli import data, pdg6dof, rendezvous
+from scpformer.cli import data, pdg6dof, rendezvous, robust_rendezvous
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -24,6 +24,8 @@ def build_parser() -> argparse.ArgumentParser:
     pdg6dof.add_bench_parser(bench_families)
     rendezvous.add_solve_parser(solve_families)
     rendezvous.add_bench_parser(bench_families)
+    robust_rendezvous.add_solve_parser(solve_families)
+    robust_rendezvous.add_bench_parser(bench_families)
     data.add_generate_parser(commands)
     data.add_dataset_parser(commands)
     return parser

@@ -126,13 +126,23 @@ class PassiveSafetyProblem:
         self.model = model or linear_model(instance)
         self.geometry: DriftGeometry = drift_geometry(instance, 0.0 if collision_only else None)
         self.bounds = boundary(instance, self.model)
-        self.sub = compiled_safety_subproblem(instance.n_nodes, config.scvx.solver)
+        self.n_rows = 1 if collision_only else config.n_linearized
+        self.sub = compiled_safety_subproblem(instance.n_nodes, config.scvx.solver, self.n_rows)
         Gamma = self.model.Phi @ self.model.B
         self.sub.set_dynamics(self.model.Phi, Gamma, self.bounds.x_init, self.bounds.x_final)
 
     def safety(self, z: Trajectory) -> SafetyEvaluation:
         """Eqs. 14-16 at ``z``."""
-        return evaluate_safety(self.geometry, self.model, z.x, z.u, self.instance, self.mode)
+        return evaluate_safety(
+            self.geometry,
+            self.model,
+            z.x,
+            z.u,
+            self.instance,
+            self.mode,
+            self.n_rows,
+            self.config.margin_gradient,
+        )
 
     def evaluate(self, z: Trajectory) -> NonlinearEvaluation:
         t0 = time.perf_counter()
@@ -161,7 +171,15 @@ class PassiveSafetyProblem:
         ev: SafetyEvaluation = evaluation.linearization
         scale = self.config.u_trust_scale
         self.sub.set_iterate(
-            z.x, z.u, ev.a_hat, ev.c_u, 1.0 + ev.beta, mu=mu, w=w, r=r, u_trust_scale=scale
+            z.x,
+            z.u,
+            ev.a_rows,
+            ev.c_rows,
+            1.0 + ev.beta_rows,
+            mu=mu,
+            w=w,
+            r=r,
+            u_trust_scale=scale,
         )
         res = self.sub.solve(solver)
         if not res.ok:

@@ -9,7 +9,9 @@ Notation (nodes as in :mod:`.scenario`)
 * ``G_ij = E_i D Psi(t_i + tau_j) Phi(t_i + tau_j, t_i)`` (3, 6) [1/m]; the normalized
   distance of the drift sample from the target's safety ellipsoid is ``d_ij(y) = |G_ij y|_2``
   (``>= 1`` outside; ``E_i^2 = P`` of the AE or the KOZ, Sec. 4).
-* ``t* = t_i + tau_{j*}``, ``j* = argmin_j d_ij(y_bar_i)``: minimum-separation instant (Eq. 16).
+* ``t* = t_i + tau_{j*}``: the drift sample where the constraint is worst,
+  ``j* = argmax_j (1 + beta_ij - d_ij)``; in the deterministic case (``beta = 0``) this is the
+  paper's minimum-separation instant ``argmin_j d_ij(y_bar_i)`` (Eq. 16).
 
 Constraint (Eqs. 2, 15-16), normalized. With ``M_i = G*^T G*`` Eq. 16 reads
 ``a_ps = M_i y_bar``, ``b_ps = sqrt(y_bar^T M_i y_bar) = d*`` and Eq. 15 is
@@ -21,17 +23,30 @@ gradient ``a_hat = a_ps / b_ps = grad d*(y_bar)``:
 
 which is the first-order expansion at ``y_bar`` of the nonlinear
 ``h_i(y) = 1 + beta_hat_i(y) - min_j d_ij(y)`` (``d`` is 1-homogeneous, so
-``d(y_bar) = a_hat^T y_bar``). The code evaluates and linearizes this normalized form
-(dimensionless; its values are Eq. 15 divided by ``b_ps``), which keeps the virtual buffers of
-all nodes on one scale whatever the range (``b_ps`` spans 1 to 20 here).
+``d(y_bar) = a_hat^T y_bar``).
+
+Worst sample. With ``beta_ij`` the margin of sample ``j`` (gradient ``a_hat_ij`` of
+``d_ij``), the code evaluates ``h_i = max_j (1 + beta_ij - d_ij)`` and linearizes it at
+``t*``. With the margin, the paper's ``t*`` (minimum distance of the MEAN arc) would make
+``h`` discontinuous: when two samples swap as the closest one, ``beta`` jumps from one
+gradient direction to the other, and SCvx* then rejects arbitrarily short steps (observed).
+The worst-sample reading is continuous, equal to the paper's without margin, and no weaker:
+it enforces the chance constraint at every sampled instant. The code evaluates and
+linearizes this normalized form (dimensionless; its values are Eq. 15 divided by ``b_ps``),
+which keeps the virtual buffers of all nodes on one scale whatever the range (``b_ps`` spans
+1 to 20 here).
 
 Margin. Eq. 16 prints ``beta = q |X(t*)^(1/2) a_ps|`` with ``a_ps`` the gradient with respect
 to ``x(t_i)``; the variance of the linearized constraint is ``a_ps^T X(t_i) a_ps``, which equals
 ``g^T X(t*) g`` for the gradient ``g`` with respect to the state at ``t*`` and
 ``X(t*) = Phi X(t_i) Phi^T`` (Eq. 14). The code computes ``a_hat^T X_i a_hat`` (no propagation
-needed); :func:`covariance_at_tstar` returns ``X(t*)`` for plots. The margin is held at the
-reference while the subproblem is solved (the paper's Eq. 17 "given beta"); the nonlinear
-``h`` recomputes it at each candidate.
+needed); :func:`covariance_at_tstar` returns ``X(t*)`` for plots. The paper holds the margin
+at its reference value in the subproblem (Eq. 17, "given beta"); by default the code also
+linearizes it (the gradient direction ``a`` turns with the state, the navigation covariance
+grows with range, the Gates covariance with the burn), because with ``beta`` frozen a
+reference sitting on the constraint boundary sees violations of ~1e-3 from metre-sized steps
+and SCvx* stalls on rejected steps (observed; the direction term is the largest, up to half
+of the gradient near the boundary). ``margin_gradient=False`` restores the paper's reading.
 
 State at the contingency. Eq. 16 writes ``x(t_i)``; the covariance ``X(t_i)`` of Eq. 14 is that
 of the state right after the maneuver at ``t_i`` (it contains the maneuver's execution error
@@ -62,7 +77,7 @@ from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.scenario import check_mode
 
 _TINY_DISTANCE = 1e-12  # normalized distance below which the gradient direction is undefined
-VIOLATION_TOL = 1e-6  # default tolerance of Eq. 7 on h (normalized distance)
+VIOLATION_TOL = 1e-3  # Eq. 7 tolerance on h: SCvx* eps_feas, 0.2 m at the KOZ [-]
 
 
 # ======================================================================================
@@ -124,15 +139,33 @@ def drift_geometry(instance: RobustInstance, t_safety_s: float | None = None) ->
 class SafetyEvaluation:
     """Passive-safety constraint of every node at one trajectory (see the module docstring)."""
 
-    h: np.ndarray  # (N,) 1 + beta_hat - d*: <= 0 is safe with the margin
-    h_mean: np.ndarray  # (N,) 1 - d*: the mean-state constraint (beta = 0)
-    beta: np.ndarray  # (N,) beta_hat = q sqrt(a_hat^T X a_hat), normalized margin
+    h: np.ndarray  # (N,) max_j (1 + beta_ij - d_ij): <= 0 is safe with the margin
+    h_mean: np.ndarray  # (N,) 1 - d_ij at t*: the mean-state constraint (beta = 0)
+    beta: np.ndarray  # (N,) beta_hat at t*: q sqrt(a_hat^T X a_hat), normalized margin
     d: np.ndarray  # (N, S) normalized distances of the drift samples
     j_star: np.ndarray  # (N,) index of t* in tau
-    a_hat: np.ndarray  # (N, 6) gradient of d* w.r.t. y_i at the reference
-    c_u: np.ndarray  # (N, 3) B_i^T a_hat_i: gradient w.r.t. u_i
+    a_hat: np.ndarray  # (N, 6) gradient of d at t* w.r.t. y_i
     X: np.ndarray | None  # (N, 6, 6) covariance X(t_i) of Eq. 14 (None: deterministic)
     y: np.ndarray  # (N, 6) post-maneuver states
+    rows: np.ndarray  # (N, K) drift samples linearized in the subproblem (worst first)
+    a_rows: np.ndarray  # (N, K, 6) their gradients a_hat_ij w.r.t. y_i
+    c_rows: np.ndarray  # (N, K, 3) B_i^T a_hat_ij: gradients w.r.t. u_i
+    beta_rows: np.ndarray  # (N, K) their margins beta_hat_ij
+    grad_beta_x: np.ndarray  # (N, K, 6) d beta_ij / d x_i (zeros when not linearized)
+    grad_beta_u: np.ndarray  # (N, K, 3) d beta_ij / d u_i
+
+    def subproblem_rows(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, ...]:
+        """``(a_x, a_u, c)`` of the rows ``c - a_x^T x_i - a_u^T u_i <= zeta_i`` (Eq. 17).
+
+        The first-order expansion of ``h_ij = 1 + beta_ij - d_ij`` at the reference
+        ``(x, u)``: ``a_x = a_hat - grad_x beta``, ``a_u = B^T a_hat - grad_u beta`` and
+        ``c = 1 + beta - grad_x beta . x - grad_u beta . u``.
+        """
+        n = u.shape[0]
+        c = 1.0 + self.beta_rows
+        c -= np.einsum("ijk,ik->ij", self.grad_beta_x, x[:n])
+        c -= np.einsum("ijk,ik->ij", self.grad_beta_u, u)
+        return self.a_rows - self.grad_beta_x, self.c_rows - self.grad_beta_u, c
 
     @property
     def b_ps(self) -> np.ndarray:
@@ -159,6 +192,8 @@ def evaluate_safety(
     u: np.ndarray,
     instance: RobustInstance,
     mode: str,
+    n_rows: int = 1,
+    margin_gradient: bool = True,
 ) -> SafetyEvaluation:
     """Eqs. 14-16 at ``(x, u)`` for every node at once; ``mode="deterministic"`` sets ``X = 0``.
 
@@ -174,31 +209,124 @@ def evaluate_safety(
         Supplies the uncertainty model and ``Delta``.
     mode
         ``"deterministic"`` or ``"chance"``.
+    n_rows
+        Number ``K`` of drift samples per node returned for linearization (the ``K`` worst;
+        1 is the paper's single constraint at ``t*``).
+    margin_gradient
+        Also differentiate the margin ``beta`` with respect to ``(x_i, u_i)``: through the
+        direction ``a`` of the constraint gradient, the range of the navigation model and the
+        Gates model. ``False`` holds ``beta`` at its reference value, as the paper's Eq. 17
+        ("given beta").
     """
     check_mode(mode)
     n = u.shape[0]
     y = x[:n] + np.einsum("ikl,il->ik", model.B, u)  # (N, 6)
     r = np.einsum("ijrl,il->ijr", geometry.G, y)  # (N, S, 3)
     d = np.linalg.norm(r, axis=-1)  # (N, S)
-    j_star = np.argmin(d, axis=1)
-    idx = np.arange(n)
-    d_star = d[idx, j_star]
-    G_star = geometry.G[idx, j_star]  # (N, 3, 6)
-    r_star = r[idx, j_star] / np.maximum(d_star, _TINY_DISTANCE)[:, None]
-    a_hat = np.einsum("ir,irl->il", r_star, G_star)  # (N, 6)
-    c_u = np.einsum("ikl,ik->il", model.B, a_hat)  # (N, 3)
-    X, beta = None, np.zeros(n)
+    unit = r / np.maximum(d, _TINY_DISTANCE)[..., None]
+    a = np.einsum("ijr,ijrl->ijl", unit, geometry.G)  # (N, S, 6): grad of d_ij w.r.t. y_i
+    X, beta = None, np.zeros_like(d)
+    g_x, g_u = np.zeros_like(a), np.zeros((*d.shape, 3))
     if mode == "chance":
         unc = instance.uncertainty
-        hist = covariance_history(x[:n], u, model.Phi, model.B, model.Psi[:n], unc)
-        X = hist.X
-        var = np.einsum("ik,ikl,il->i", a_hat, X, a_hat)
-        beta = unc.q * np.sqrt(np.maximum(var, 0.0))
-    h_mean = 1.0 - d_star
+        X = covariance_history(x[:n], u, model.Phi, model.B, model.Psi[:n], unc).X
+        var = np.maximum(np.einsum("ijk,ikl,ijl->ij", a, X, a), 0.0)
+        beta = unc.q * np.sqrt(var)
+        if margin_gradient:
+            g_x, g_u = _margin_gradient(model, x[:n], u, a, var, instance)
+            g_y = _direction_gradient(geometry.G, unit, d, a, X, var, unc.q)
+            g_x, g_u = g_x + g_y, g_u + np.einsum("ikl,ijk->ijl", model.B, g_y)
+    h_all = 1.0 + beta - d  # (N, S)
+    order = np.argsort(-h_all, axis=1, kind="stable")[:, : max(1, min(n_rows, d.shape[1]))]
+    idx = np.arange(n)
+    j_star = order[:, 0]
+
+    def pick(v: np.ndarray) -> np.ndarray:
+        return np.take_along_axis(v, order.reshape(*order.shape, *([1] * (v.ndim - 2))), axis=1)
+
+    a_rows = pick(a)
     return SafetyEvaluation(
-        h=h_mean + beta, h_mean=h_mean, beta=beta, d=d, j_star=j_star, a_hat=a_hat, c_u=c_u,
-        X=X, y=y,
-    )  # fmt: skip
+        h=h_all[idx, j_star],
+        h_mean=1.0 - d[idx, j_star],
+        beta=beta[idx, j_star],
+        d=d,
+        j_star=j_star,
+        a_hat=a[idx, j_star],
+        X=X,
+        y=y,
+        rows=order,
+        a_rows=a_rows,
+        c_rows=np.einsum("ikl,ijk->ijl", model.B, a_rows),
+        beta_rows=pick(beta),
+        grad_beta_x=pick(g_x),
+        grad_beta_u=pick(g_u),
+    )
+
+
+def _direction_gradient(
+    G: np.ndarray,
+    unit: np.ndarray,
+    d: np.ndarray,
+    a: np.ndarray,
+    X: np.ndarray,
+    var: np.ndarray,
+    q: float,
+) -> np.ndarray:
+    """Gradient of ``beta_ij`` w.r.t. ``y_i`` through the direction ``a_ij = G^T r / |r|``.
+
+    ``d a / d y = G^T (I - r_hat r_hat^T) G / d`` (symmetric), so
+    ``d beta / d y = q / sqrt(var) G^T (I - r_hat r_hat^T) G X a / d``, (N, S, 6).
+    """
+    t = np.einsum("ijrl,ilk,ijk->ijr", G, X, a)  # G X a, (N, S, 3)
+    t_perp = t - unit * np.sum(unit * t, axis=-1, keepdims=True)
+    factor = q / (np.sqrt(np.maximum(var, 1e-300)) * np.maximum(d, _TINY_DISTANCE))
+    return factor[..., None] * np.einsum("ijrl,ijr->ijl", G, t_perp)
+
+
+def _margin_gradient(
+    model: LinearModel,
+    x: np.ndarray,
+    u: np.ndarray,
+    a: np.ndarray,
+    var: np.ndarray,
+    instance: RobustInstance,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Gradients of ``beta_ij = q sqrt(a_ij^T X_i a_ij)`` through ``X_i``, ``a`` held fixed.
+
+    ``X_i = X_nav(rho(x_i)) + B U(u_i) B^T + Q`` (Eq. 14). With ``w = B^T a``, the Gates part
+    (Eqs. 12-13) is ``w^T U w = sa^2 |w|^2 + sp^2 |u|^2 |w|^2 + (ss^2 - sp^2) (u.w)^2
+    + (sr^2 - sa^2) (u.w)^2 / |u|^2``; the navigation part (Eqs. 10-11) is
+    ``rho^2 sum_k a_k^2 s_k(rho)^2`` with ``rho = |D Psi_i x_i|``. Returns (N, S, 6), (N, S, 3).
+    """
+    unc = instance.uncertainty
+    act, nav = unc.actuation, unc.navigation
+    scale = unc.q / (2.0 * np.sqrt(np.maximum(var, 1e-300)))  # d beta / d var
+    w = np.einsum("ikl,ijk->ijl", model.B, a)  # (N, S, 3)
+    uw = np.einsum("il,ijl->ij", u, w)
+    u2 = np.sum(u * u, axis=1)[:, None]  # (N, 1)
+    ww = np.sum(w * w, axis=-1)
+    d_var_u = 2.0 * act.sigma_p**2 * ww[..., None] * u[:, None, :]
+    d_var_u += 2.0 * (act.sigma_s**2 - act.sigma_p**2) * uw[..., None] * w
+    if act.sigma_r != act.sigma_a:
+        safe = np.where(u2 > 0.0, u2, 1.0)
+        d_var_u += (act.sigma_r**2 - act.sigma_a**2) * np.where(
+            (u2 > 0.0)[..., None],
+            2.0 * uw[..., None] * w / safe[..., None]
+            - 2.0 * (uw**2)[..., None] * u[:, None, :] / (safe**2)[..., None],
+            0.0,
+        )
+    P = model.Psi[: x.shape[0], :3, :]  # D Psi_i, (N, 3, 6)
+    pos = np.einsum("irl,il->ir", P, x)
+    rho = np.linalg.norm(pos, axis=1)
+    s = nav.scale(rho)  # (N, 6)
+    inside = (rho > nav.rho2) & (rho < nav.rho1)
+    slope = (np.asarray(nav.s1) - np.asarray(nav.s2)) / (nav.rho1 - nav.rho2)
+    ds = np.where(inside[:, None], slope, 0.0)
+    d_var_rho = np.einsum("ijk,ik->ij", a**2, 2.0 * rho[:, None] * s**2
+                          + 2.0 * rho[:, None] ** 2 * s * ds)  # fmt: skip
+    d_rho_x = np.einsum("irl,ir->il", P, pos) / np.maximum(rho, 1e-12)[:, None]  # (N, 6)
+    g_x = (scale * d_var_rho)[..., None] * d_rho_x[:, None, :]
+    return g_x, scale[..., None] * d_var_u
 
 
 def covariance_at_tstar(geometry: DriftGeometry, ev: SafetyEvaluation) -> np.ndarray | None:

@@ -175,6 +175,8 @@ class RobustSolverConfig:
 
     tight_tol: float = 1e-4  # a safety row is tight when h_i >= -tight_tol [-]
     u_trust_scale: float = 1.0  # trust region on u is r * u_trust_scale [m/s] (paper: same r)
+    n_linearized: int = 3  # K: worst drift samples per node linearized in Eq. 17 (paper: 1)
+    margin_gradient: bool = True  # linearize the margin beta too (paper: held at the reference)
     scvx: SCvxStarParameters = field(default_factory=SCvxStarParameters)
     verification: RobustVerification = field(default_factory=RobustVerification)
 
@@ -183,6 +185,8 @@ class RobustSolverConfig:
         object.__setattr__(
             self, "u_trust_scale", check_positive("u_trust_scale", self.u_trust_scale)
         )
+        object.__setattr__(self, "n_linearized", _int_field("n_linearized", self.n_linearized, 1))
+        object.__setattr__(self, "margin_gradient", bool(self.margin_gradient))
         if self.scvx.solver == "scs":
             raise ValueError("scvx.solver: scs is not supported here; use clarabel, ecos or qoco")
 

@@ -11,12 +11,24 @@ ROE [m] and ``U = 1e3 u`` (N, 3) [mm/s] (so that ``Phi B U`` is of order metres 
           |u_i - u_bar_i|_inf <= s_u r                        i = 0 .. N-1
 
 with ``a_i = a_hat_i``, ``e_i = B_i^T a_hat_i`` and ``c_i = 1 + beta_hat_i`` from
-:func:`.safety.evaluate_safety` at the reference. The buffers ``zeta`` of the inequality rows
-are the virtual buffers of Eq. 17 (the dynamics and boundary conditions are linear, hence
-exact, so SCvx* has no equality constraints ``g`` here). The state trust region skips the two
-fixed boundary nodes so that a reference that misses them (a learned warm start) still gives a
-feasible subproblem. ``s_u`` is 1 m/s per unit of ``r`` by default (the paper's single
-radius ``rho`` for both).
+:func:`.safety.evaluate_safety` at the reference. With ``n_rows = K > 1`` each node gets the
+rows of its ``K`` worst drift samples, all bounded by the node's one buffer ``zeta_i``: the
+cutting-plane model ``max_k`` of the linearizations of ``h_i = max_j h_ij``, which anticipates
+a switch of ``t*`` to a neighbouring sample (``K = 1`` is Eq. 17 as printed).
+
+The buffers ``zeta`` of the inequality rows are the virtual buffers of Eq. 17 (the
+dynamics and boundary conditions are linear, hence exact, so SCvx* has no equality
+constraints ``g`` here). The state trust region skips the two fixed boundary nodes so that a
+reference that misses them (a learned warm start) still gives a feasible subproblem. ``s_u``
+is 1 m/s per unit of ``r`` by default (the paper's single radius ``rho`` for both).
+
+Proximal term (not in Eq. 17). The fuel cost is degenerate (many plans cost within 1e-5 m/s
+of each other) and an interior-point solver returns the centre of the optimal face, which can
+lie hundreds of metres from the reference for a negligible predicted decrease; the
+minimum-separation instant ``t*`` then jumps and SCvx* rejects the step. A small
+``PROX_WEIGHT (|X - X_bar|^2 + |U - U_bar|^2)`` picks the optimal point nearest the reference
+(1 m on every state costs 6e-6 m/s). It vanishes at ``z = z_bar``, so it changes neither the
+fixed points of SCvx* nor its ratio test (``L`` is evaluated without it).
 """
 
 from __future__ import annotations
@@ -36,6 +48,7 @@ from scpformer.scp.scvx_star import PenaltyTerm
 
 SOLVERS = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
 U_SCALE = 1e3  # decision variable U = U_SCALE * u (mm/s)
+PROX_WEIGHT = 1e-10  # proximal weight [m/s per m^2 and per (mm/s)^2], see the module docstring
 
 
 @dataclass(frozen=True)
@@ -58,16 +71,19 @@ class ConicResult:
 class SafetySubproblem:
     """Eq. 17 for ``n_nodes`` impulses; parameters are written before each re-solve."""
 
-    def __init__(self, n_nodes: int) -> None:
+    def __init__(self, n_nodes: int, n_rows: int = 1) -> None:
         n = self.n_nodes = int(n_nodes)
+        k = self.n_rows = int(n_rows)
+        if n < 2 or k < 1:
+            raise ValueError(f"need n_nodes >= 2 and n_rows >= 1, got {n_nodes}, {n_rows}")
         P = cp.Parameter
         self.phi = P((n, 36), name="Phi")  # row-major Phi_i
         self.gamma = P((n, 18), name="Phi_B")  # row-major Phi_i B_i / U_SCALE
         self.x_init = P(6, name="x_init")
         self.x_final = P(6, name="x_f")
-        self.a_x = P((n, 6), name="a_hat")  # gradient of d* w.r.t. x_i [1/m]
-        self.a_u = P((n, 3), name="B_T_a_hat")  # gradient w.r.t. U_i (already / U_SCALE)
-        self.c = P(n, name="one_plus_beta")  # 1 + beta_hat_i
+        self.a_x = P((n * k, 6), name="a_hat")  # gradients of d_ij w.r.t. x_i [1/m]
+        self.a_u = P((n * k, 3), name="B_T_a_hat")  # gradients w.r.t. U_i (already / U_SCALE)
+        self.c = P(n * k, name="one_plus_beta")  # 1 + beta_hat_ij
         self.x_ref = P((n + 1, 6), name="x_bar")
         self.u_ref = P((n, 3), name="U_bar")
         self.u_radius = P(nonneg=True, name="r_u")  # U_SCALE * s_u * r
@@ -79,20 +95,25 @@ class SafetySubproblem:
     def _build(self) -> cp.Problem:
         X, U, n, term = self.X, self.U, self.n_nodes, self.term
         dynamics = _batched_matvec(self.phi, X[:-1], 6, 6) + _batched_matvec(self.gamma, U, 6, 3)
+        node = np.repeat(np.arange(n), self.n_rows)  # row -> node, K rows per node
+        X_rows, U_rows = (X[node, :], U[node, :]) if self.n_rows > 1 else (X[:n], U)
         safety = (
             self.c
-            - cp.sum(cp.multiply(self.a_x, X[:n]), axis=1)
-            - cp.sum(cp.multiply(self.a_u, U), axis=1)
+            - cp.sum(cp.multiply(self.a_x, X_rows), axis=1)
+            - cp.sum(cp.multiply(self.a_u, U_rows), axis=1)
         )
+        zeta = term.zeta[node] if self.n_rows > 1 else term.zeta
         constraints = [
             X[1:] == dynamics,
             X[0] == self.x_init,
             X[n] == self.x_final,
-            safety <= term.zeta,
+            safety <= zeta,
             cp.abs(X[1:n] - self.x_ref[1:n]) <= term.r,
             cp.abs(U - self.u_ref) <= self.u_radius,
         ]
+        proximal = cp.sum_squares(X[1:n] - self.x_ref[1:n]) + cp.sum_squares(U - self.u_ref)
         cost = cp.sum(cp.norm(U, 2, axis=1)) / U_SCALE + term.expression
+        cost = cost + PROX_WEIGHT * proximal
         return cp.Problem(cp.Minimize(cost), constraints)
 
     # -- parameter updates ---------------------------------------------------------------
@@ -119,12 +140,13 @@ class SafetySubproblem:
         r: float,
         u_trust_scale: float,
     ) -> None:
-        """Write the reference, the linearized safety rows, multipliers, weight and radius."""
+        """Write the reference, the linearized safety rows (N, K, ...), multipliers, weight and
+        radius."""
         self.x_ref.value = np.asarray(x_ref, dtype=float)
         self.u_ref.value = U_SCALE * np.asarray(u_ref, dtype=float)
-        self.a_x.value = np.asarray(a_x, dtype=float)
-        self.a_u.value = np.asarray(a_u, dtype=float) / U_SCALE
-        self.c.value = np.asarray(c, dtype=float)
+        self.a_x.value = np.asarray(a_x, dtype=float).reshape(-1, 6)
+        self.a_u.value = np.asarray(a_u, dtype=float).reshape(-1, 3) / U_SCALE
+        self.c.value = np.asarray(c, dtype=float).reshape(-1)
         self.u_radius.value = U_SCALE * u_trust_scale * float(r)
         self.term.assign(lambda_=np.zeros(0), mu=mu, w=w, r=r)
 
@@ -162,14 +184,18 @@ class SafetySubproblem:
 
 
 @functools.lru_cache(maxsize=8)
-def compiled_safety_subproblem(n_nodes: int, solver: str = "clarabel") -> SafetySubproblem:
-    """The process-wide Eq. 17 subproblem per ``N`` and solver, canonicalized (disk-cached)."""
+def compiled_safety_subproblem(
+    n_nodes: int, solver: str = "clarabel", n_rows: int = 1
+) -> SafetySubproblem:
+    """The process-wide Eq. 17 subproblem per ``N``, ``K`` and solver (disk-cached)."""
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
 
     def build() -> SafetySubproblem:
-        sub = SafetySubproblem(n_nodes)
+        sub = SafetySubproblem(n_nodes, n_rows)
         sub.problem.get_problem_data(SOLVERS[solver], solver_opts={})  # canonicalize now
         return sub
 
-    return cached_pickle(f"robust-rendezvous-eq17-N{n_nodes}-{solver}", build, source=__file__)
+    return cached_pickle(
+        f"robust-rendezvous-eq17-N{n_nodes}-K{n_rows}-{solver}", build, source=__file__
+    )

@@ -1,0 +1,91 @@
+"""Figures of the robust rendezvous: free-drift arcs with uncertainty ellipses (robust ART
+Fig. 7) and the passive-safety constraint history with and without margin (Fig. 8)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Ellipse
+
+from scpformer.problems.robust_rendezvous.instance import RobustInstance
+from scpformer.problems.robust_rendezvous.io import safety_record
+from scpformer.problems.robust_rendezvous.safety import (
+    drift_geometry,
+    evaluate_safety,
+    linear_model,
+)
+
+
+def _rt_ellipse(cov_rt: np.ndarray, center: np.ndarray, q: float, **kw) -> Ellipse:
+    """``q``-sigma ellipse of a 2x2 (R, T) position covariance, drawn as (T, R)."""
+    vals, vecs = np.linalg.eigh(cov_rt[::-1, ::-1])  # (T, R) order
+    angle = np.degrees(np.arctan2(vecs[1, -1], vecs[0, -1]))
+    w, h = 2.0 * q * np.sqrt(np.maximum(vals[::-1], 0.0))
+    return Ellipse((center[1], center[0]), w, h, angle=angle, **kw)
+
+
+def plot_drift_arcs(ax, instance: RobustInstance, x: np.ndarray, u: np.ndarray, every: int = 4):
+    """Fig. 7: controlled path, free-drift arcs of every ``every``-th node, ellipses at ``t*``."""
+    model = linear_model(instance)
+    dense = drift_geometry(instance)
+    rec = safety_record(instance, x, u)
+    rtn = model.rtn(x)
+    ax.plot(rtn[:, 1], rtn[:, 0], "k.-", lw=1.2, ms=3, label="controlled (mean)")
+    y = x[:-1] + np.einsum("ikl,il->ik", model.B, u)
+    arcs = np.einsum("ijrl,ijls,is->ijr", dense.Psi[..., :3, :], dense.Phi, y)  # (N, S, 3)
+    switch = instance.scenario.n_ae_to_koz
+    q = instance.uncertainty.q
+    j_star = evaluate_safety(dense, model, x, u, instance, "chance").j_star
+    for i in range(0, instance.n_nodes, every):
+        color = "tab:green" if i < switch else "tab:gray"
+        ax.plot(arcs[i, :, 1], arcs[i, :, 0], "-", color=color, lw=0.6, alpha=0.7)
+        j = int(j_star[i])
+        Psi = dense.Psi[i, j]
+        cov = Psi[:2, :] @ rec["covariance_tstar"][i] @ Psi[:2, :].T
+        ax.add_patch(_rt_ellipse(cov, arcs[i, j], q, fc="none", ec=color, lw=0.8))
+    for axes, name, style in (
+        (instance.scenario.ae_semi_axes_m, "AE", "tab:green"),
+        (instance.scenario.koz_semi_axes_m, "KOZ", "tab:red"),
+    ):
+        ax.add_patch(Ellipse((0, 0), 2 * axes[1], 2 * axes[0], fc="none", ec=style, ls="--",
+                             label=name))  # fmt: skip
+    ax.set_xlabel("T [m]")
+    ax.set_ylabel("R [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"free-drift arcs ({q:.2f}-sigma ellipses at t*)")
+
+
+def plot_constraint_history(ax, instance: RobustInstance, x: np.ndarray, u: np.ndarray) -> None:
+    """Fig. 8: Eq. 15 with (dark) and without (light) the margin; > 0 is a violation."""
+    rec = safety_record(instance, x, u)
+    nodes = np.arange(instance.n_nodes)
+    ax.axhspan(0.0, max(1.0, float(np.max(rec["eq15"]))), color="tab:green", alpha=0.15)
+    ax.plot(nodes, rec["eq15_mean"], color="tab:blue", alpha=0.4, label="M*(x) (mean)")
+    ax.plot(nodes, rec["eq15"], color="tab:blue", label="M*(x) + beta")
+    ax.axvline(instance.scenario.n_ae_to_koz, color="k", ls=":", lw=0.8)
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_xlabel("node i")
+    ax.set_ylabel("Eq. 15 left-hand side")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title("passive-safety constraint (> 0 violates)")
+
+
+def plot_solution(
+    instance: RobustInstance, x: np.ndarray, u: np.ndarray, path: str | Path | None = None
+):
+    """Figs. 7 and 8 side by side; saved to ``path`` when given. Returns the figure."""
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 5.5))
+    plot_drift_arcs(ax1, instance, x, u)
+    plot_constraint_history(ax2, instance, x, u)
+    fig.tight_layout()
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return fig

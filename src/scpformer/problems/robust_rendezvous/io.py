@@ -1,0 +1,128 @@
+"""Self-describing ``.npz`` output of a robust rendezvous solution.
+
+The rendezvous family's fields (:mod:`scpformer.problems.rendezvous.io`; N impulses, N + 1
+nodes): ``t``, ``roe``, ``rtn``, ``dv``, ``cost``, ``status``, ``constraint_to_go`` (here the
+Eq. 7 constraint-violation budget of the solved mode, (N+1,)), ``reward_to_go`` (Eq. 9),
+``target_oe`` (JSON: mean elements, consistent osculating elements and relative state) and
+``constants`` (JSON: scenario, instance, mode, stage). Plus, for nodes ``0 .. N-1``:
+
+* ``covariance`` (N, 6, 6): ``X(t_i)`` of Eq. 14 [m^2] (zeros in deterministic mode);
+* ``covariance_tstar`` (N, 6, 6): ``X(t*)``, propagated to the minimum-separation instant;
+* ``t_star`` (N,): ``t*`` [s] of each free-drift arc;
+* ``safety`` / ``safety_mean`` (N,): the normalized constraint ``h`` with and without the
+  margin (``<= 0`` is safe, :mod:`.safety`);
+* ``eq15`` / ``eq15_mean`` (N,): the left-hand side of Eq. 15 with and without ``beta``
+  (Fig. 8 of the paper);
+* ``beta`` (N,): the normalized margin ``beta / b_ps``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scpformer.problems.rendezvous.io import _oe_record
+from scpformer.problems.rendezvous.problem import osculating_initial_state, reward_to_go
+from scpformer.problems.robust_rendezvous.instance import RobustInstance
+from scpformer.problems.robust_rendezvous.safety import (
+    constraint_violation_budget,
+    covariance_at_tstar,
+    drift_geometry,
+    evaluate_safety,
+    linear_model,
+)
+from scpformer.scp.solution import Solution
+
+NPZ_FIELDS = (
+    "t", "roe", "rtn", "dv", "cost", "status", "constraint_to_go", "reward_to_go", "target_oe",
+    "constants", "covariance", "covariance_tstar", "t_star", "safety", "safety_mean", "eq15",
+    "eq15_mean", "beta",
+)  # fmt: skip
+
+
+def safety_record(instance: RobustInstance, x: np.ndarray, u: np.ndarray) -> dict[str, Any]:
+    """Covariances and safety values of the chance-constrained evaluation of ``(x, u)``."""
+    geometry, model = drift_geometry(instance), linear_model(instance)
+    ev = evaluate_safety(geometry, model, x, u, instance, "chance")
+    return {
+        "covariance": ev.X,
+        "covariance_tstar": covariance_at_tstar(geometry, ev),
+        "t_star": model.t[:-1] + geometry.tau[ev.j_star],
+        "safety": ev.h,
+        "safety_mean": ev.h_mean,
+        "eq15": ev.eq15,
+        "eq15_mean": ev.eq15_mean,
+        "beta": ev.beta,
+    }
+
+
+def target_record(instance: RobustInstance) -> dict[str, Any]:
+    """Mean target elements at ``t_0`` and a consistent osculating initial state."""
+    record: dict[str, Any] = {**instance.target.to_dict(), "elements": "mean (first-order J2)"}
+    oe_osc, rtn0 = osculating_initial_state(instance)  # type: ignore[arg-type]
+    record["osculating"] = _oe_record(oe_osc)
+    record["rtn0_osculating"] = [float(v) for v in rtn0]
+    return record
+
+
+def save_solution(
+    path: str | Path, solution: Solution, instance: RobustInstance, mode: str = "chance"
+) -> None:
+    """Write ``solution`` to ``path`` atomically; the safety fields use the chance margin.
+
+    ``constraint_to_go`` is the Eq. 7 budget in ``mode`` (deterministic: ``beta = 0``).
+    """
+    if solution.trajectory is None:
+        raise ValueError(f"no trajectory to write: status {solution.status.value}")
+    x = np.asarray(solution.trajectory.x, dtype=float)
+    u = np.asarray(solution.trajectory.u, dtype=float)
+    n = instance.n_nodes
+    if x.shape != (n + 1, 6) or u.shape != (n, 3):
+        raise ValueError(f"solution shapes {x.shape}, {u.shape} do not match N = {n}")
+    safety = safety_record(instance, x, u)
+    h = safety["safety"] if mode == "chance" else safety["safety_mean"]
+    constants = {
+        "scenario": instance.scenario.to_dict(),
+        "instance": instance.to_dict(),
+        "mode": mode,
+        "stage": solution.extras.get("stage"),
+        "period_s": instance.target.period_s,
+        "t_safety_s": instance.t_safety_s,
+        "q": instance.uncertainty.q,
+    }
+    arrays = {
+        "t": instance.times(),
+        "roe": x,
+        "rtn": linear_model(instance).rtn(x),
+        "dv": u,
+        "cost": np.float64(np.linalg.norm(u, axis=1).sum()),
+        "status": np.str_(solution.status.value),
+        "constraint_to_go": constraint_violation_budget(h),
+        "reward_to_go": reward_to_go(u),
+        "target_oe": np.str_(json.dumps(target_record(instance))),
+        "constants": np.str_(json.dumps(constants)),
+        **safety,
+    }
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
+    try:
+        np.savez(tmp, **arrays)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def load_solution(path: str | Path) -> dict[str, Any]:
+    """Read a file written by :func:`save_solution`; JSON fields come back as dicts."""
+    with np.load(Path(path), allow_pickle=False) as data:
+        out: dict[str, Any] = {k: data[k] for k in data.files}
+    for key in ("target_oe", "constants"):
+        out[key] = json.loads(str(out[key]))
+    out["status"] = str(out["status"])
+    out["cost"] = float(out["cost"])
+    return out

@@ -1,0 +1,324 @@
+"""Tests of the robust (chance-constrained, passively safe) rendezvous family."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from scpformer.dynamics.orbits import eci_to_rtn, oe_to_eci, propagate_mean_j2, rtn_to_eci
+from scpformer.dynamics.roe import psi_matrix, stm_j2
+from scpformer.dynamics.truth import propagate_relative
+from scpformer.dynamics.uncertainty import (
+    GatesModel,
+    NavigationModel,
+    ProcessNoise,
+    UncertaintyModel,
+    chance_margin,
+)
+from scpformer.problems.robust_rendezvous import (
+    MonteCarloConfig,
+    RobustInstance,
+    RobustScenario,
+    constraint_violation_budget,
+    monte_carlo,
+    sample_instances,
+    solve,
+    solve_safety,
+    solve_tpbvp,
+    trajectory_violations,
+)
+from scpformer.problems.robust_rendezvous.io import NPZ_FIELDS, load_solution, save_solution
+from scpformer.problems.robust_rendezvous.montecarlo import propagate_drift_truth
+from scpformer.problems.robust_rendezvous.safety import (
+    covariance_at_tstar,
+    drift_geometry,
+    evaluate_safety,
+    linear_model,
+)
+from scpformer.problems.robust_rendezvous.subproblem import ConicResult, SafetySubproblem
+from scpformer.scp.solution import Status
+
+INSTANCE = RobustInstance()
+
+
+@pytest.fixture(scope="module")
+def tpbvp():
+    return solve_tpbvp(INSTANCE)
+
+
+@pytest.fixture(scope="module")
+def solved():
+    """Three-stage solutions of the nominal instance in both modes."""
+    return {mode: solve(INSTANCE, mode=mode) for mode in ("deterministic", "chance")}
+
+
+# -- scenario and instance ------------------------------------------------------------------
+def test_defaults_are_robust_tables_1_and_2():
+    sc, tgt = INSTANCE.scenario, INSTANCE.target
+    assert (sc.n_nodes, sc.horizon_orbits, sc.t_safety_orbits, sc.n_safety) == (100, 1.29, 1, 20)
+    assert sc.ae_semi_axes_m == (1000.0,) * 3 and sc.koz_semi_axes_m == (200.0,) * 3
+    assert sc.n_ae_to_koz == 55
+    assert (tgt.a_m, tgt.e, tgt.i_deg, tgt.raan_deg, tgt.argp_deg, tgt.M_deg) == (
+        6738e3, 5.58e-4, 51.64, 301.04, 26.18, 68.23,
+    )  # fmt: skip
+    assert tgt.period_s / 3600 == pytest.approx(1.528, abs=2e-3)
+    assert INSTANCE.x0_rtn == (-4000.0, -17500.0, 0.0, 0.0, 6.849, 0.0)
+    assert INSTANCE.uncertainty.q == pytest.approx(3.09, abs=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("waypoint", "expected"),
+    [("+T", (0, 750, 0)), ("-T", (0, -750, 0)), ("+R", (750, 0, 0)), ("-R", (-750, 0, 0))],
+)
+def test_waypoints_are_750_m_on_r_bar_and_v_bar_at_rest(waypoint, expected):
+    inst = dataclasses.replace(INSTANCE, waypoint=waypoint)
+    np.testing.assert_array_equal(inst.xf_rtn, [*expected, 0, 0, 0])
+    model = linear_model(inst)
+    x = solve_tpbvp(inst).trajectory.x
+    np.testing.assert_allclose(model.rtn(x)[-1], inst.xf_rtn, atol=1e-6)
+    np.testing.assert_allclose(model.rtn(x)[0], inst.x0_rtn, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("build", "field"),
+    [
+        (lambda: RobustInstance(waypoint="+N"), "waypoint"),
+        (lambda: RobustInstance(x0_rtn=(100.0, 0, 0, 0, 0, 0)), "x0_rtn"),
+        (lambda: RobustInstance(x0_rtn=(np.nan, 0, 0, 0, 0, 0)), "x0_rtn"),
+        (lambda: UncertaintyModel(delta=1.0), "delta"),
+        (lambda: UncertaintyModel(delta=0.0), "delta"),
+        (lambda: GatesModel(sigma_s=-1e-3), "sigma_s"),
+        (lambda: NavigationModel(s1=(-1, 0, 0, 0, 0, 0)), "s1"),
+        (lambda: ProcessNoise(Q_roe=np.diag([1, 1, 1, 1, 1, -1.0]).tolist()), "Q_roe"),
+        (lambda: ProcessNoise(Q_roe=np.zeros((6, 6)).tolist()), "Q_roe"),
+        (lambda: RobustScenario(n_safety=0), "n_safety"),
+        (lambda: RobustScenario(t_safety_orbits=-1.0), "t_safety_orbits"),
+        (lambda: RobustScenario(koz_semi_axes_m=(200.0, 0.0, 200.0)), "koz_semi_axes_m"),
+        (lambda: RobustInstance.from_dict({"x0": [0] * 6}), "x0"),
+        (lambda: RobustInstance.from_dict({"uncertainty": {"delta": 2.0}}), "delta"),
+        (lambda: solve(INSTANCE, mode="robust"), "mode"),
+        (lambda: sample_instances(0, -1), "n"),
+    ],
+)
+def test_bad_input_raises_naming_the_field(build, field):
+    with pytest.raises(ValueError, match=field):
+        build()
+
+
+def test_sampler_is_seeded_and_stays_in_the_table_1_ranges():
+    a, b = sample_instances(7, 50), sample_instances(np.random.default_rng(7), 50)
+    assert [i.to_dict() for i in a] == [i.to_dict() for i in b]
+    x0 = np.array([i.x0_rtn for i in a])
+    nominal = np.array(INSTANCE.x0_rtn)
+    assert np.all(np.abs(x0[:, 0] - nominal[0]) <= 1400.0)
+    assert np.all(np.abs(x0[:, 1] - nominal[1]) <= 3000.0)
+    assert np.all(np.abs(x0[:, 4] - nominal[4]) <= 1.0)
+    np.testing.assert_array_equal(x0[:, [2, 3, 5]], 0.0)
+    assert {i.waypoint for i in a} == {"+T", "-T", "+R", "-R"}
+
+
+def test_instance_round_trips_through_a_dict():
+    inst = sample_instances(3, 1)[0]
+    assert RobustInstance.from_dict(inst.to_dict()) == inst
+
+
+# -- passive safety (Eqs. 14-16) --------------------------------------------------------------
+def _brute_force_maps(inst: RobustInstance) -> np.ndarray:
+    """``E_i D Psi(t_i + tau_j) Phi(t_i + tau_j, t_i)``, one STM and Psi at a time (N, S, 3, 6)."""
+    t = inst.times()
+    oe0 = inst.target.oe.to_array()
+    tau = np.linspace(0.0, inst.t_safety_s, inst.scenario.n_safety)
+    G = np.empty((inst.n_nodes, tau.size, 3, 6))
+    for i in range(inst.n_nodes):
+        axes = inst.scenario.ae_semi_axes_m if i < 55 else inst.scenario.koz_semi_axes_m
+        for j, s in enumerate(tau):
+            Phi = stm_j2(propagate_mean_j2(oe0, t[i]), s)
+            Psi = psi_matrix(propagate_mean_j2(oe0, t[i] + s))
+            G[i, j] = (Psi @ Phi)[:3] / np.asarray(axes)[:, None]
+    return G
+
+
+def test_passive_safety_matches_brute_force_sampling_of_the_drift_arc(tpbvp):
+    x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
+    model, geo = linear_model(INSTANCE), drift_geometry(INSTANCE)
+    det = evaluate_safety(geo, model, x, u, INSTANCE, "deterministic")
+    chance = evaluate_safety(geo, model, x, u, INSTANCE, "chance")
+    y = x[:-1] + np.einsum("ikl,il->ik", model.B, u)
+    G = _brute_force_maps(INSTANCE)
+    r = np.einsum("ijrl,il->ijr", G, y)
+    d = np.linalg.norm(r, axis=-1)
+    np.testing.assert_allclose(det.d, d, rtol=1e-10)
+    np.testing.assert_allclose(det.y, y)
+    # deterministic: t* is the minimum-separation instant of the drift arc (Eq. 16)
+    np.testing.assert_array_equal(det.j_star, np.argmin(d, axis=1))
+    np.testing.assert_allclose(det.h, 1.0 - d.min(axis=1), rtol=1e-10)
+    # chance: the worst sample of 1 + q sqrt(a^T X a) - d with a = G^T G y / d (Eq. 16)
+    a = np.einsum("ijr,ijrl->ijl", r / d[..., None], G)
+    beta = chance_margin(chance.X[:, None], a, 1e-3)
+    np.testing.assert_allclose(chance.h, (1.0 + beta - d).max(axis=1), rtol=1e-9)
+    np.testing.assert_array_equal(chance.j_star, np.argmax(1.0 + beta - d, axis=1))
+    assert np.all(chance.h >= det.h) and np.any(det.h > 0.0)  # the TPBVP is not safe
+
+
+@pytest.mark.parametrize("mode", ["deterministic", "chance"])
+def test_subproblem_rows_are_the_exact_linearization_of_h(tpbvp, mode):
+    """Finite differences of h_ij (margin included) w.r.t. x_i and u_i, at four nodes."""
+    x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
+    geo, model = drift_geometry(INSTANCE), linear_model(INSTANCE)
+    ev = evaluate_safety(geo, model, x, u, INSTANCE, mode, n_rows=3)
+    a_x, a_u, c = ev.subproblem_rows(x, u)
+    for i in (5, 30, 60, 90):
+        j = ev.rows[i, 0]
+
+        def h(xx, uu, i=i, j=j):
+            e = evaluate_safety(geo, model, xx, uu, INSTANCE, mode, n_rows=20)
+            return 1.0 + e.beta_rows[i, list(e.rows[i]).index(j)] - e.d[i, j]
+
+        for k, step in [(k, 1e-2) for k in range(6)]:
+            dx = np.zeros_like(x)
+            dx[i, k] = step
+            fd = (h(x + dx, u) - h(x - dx, u)) / (2 * step)
+            assert fd == pytest.approx(-a_x[i, 0, k], rel=1e-5, abs=1e-9)
+        for k in range(3):
+            du = np.zeros_like(u)
+            du[i, k] = 1e-5
+            fd = (h(x, u + du) - h(x, u - du)) / 2e-5
+            assert fd == pytest.approx(-a_u[i, 0, k], rel=1e-4, abs=1e-7)
+        # the row reproduces h at the reference
+        assert c[i, 0] - a_x[i, 0] @ x[i] - a_u[i, 0] @ u[i] == pytest.approx(ev.h[i], abs=1e-9)
+    if mode == "deterministic":
+        np.testing.assert_allclose(a_u, np.einsum("ikl,ijk->ijl", model.B, ev.a_rows))
+
+
+def test_margin_is_q_sqrt_of_the_linearized_variance_eq_16(tpbvp):
+    x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
+    geo = drift_geometry(INSTANCE)
+    ev = evaluate_safety(geo, linear_model(INSTANCE), x, u, INSTANCE, "chance")
+    np.testing.assert_allclose(ev.beta, chance_margin(ev.X, ev.a_hat, 1e-3), rtol=1e-12)
+    # Same variance seen at t*: g^T X(t*) g with g the gradient w.r.t. the state at t*.
+    X_star = covariance_at_tstar(geo, ev)
+    Phi = geo.Phi[np.arange(100), ev.j_star]
+    g = np.linalg.solve(np.swapaxes(Phi, 1, 2), ev.a_hat[..., None])[..., 0]
+    np.testing.assert_allclose(ev.beta, 3.0902 * np.sqrt(np.einsum("ik,ikl,il->i", g, X_star, g)),
+                               rtol=1e-4)  # fmt: skip
+
+
+def test_propagated_covariance_at_tstar_matches_monte_carlo_on_the_linear_model(tpbvp):
+    x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
+    geo = drift_geometry(INSTANCE)
+    ev = evaluate_safety(geo, linear_model(INSTANCE), x, u, INSTANCE, "chance")
+    i, n = 20, 50_000
+    rng = np.random.default_rng(0)
+    e = rng.standard_normal((n, 6)) @ np.linalg.cholesky(ev.X[i]).T
+    drifted = e @ geo.Phi[i, ev.j_star[i]].T
+    L = np.linalg.cholesky(covariance_at_tstar(geo, ev)[i])
+    w = np.linalg.solve(L, drifted.T)
+    assert np.max(np.abs(w @ w.T / n - np.eye(6))) < 5 * np.sqrt(2 / n)
+
+
+def test_margin_vanishes_with_zero_covariance(tpbvp):
+    x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
+    geo, model = drift_geometry(INSTANCE), linear_model(INSTANCE)
+    det = evaluate_safety(geo, model, x, u, INSTANCE, "deterministic")
+    assert det.X is None and np.all(det.beta == 0.0)
+    np.testing.assert_array_equal(det.h, det.h_mean)
+    quiet = UncertaintyModel(
+        navigation=NavigationModel(s1=(0.0,) * 6, s2=(0.0,) * 6),
+        actuation=GatesModel(sigma_s=0.0, sigma_p=0.0, sigma_r=0.0, sigma_a=0.0),
+        process_noise=ProcessNoise(Q_roe=(np.eye(6) * 1e-30).tolist()),
+    )
+    chance = evaluate_safety(geo, model, x, u, dataclasses.replace(INSTANCE, uncertainty=quiet),
+                             "chance")  # fmt: skip
+    assert np.max(chance.beta) < 1e-12
+    np.testing.assert_allclose(chance.h, det.h, atol=1e-12)
+
+
+def test_collision_avoidance_is_the_zero_drift_case(tpbvp):
+    x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
+    model = linear_model(INSTANCE)
+    ev = evaluate_safety(drift_geometry(INSTANCE, 0.0), model, x, u, INSTANCE, "deterministic")
+    E = INSTANCE.scenario.ellipsoid_E()[:-1]
+    d = np.linalg.norm(np.einsum("irs,is->ir", E, model.rtn(x)[:-1, :3]), axis=1)
+    np.testing.assert_allclose(1.0 - ev.h, d, rtol=1e-6)
+
+
+def test_violation_budget_counts_violated_nodes_to_go_eq_7(tpbvp):
+    h = np.array([0.5, -1.0, 2e-3, 1e-3, 2.0])  # 1e-3: within the solver tolerance
+    np.testing.assert_array_equal(constraint_violation_budget(h), [3, 2, 2, 1, 1, 0])
+    C = trajectory_violations(INSTANCE, tpbvp.trajectory.x, tpbvp.trajectory.u, "chance")
+    assert C.shape == (101,) and C[0] > 0 and C[-1] == 0 and np.all(np.diff(C) <= 0)
+
+
+# -- SCvx* on Eq. 17 and the three-stage solve ----------------------------------------------
+def test_subproblem_is_dpp():
+    assert SafetySubproblem(6).problem.is_dpp()
+
+
+def test_three_stage_solve_is_passively_safe_with_margin(solved):
+    for mode, sol in solved.items():
+        assert sol.status is Status.CONVERGED, (mode, sol.message)
+        assert sol.extras["stage"] == "passive_safety" and sol.extras["mode"] == mode
+        assert set(sol.extras["stage_status"]) == {"tpbvp", "collision_avoidance", "passive_safety"}
+        x, u = sol.trajectory.x, sol.trajectory.u
+        assert trajectory_violations(INSTANCE, x, u, mode, tol=1e-3)[0] == 0
+        assert sol.verification.passed and sol.extras["violation_budget"][0] == 0
+    x, u = solved["deterministic"].trajectory.x, solved["deterministic"].trajectory.u
+    assert trajectory_violations(INSTANCE, x, u, "chance", tol=1e-3)[0] > 0  # margin matters
+
+
+def test_conic_solver_failure_is_a_status_with_the_reason(tpbvp, monkeypatch):
+    def fail(self, solver="clarabel"):
+        return ConicResult("infeasible_inaccurate", None, None, None, float("nan"), 0.0)
+
+    monkeypatch.setattr(SafetySubproblem, "solve", fail)
+    sol = solve_safety(INSTANCE, tpbvp, mode="chance")
+    assert sol.status is Status.SOLVER_FAILED and "infeasible_inaccurate" in sol.message
+    full = solve(INSTANCE, mode="chance")
+    assert full.status is Status.SOLVER_FAILED and full.extras["stage"] == "tpbvp"
+
+
+def test_npz_holds_rendezvous_fields_covariances_and_safety_values(solved, tmp_path):
+    path = tmp_path / "s.npz"
+    save_solution(path, solved["chance"], INSTANCE, "chance")
+    data = load_solution(path)
+    assert set(NPZ_FIELDS) <= set(data)
+    assert data["covariance"].shape == data["covariance_tstar"].shape == (100, 6, 6)
+    assert np.all(data["safety"] >= data["safety_mean"]) and np.all(data["safety"] <= 1e-3)
+    assert data["constants"]["stage"] == "passive_safety" and data["constraint_to_go"][0] == 0
+
+
+# -- Monte Carlo verification -----------------------------------------------------------------
+def test_rk4_drift_matches_the_adaptive_truth_propagator():
+    oe = INSTANCE.target.oe.to_array()
+    rtn0 = np.array([-300.0, 2000.0, 50.0, 0.1, 0.4, -0.05])
+    tau = np.linspace(0.0, INSTANCE.target.period_s, 11)
+    ref = propagate_relative(oe, rtn0, [0.0], t_out=tau).rtn
+    r_c, v_c = oe_to_eci(oe)
+    r_d, v_d = rtn_to_eci(r_c, v_c, rtn0)
+    out = propagate_drift_truth(np.r_[r_c, v_c][None], np.r_[r_d, v_d][None, None], tau, 20.0)
+    np.testing.assert_allclose(out[0, 0], ref, atol=1e-2)
+    np.testing.assert_allclose(eci_to_rtn(r_c, v_c, r_d, v_d), rtn0, atol=1e-9)
+
+
+def test_chance_solution_passes_the_monte_carlo_check_at_the_design_level(solved):
+    """Linear (design) model at all nodes; the deterministic plan fails the same check."""
+    cfg = MonteCarloConfig(n_samples=2000, propagator="linear", dense_per_sample=1, seed=1)
+    results = {}
+    for mode, sol in solved.items():
+        results[mode] = monte_carlo(INSTANCE, sol.trajectory.x, sol.trajectory.u, cfg)
+    assert results["chance"].passes()
+    assert results["chance"].p_design.mean() < INSTANCE.uncertainty.delta
+    assert not results["deterministic"].passes()
+    assert results["deterministic"].p_design.max() > 0.1
+
+
+def test_chance_solution_passes_monte_carlo_in_the_truth_model_at_its_active_nodes(solved):
+    sol = solved["chance"]
+    x, u = sol.trajectory.x, sol.trajectory.u
+    ev = evaluate_safety(drift_geometry(INSTANCE), linear_model(INSTANCE), x, u, INSTANCE, "chance")
+    active = np.argsort(ev.h)[-4:]
+    cfg = MonteCarloConfig(n_samples=1000, propagator="truth", dense_per_sample=1, seed=2)
+    res = monte_carlo(INSTANCE, x, u, cfg, nodes=active)
+    assert res.passes() and res.min_distance.shape == (4, 1000)
