@@ -13,8 +13,7 @@ constraints are written with the same ``Psi``.
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +33,7 @@ from scpformer.problems.robust_rendezvous.scenario import (
     check_waypoint,
     robust_target,
 )
-from scpformer.validation import check_finite
+from scpformer.validation import check_finite, known_fields, read_json
 
 #: Nominal initial RTN state of Table 1: (-4 km, -17.5 km, 0) and (0, 6.849 m/s, 0).
 X0_RTN_TABLE1 = (-4000.0, -17500.0, 0.0, 0.0, 6.849, 0.0)
@@ -43,24 +42,11 @@ X0_RTN_TABLE1 = (-4000.0, -17500.0, 0.0, 0.0, 6.849, 0.0)
 def _uncertainty_from_dict(data: Any) -> UncertaintyModel:
     if isinstance(data, UncertaintyModel):
         return data
-    if not isinstance(data, dict):
-        raise ValueError(f"uncertainty must be a JSON object, got {type(data).__name__}")
+    kwargs = known_fields(UncertaintyModel, data, "uncertainty")
     parts = {"navigation": NavigationModel, "actuation": GatesModel, "process_noise": ProcessNoise}
-    unknown = sorted(set(data) - {*parts, "delta"})
-    if unknown:
-        raise ValueError(f"unknown uncertainty field(s): {', '.join(unknown)}")
-    kwargs: dict[str, Any] = {}
     for key, cls in parts.items():
-        if key in data:
-            sub = data[key]
-            if not isinstance(sub, dict):
-                raise ValueError(f"uncertainty.{key} must be a JSON object")
-            bad = sorted(set(sub) - {f.name for f in fields(cls)})
-            if bad:
-                raise ValueError(f"unknown uncertainty.{key} field(s): {', '.join(bad)}")
-            kwargs[key] = cls(**sub)
-    if "delta" in data:
-        kwargs["delta"] = data["delta"]
+        if key in kwargs:
+            kwargs[key] = cls(**known_fields(cls, kwargs[key], f"uncertainty.{key}"))
     return UncertaintyModel(**kwargs)
 
 
@@ -138,12 +124,7 @@ class RobustInstance:
     @classmethod
     def from_dict(cls, data: Any) -> RobustInstance:
         """Build from plain values; unknown keys (also nested) raise ``ValueError``."""
-        if not isinstance(data, dict):
-            raise ValueError(f"instance must be a JSON object, got {type(data).__name__}")
-        unknown = sorted(set(data) - {f.name for f in fields(cls)})
-        if unknown:
-            raise ValueError(f"unknown instance field(s): {', '.join(unknown)}")
-        kwargs = dict(data)
+        kwargs = known_fields(cls, data, "instance")
         if "x0_rtn" in kwargs and isinstance(kwargs["x0_rtn"], list):
             kwargs["x0_rtn"] = tuple(kwargs["x0_rtn"])
         if "target" in kwargs:
@@ -157,14 +138,7 @@ class RobustInstance:
     @classmethod
     def from_json(cls, path: str | Path) -> RobustInstance:
         """Read an instance from a JSON file (keys as in :meth:`from_dict`)."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"instance file not found: {path}") from None
-        except json.JSONDecodeError as err:
-            raise ValueError(f"malformed JSON in {path}: {err}") from None
-        return cls.from_dict(data)
+        return cls.from_dict(read_json(path, "instance"))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-value dictionary that :meth:`from_dict` reads back."""

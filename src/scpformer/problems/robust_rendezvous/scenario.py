@@ -22,7 +22,7 @@ R-bar (``+R``, ``-R``) with zero relative velocity.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -30,7 +30,7 @@ import numpy as np
 from scpformer.dynamics.uncertainty import UncertaintyModel
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.scp.scvx_star import SCvxStarParameters
-from scpformer.validation import check_finite, check_positive
+from scpformer.validation import check_finite, check_positive, known_fields
 
 WAYPOINTS = ("+T", "-T", "+R", "-R")
 MODES = ("deterministic", "chance")
@@ -136,11 +136,7 @@ class RobustScenario:
         """Build from plain values; unknown keys raise ``ValueError`` naming them."""
         if isinstance(data, cls):
             return data
-        if not isinstance(data, dict):
-            raise ValueError(f"scenario must be a JSON object, got {type(data).__name__}")
-        unknown = sorted(set(data) - {f.name for f in fields(cls)})
-        if unknown:
-            raise ValueError(f"unknown scenario field(s): {', '.join(unknown)}")
+        data = known_fields(cls, data, "scenario")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
