@@ -200,12 +200,23 @@ def sequence_fields(
 ) -> dict[str, np.ndarray]:
     """States in ROE and RTN (``model``'s Psi), impulses, reward- and constraint-to-go."""
     rtn = model.rtn(roe)
+    return art_sequences(prefix, roe, rtn, dv, constraint_to_go(rtn, scenario))
+
+
+def art_sequences(
+    prefix: str, roe: np.ndarray, rtn: np.ndarray, dv: np.ndarray, ctg: np.ndarray
+) -> dict[str, np.ndarray]:
+    """The ART sequence fields of one twin: states, impulses, ``R(t_k)`` and the given ``C(t_k)``.
+
+    Family-independent: the robust family passes its constraint-violation budget (Eq. 7) as
+    ``ctg``, so :class:`~scpformer.data.torch_views.ArtSequenceDataset` serves both families.
+    """
     return {
         f"{prefix}_roe": roe,
         f"{prefix}_rtn": rtn,
         f"{prefix}_dv": dv,
         f"{prefix}_rtg": reward_to_go(dv),
-        f"{prefix}_ctg": constraint_to_go(rtn, scenario).astype(float),
+        f"{prefix}_ctg": np.asarray(ctg, dtype=float),
     }
 
 
