@@ -241,6 +241,7 @@ class ArtSequenceDataset(_StoredView):
         self.frame, self.pairs = frame, pairs
         self.n_steps = manifest.field(f"{self.twins[0]}_dv").shape[0]
         self.items = self._items()  # (items, 2): sample position, twin number (-1: pair)
+        self.base_index = self.samples.column("base_index")  # small indexing column
         self._stats = self._pooled(stored) if normalize else {}
 
     def _items(self) -> np.ndarray:
@@ -267,7 +268,7 @@ class ArtSequenceDataset(_StoredView):
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
         position, twin = (int(v) for v in self.items[i])
-        base = torch.tensor(int(self.samples.read("base_index", position)), dtype=torch.int64)
+        base = torch.tensor(int(self.base_index[position]), dtype=torch.int64)
         if twin >= 0:
             return {**self._twin_item(position, twin), "base_index": base}
         items = {}
