@@ -108,10 +108,19 @@ class SafetySubproblem:
             X[0] == self.x_init,
             X[n] == self.x_final,
             safety <= zeta,
-            cp.abs(X[1:n] - self.x_ref[1:n]) <= term.r,
-            cp.abs(U - self.u_ref) <= self.u_radius,
+            X[1:n] - self.x_ref[1:n] <= term.r,  # |.|_inf <= r as two linear inequalities
+            self.x_ref[1:n] - X[1:n] <= term.r,  # (cp.abs would add an auxiliary per entry)
+            U - self.u_ref <= self.u_radius,
+            self.u_ref - U <= self.u_radius,
         ]
-        proximal = cp.sum_squares(X[1:n] - self.x_ref[1:n]) + cp.sum_squares(U - self.u_ref)
+        # |X - X_bar|^2 + |U - U_bar|^2 up to a constant, written without the differences so
+        # that canonicalization adds no auxiliary variable per entry (the solver sees P directly)
+        proximal = (
+            cp.sum_squares(X[1:n])
+            - 2.0 * cp.sum(cp.multiply(self.x_ref[1:n], X[1:n]))
+            + cp.sum_squares(U)
+            - 2.0 * cp.sum(cp.multiply(self.u_ref, U))
+        )
         cost = cp.sum(cp.norm(U, 2, axis=1)) / U_SCALE + term.expression
         cost = cost + PROX_WEIGHT * proximal
         return cp.Problem(cp.Minimize(cost), constraints)
