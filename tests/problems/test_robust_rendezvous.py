@@ -38,7 +38,7 @@ from scpformer.problems.robust_rendezvous.safety import (
     linear_model,
 )
 from scpformer.problems.robust_rendezvous.subproblem import ConicResult, SafetySubproblem
-from scpformer.scp.solution import Status
+from scpformer.scp.solution import Status, Trajectory
 
 INSTANCE = RobustInstance()
 
@@ -266,6 +266,16 @@ def test_three_stage_solve_is_passively_safe_with_margin(solved):
         assert sol.verification.passed and sol.extras["violation_budget"][0] == 0
     x, u = solved["deterministic"].trajectory.x, solved["deterministic"].trajectory.u
     assert trajectory_violations(INSTANCE, x, u, "chance", tol=1e-3)[0] > 0  # margin matters
+
+
+def test_a_given_warm_start_goes_straight_to_passive_safety(tpbvp):
+    sol = solve(INSTANCE, mode="deterministic", warmstart=tpbvp.trajectory)
+    assert sol.converged and set(sol.extras["stage_status"]) == {"passive_safety"}
+    bad = Trajectory(x=np.zeros((100, 6)), u=np.zeros((100, 3)), p=np.zeros(0))
+    with pytest.raises(ValueError, match="warm start"):
+        solve(INSTANCE, warmstart=bad)
+    with pytest.raises(ValueError, match="warmstart must be one of"):
+        solve(INSTANCE, warmstart="art")
 
 
 def test_conic_solver_failure_is_a_status_with_the_reason(tpbvp, monkeypatch):
