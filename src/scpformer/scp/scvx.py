@@ -30,6 +30,7 @@ from typing import Protocol
 
 import numpy as np
 
+from scpformer.scp.conic import check_solver
 from scpformer.scp.solution import (
     IterationRecord,
     Solution,
@@ -82,8 +83,7 @@ class SCvxParameters:
                 f"need eta_lb <= eta_init <= eta_ub, got {self.eta_lb}, {self.eta_init}, "
                 f"{self.eta_ub}"
             )
-        if self.solver not in ("clarabel", "ecos", "qoco"):
-            raise ValueError(f"solver must be clarabel, ecos or qoco, got {self.solver!r}")
+        check_solver(self.solver)
 
 
 @dataclass(frozen=True)

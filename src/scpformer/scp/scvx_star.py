@@ -56,6 +56,7 @@ from typing import Protocol
 import cvxpy as cp
 import numpy as np
 
+from scpformer.scp.conic import check_solver
 from scpformer.scp.solution import (
     IterationRecord,
     Solution,
@@ -84,7 +85,6 @@ __all__ = [
     "update_trust_radius",
 ]
 
-SOLVERS = ("clarabel", "ecos", "qoco", "scs")
 TIGHT_TOL = 1e-6  # h(z) >= -TIGHT_TOL flags a row as tight when the problem gives no flags
 _DEGENERATE_DELTA_L = 1e-12  # |Delta L| below this times max(1, |J_bar|) predicts no change
 
@@ -111,7 +111,7 @@ class SCvxStarParameters:
     rho_1: float = 0.25  # rho_1: shrink below this ratio
     rho_2: float = 0.7  # rho_2: grow at or above this ratio
     iter_max: int = 20  # maximum number of subproblem solves
-    solver: str = "clarabel"  # conic solver: clarabel, ecos, qoco or scs
+    solver: str = "clarabel"  # conic solver, one of scpformer.scp.conic.SOLVERS
 
     def __post_init__(self) -> None:
         if int(self.iter_max) != self.iter_max or self.iter_max < 1:
@@ -134,8 +134,7 @@ class SCvxStarParameters:
             )
         if self.w_init > self.w_max:
             raise ValueError(f"w_init must not exceed w_max, got {self.w_init} > {self.w_max}")
-        if self.solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        check_solver(self.solver)
 
 
 # ----------------------------------------------------------------------------------------

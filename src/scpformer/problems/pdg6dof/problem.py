@@ -18,11 +18,8 @@ from scpformer.dynamics import powered_descent as pd
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.guess import straight_line_guess
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.problems.pdg6dof.subproblem import (
-    SOLVED,
-    compiled_subproblem,
-    trust_region_scales,
-)
+from scpformer.problems.pdg6dof.subproblem import compiled_subproblem, trust_region_scales
+from scpformer.scp.conic import SOLVED
 from scpformer.scp.discretization import FOHDiscretization, foh_discretize
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Status, Trajectory, Verification

@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import functools
 import math
-import time
-import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
@@ -31,10 +29,8 @@ import numpy as np
 
 from scpformer.cache import cached_pickle
 from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.scp.conic import canonicalize, check_solver, solve_timed
 from scpformer.scp.discretization import FOHDiscretization
-
-SOLVERS = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
-SOLVED = {cp.OPTIMAL, cp.OPTIMAL_INACCURATE}
 
 
 @dataclass(frozen=True)
@@ -48,8 +44,8 @@ class SubproblemSolution:
     nu: np.ndarray | None  # (N-1, 14) virtual control
     buffers: np.ndarray | None  # (N,) virtual buffers of the thrust lower bound
     linear_cost: float  # L^k of Eq. 13
-    solve_time: float  # seconds inside the conic solver (as it reports)
-    wall_time: float  # seconds in cvxpy.Problem.solve, parameter update to unpacking
+    solve_time: float  # seconds inside the conic solver call
+    wall_time: float  # seconds from the parameter values to the unpacked solution
     message: str = ""
 
 
@@ -186,35 +182,21 @@ class PDGSubproblem:
         self.eta_u.value = eta * self.scale_u
         self.eta_sigma.value = eta * self.scale_sigma
         self.lambda_.value = lambda_
-        start = time.perf_counter()
-        try:
-            with warnings.catch_warnings():  # "inaccurate" is reported as a status instead
-                warnings.simplefilter("ignore", UserWarning)
-                self.problem.solve(solver=SOLVERS[solver])
-        except cp.SolverError as err:
-            wall = time.perf_counter() - start
-            return _failed(f"solver_error: {err}", wall)
-        wall = time.perf_counter() - start
-        stats = self.problem.solver_stats
-        # The solver's own clock can read a little above the wall time around the call (it
-        # starts before cvxpy's timer on some builds), so clip it: the solve is part of the call.
-        reported = stats.solve_time if stats and stats.solve_time is not None else wall
-        solve_time = min(float(reported), wall)
-        status = self.problem.status
-        if status not in SOLVED or self.X.value is None:
-            return _failed(status, wall, solve_time)
+        call = solve_timed(self.problem, solver)
+        if not call.solved or self.X.value is None:
+            return _failed(call.status, call.wall_time, call.solver_time)
         nu, buffers = self.nu.value, np.maximum(self.buffers.value, 0.0)
         linear_cost = -self.X.value[-1, 13] + lambda_ * (np.abs(nu).sum() + buffers.sum())
         return SubproblemSolution(
-            status=status,
+            status=call.status,
             x=self.X.value.copy(),
             u=self.U.value.copy(),
             sigma=float(self.sigma.value),
             nu=nu.copy(),
             buffers=buffers.copy(),
             linear_cost=float(linear_cost),
-            solve_time=float(solve_time),
-            wall_time=wall,
+            solve_time=call.solver_time,
+            wall_time=call.wall_time,
         )
 
 
@@ -242,7 +224,7 @@ def trust_region_scales(instance: PDGInstance) -> tuple[np.ndarray, np.ndarray, 
     return scale_x, np.full(3, 0.25 * c.T_max), 0.5
 
 
-def _failed(status: str, wall: float, solve_time: float | None = None) -> SubproblemSolution:
+def _failed(status: str, wall: float, solve_time: float) -> SubproblemSolution:
     return SubproblemSolution(
         status=status,
         x=None,
@@ -251,7 +233,7 @@ def _failed(status: str, wall: float, solve_time: float | None = None) -> Subpro
         nu=None,
         buffers=None,
         linear_cost=math.nan,
-        solve_time=wall if solve_time is None else solve_time,
+        solve_time=solve_time,
         wall_time=wall,
         message=status,
     )
@@ -269,13 +251,12 @@ def compiled_subproblem(
     scpformer versions and this module's source, so that it is built once per machine rather
     than once per process.
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    check_solver(solver)
     key = f"pdg6dof-subproblem-N{n_nodes}-roll{int(fix_roll)}-prox{prox_weight:g}-{solver}"
 
     def build() -> PDGSubproblem:
         sub = PDGSubproblem(n_nodes, fix_roll, prox_weight)
-        sub.problem.get_problem_data(SOLVERS[solver])  # canonicalize before any solver exists
+        canonicalize(sub.problem, solver)
         return sub
 
     return cached_pickle(key, build, source=__file__)

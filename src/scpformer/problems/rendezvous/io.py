@@ -65,7 +65,11 @@ def _oe_record(oe: np.ndarray) -> dict[str, float]:
 
 
 def target_record(instance: RendezvousInstance) -> dict[str, Any]:
-    """Mean target elements at ``t_0`` and a consistent osculating initial state."""
+    """Mean target elements at ``t_0`` and a consistent osculating initial state.
+
+    Also used for robust instances, which carry the same ``target``, ``roe0`` and ``scenario``
+    attributes that :func:`.problem.osculating_initial_state` reads.
+    """
     record: dict[str, Any] = {**instance.target.to_dict(), "elements": "mean (first-order J2)"}
     oe_osc, rtn0 = osculating_initial_state(instance)
     record["osculating"] = _oe_record(oe_osc)

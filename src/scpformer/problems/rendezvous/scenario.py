@@ -31,9 +31,9 @@ from typing import Any
 import numpy as np
 
 from scpformer.dynamics.orbits import R_EARTH, OrbitalElements
+from scpformer.scp.conic import check_solver
 from scpformer.validation import check_finite, check_in_range, check_positive, known_fields
 
-SOLVER_NAMES = ("clarabel", "ecos", "qoco")
 STOP_TESTS = ("step", "radius")
 UNIT_AXIS_TOL = 1e-6
 MIN_SIN_INCLINATION = 1e-6
@@ -266,8 +266,7 @@ class SCPParameters:
         object.__setattr__(self, "J_tol", check_positive("scp.J_tol", self.J_tol))
         if self.stop_test not in STOP_TESTS:
             raise ValueError(f"scp.stop_test must be one of {STOP_TESTS}, got {self.stop_test!r}")
-        if self.solver not in SOLVER_NAMES:
-            raise ValueError(f"scp.solver must be one of {SOLVER_NAMES}, got {self.solver!r}")
+        check_solver(self.solver, "scp.solver")
 
     @property
     def beta(self) -> float:

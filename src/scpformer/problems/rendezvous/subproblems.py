@@ -28,18 +28,21 @@ from __future__ import annotations
 
 import functools
 import math
-import time
-import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
 import numpy as np
 
 from scpformer.cache import cached_pickle
+from scpformer.scp.conic import (
+    SOLVED,
+    batched_matvec,
+    canonicalize,
+    check_solver,
+    solve_timed,
+)
 
 KINDS = ("tpbvp", "convex", "scp")
-SOLVERS = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
-OPTIMAL = cp.OPTIMAL
 INACCURATE = cp.OPTIMAL_INACCURATE
 U_SCALE = 1e3  # decision variable U = U_SCALE * dv (mm/s)
 
@@ -59,20 +62,7 @@ class SubproblemSolution:
     @property
     def ok(self) -> bool:
         """A usable solution: optimal, or optimal_inaccurate (flagged by ``status``)."""
-        return self.status in (OPTIMAL, INACCURATE) and self.x is not None
-
-
-def _batched_matvec(M: cp.Expression, V: cp.Expression, rows: int, cols: int) -> cp.Expression:
-    """``out[k, r] = sum_j M[k, r*cols + j] V[k, j]`` for all k at once.
-
-    ``M`` is a parameter of shape (K, rows*cols) holding row-major (rows, cols) matrices, ``V``
-    an affine expression of shape (K, cols); the result has shape (K, rows).
-    """
-    out = None
-    for j in range(cols):
-        term = cp.multiply(M[:, j::cols], V[:, j : j + 1])  # (K, rows) * (K, 1) broadcast
-        out = term if out is None else out + term
-    return out
+        return self.status in SOLVED and self.x is not None
 
 
 class RendezvousSubproblem:
@@ -106,10 +96,10 @@ class RendezvousSubproblem:
 
     def _build(self) -> cp.Problem:
         X, U, kw, n = self.X, self.U, self.n_waypoint, self.n_nodes
-        dynamics = _batched_matvec(self.phi, X[:-1], 6, 6) + _batched_matvec(self.gamma, U, 6, 3)
+        dynamics = batched_matvec(self.phi, X[:-1], 6, 6) + batched_matvec(self.gamma, U, 6, 3)
         constraints = [X[1:] == dynamics, X[0] == self.x_init, X[n] == self.x_dock]
         if self.kind in ("convex", "scp"):
-            position = _batched_matvec(self.cone_A, X[kw:n], 3, 6)  # D Psi_k x_k, (n_cone, 3)
+            position = batched_matvec(self.cone_A, X[kw:n], 3, 6)  # D Psi_k x_k, (n_cone, 3)
             lhs = cp.norm(position + self.cone_b[None, :], 2, axis=1)
             rhs = cp.sum(cp.multiply(self.cone_c, X[kw:n]), axis=1) + self.cone_d
             constraints += [X[kw] == self.x_wp, lhs <= rhs]
@@ -157,36 +147,19 @@ class RendezvousSubproblem:
     def solve(self, solver: str = "clarabel") -> SubproblemSolution:
         """Solve with the current parameter values; a failing solve is a status, not a raise.
 
-        Runs cvxpy's three stages by hand (cached parameter map -> conic solver -> unpack) so
-        that the conic solver call is timed on its own.
+        See :func:`scpformer.scp.conic.solve_timed` for how the solver call is timed.
         """
-        if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
-        start = time.perf_counter()
-        solver_time = 0.0
-        try:
-            with warnings.catch_warnings():  # "inaccurate" is reported as a status instead
-                warnings.simplefilter("ignore", UserWarning)
-                data, chain, inverse = self.problem.get_problem_data(
-                    SOLVERS[solver], solver_opts={}
-                )
-                t0 = time.perf_counter()
-                raw = chain.solve_via_data(self.problem, data, False, False, {})
-                solver_time = time.perf_counter() - t0
-                self.problem.unpack_results(raw, chain, inverse)
-        except cp.SolverError as err:
-            return _failed(f"solver_error: {err}", time.perf_counter() - start, solver_time)
-        status = self.problem.status
-        if status not in (OPTIMAL, INACCURATE) or self.X.value is None:
-            return _failed(status, time.perf_counter() - start, solver_time)
+        call = solve_timed(self.problem, solver)
+        if not call.solved or self.X.value is None:
+            return _failed(call.status, call.wall_time, call.solver_time)
         dv = self.U.value / U_SCALE
         return SubproblemSolution(
-            status=status,
+            status=call.status,
             x=self.X.value.copy(),
             dv=dv,
             cost=float(np.linalg.norm(dv, axis=1).sum()),
-            solver_time=solver_time,
-            wall_time=time.perf_counter() - start,
+            solver_time=call.solver_time,
+            wall_time=call.wall_time,
         )
 
 
@@ -212,15 +185,14 @@ def compiled_subproblem(
     cached on disk keyed by the structure, the solver, the cvxpy and scpformer versions and this
     module's source.
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    check_solver(solver)
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
     key = f"rendezvous-{kind}-N{n_nodes}-wp{n_waypoint}-{solver}"
 
     def build() -> RendezvousSubproblem:
         sub = RendezvousSubproblem(kind, n_nodes, n_waypoint)
-        sub.problem.get_problem_data(SOLVERS[solver], solver_opts={})  # canonicalize now
+        canonicalize(sub.problem, solver)
         return sub
 
     return cached_pickle(key, build, source=__file__)

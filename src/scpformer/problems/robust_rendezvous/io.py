@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.problems.rendezvous.io import _oe_record
-from scpformer.problems.rendezvous.problem import osculating_initial_state, reward_to_go
+from scpformer.problems.rendezvous.io import target_record
+from scpformer.problems.rendezvous.problem import reward_to_go
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.safety import (
     constraint_violation_budget,
@@ -58,15 +58,6 @@ def safety_record(instance: RobustInstance, x: np.ndarray, u: np.ndarray) -> dic
         "eq15_mean": ev.eq15_mean,
         "beta": ev.beta,
     }
-
-
-def target_record(instance: RobustInstance) -> dict[str, Any]:
-    """Mean target elements at ``t_0`` and a consistent osculating initial state."""
-    record: dict[str, Any] = {**instance.target.to_dict(), "elements": "mean (first-order J2)"}
-    oe_osc, rtn0 = osculating_initial_state(instance)  # type: ignore[arg-type]
-    record["osculating"] = _oe_record(oe_osc)
-    record["rtn0_osculating"] = [float(v) for v in rtn0]
-    return record
 
 
 def save_solution(
@@ -103,7 +94,7 @@ def save_solution(
         "status": np.str_(solution.status.value),
         "constraint_to_go": constraint_violation_budget(h),
         "reward_to_go": reward_to_go(u),
-        "target_oe": np.str_(json.dumps(target_record(instance))),
+        "target_oe": np.str_(json.dumps(target_record(instance))),  # type: ignore[arg-type]
         "constants": np.str_(json.dumps(constants)),
         **safety,
     }

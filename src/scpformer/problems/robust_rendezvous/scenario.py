@@ -183,8 +183,6 @@ class RobustSolverConfig:
         )
         object.__setattr__(self, "n_linearized", _int_field("n_linearized", self.n_linearized, 1))
         object.__setattr__(self, "margin_gradient", bool(self.margin_gradient))
-        if self.scvx.solver == "scs":
-            raise ValueError("scvx.solver: scs is not supported here; use clarabel, ecos or qoco")
 
 
 __all__ = [

@@ -35,18 +35,21 @@ from __future__ import annotations
 
 import functools
 import math
-import time
-import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
 import numpy as np
 
 from scpformer.cache import cached_pickle
-from scpformer.problems.rendezvous.subproblems import _batched_matvec
+from scpformer.scp.conic import (
+    SOLVED,
+    batched_matvec,
+    canonicalize,
+    check_solver,
+    solve_timed,
+)
 from scpformer.scp.scvx_star import PenaltyTerm
 
-SOLVERS = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
 U_SCALE = 1e3  # decision variable U = U_SCALE * u (mm/s)
 PROX_WEIGHT = 1e-10  # proximal weight [m/s per m^2 and per (mm/s)^2], see the module docstring
 
@@ -65,7 +68,7 @@ class ConicResult:
     @property
     def ok(self) -> bool:
         """Optimal or optimal_inaccurate with values."""
-        return self.status in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) and self.x is not None
+        return self.status in SOLVED and self.x is not None
 
 
 class SafetySubproblem:
@@ -94,7 +97,7 @@ class SafetySubproblem:
 
     def _build(self) -> cp.Problem:
         X, U, n, term = self.X, self.U, self.n_nodes, self.term
-        dynamics = _batched_matvec(self.phi, X[:-1], 6, 6) + _batched_matvec(self.gamma, U, 6, 3)
+        dynamics = batched_matvec(self.phi, X[:-1], 6, 6) + batched_matvec(self.gamma, U, 6, 3)
         node = np.repeat(np.arange(n), self.n_rows)  # row -> node, K rows per node
         X_rows, U_rows = (X[node, :], U[node, :]) if self.n_rows > 1 else (X[:n], U)
         safety = (
@@ -162,33 +165,18 @@ class SafetySubproblem:
     # -- solve ---------------------------------------------------------------------------
     def solve(self, solver: str = "clarabel") -> ConicResult:
         """Solve with the current parameters; a failing solve is a status, never a raise."""
-        if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
-        solver_time = 0.0
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", UserWarning)
-                data, chain, inverse = self.problem.get_problem_data(
-                    SOLVERS[solver], solver_opts={}
-                )
-                t0 = time.perf_counter()
-                raw = chain.solve_via_data(self.problem, data, False, False, {})
-                solver_time = time.perf_counter() - t0
-                self.problem.unpack_results(raw, chain, inverse)
-        except cp.SolverError as err:
-            return ConicResult(f"solver_error: {err}", None, None, None, math.nan, solver_time)
-        status = self.problem.status
-        if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or self.X.value is None:
-            return ConicResult(str(status), None, None, None, math.nan, solver_time)
+        call = solve_timed(self.problem, solver)
+        if not call.solved or self.X.value is None:
+            return ConicResult(call.status, None, None, None, math.nan, call.solver_time)
         u = self.U.value / U_SCALE
         _, zeta = self.term.buffers()
         return ConicResult(
-            status=status,
+            status=call.status,
             x=self.X.value.copy(),
             u=u,
             zeta=zeta,
             cost=float(np.linalg.norm(u, axis=1).sum()),
-            solver_time=solver_time,
+            solver_time=call.solver_time,
         )
 
 
@@ -197,12 +185,11 @@ def compiled_safety_subproblem(
     n_nodes: int, solver: str = "clarabel", n_rows: int = 1
 ) -> SafetySubproblem:
     """The process-wide Eq. 17 subproblem per ``N``, ``K`` and solver (disk-cached)."""
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    check_solver(solver)
 
     def build() -> SafetySubproblem:
         sub = SafetySubproblem(n_nodes, n_rows)
-        sub.problem.get_problem_data(SOLVERS[solver], solver_opts={})  # canonicalize now
+        canonicalize(sub.problem, solver)
         return sub
 
     return cached_pickle(
