@@ -9,12 +9,12 @@ and ``tight_flags`` (iterations, rows) with ``constraint_rows`` naming each row 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from scpformer.files import save_npz_atomic
 from scpformer.problems.pdg6dof.constraints import constraint_index
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.scp.solution import Solution
@@ -63,7 +63,4 @@ def save_solution(path: str | Path, solution: Solution, instance: PDGInstance) -
         arrays["verification"] = np.str_(
             json.dumps(solution.verification.__dict__, default=_json_default)
         )
-    tmp = path.with_name(path.name + ".tmp.npz")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(tmp, **arrays)
-    os.replace(tmp, path)
+    save_npz_atomic(path, arrays)

@@ -21,13 +21,13 @@ Fields (issue 3; N impulses, N + 1 nodes):
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from scpformer.dynamics.orbits import R_EARTH
+from scpformer.files import save_npz_atomic
 from scpformer.problems.rendezvous.instance import RendezvousInstance
 from scpformer.problems.rendezvous.problem import (
     constraint_to_go,
@@ -125,14 +125,7 @@ def save_solution(path: str | Path, solution: Solution, instance: RendezvousInst
         "target_oe": np.str_(json.dumps(target_record(instance))),
         "constants": np.str_(json.dumps(constants_record(instance))),
     }
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    save_npz_atomic(path, arrays)
 
 
 def load_solution(path: str | Path) -> dict[str, Any]:

@@ -14,18 +14,20 @@ Eq. 7 constraint-violation budget of the solved mode, (N+1,)), ``reward_to_go`` 
 * ``eq15`` / ``eq15_mean`` (N,): the left-hand side of Eq. 15 with and without ``beta``
   (Fig. 8 of the paper);
 * ``beta`` (N,): the normalized margin ``beta / b_ps``.
+
+Files are read back with the rendezvous family's :func:`load_solution` (re-exported here).
 """
 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from scpformer.problems.rendezvous.io import target_record
+from scpformer.files import save_npz_atomic
+from scpformer.problems.rendezvous.io import load_solution, target_record
 from scpformer.problems.rendezvous.problem import reward_to_go
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.safety import (
@@ -98,22 +100,7 @@ def save_solution(
         "constants": np.str_(json.dumps(constants)),
         **safety,
     }
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    save_npz_atomic(path, arrays)
 
 
-def load_solution(path: str | Path) -> dict[str, Any]:
-    """Read a file written by :func:`save_solution`; JSON fields come back as dicts."""
-    with np.load(Path(path), allow_pickle=False) as data:
-        out: dict[str, Any] = {k: data[k] for k in data.files}
-    for key in ("target_oe", "constants"):
-        out[key] = json.loads(str(out[key]))
-    out["status"] = str(out["status"])
-    out["cost"] = float(out["cost"])
-    return out
+__all__ = ["NPZ_FIELDS", "load_solution", "safety_record", "save_solution"]
