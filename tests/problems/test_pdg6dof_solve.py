@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from scpformer.dynamics import quaternion as quat
+from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import solve
 from scpformer.scp.solution import Status
@@ -38,17 +39,27 @@ def test_history_records_every_iteration_with_flags_and_timing(nominal):
     assert nominal.timing.solver <= nominal.timing.total
 
 
+def _tight(instance: PDGInstance, solution, tol: float) -> np.ndarray:
+    values = con.constraint_values(instance, solution.trajectory.x, solution.trajectory.u)
+    return con.tight_flags(values, tol).ravel()
+
+
 def test_rotating_the_instance_about_up_rotates_the_solution(nominal):
     angle = math.radians(90.0)
-    rotated = solve(PDGInstance().rotated_about_up(angle))
+    instance = PDGInstance().rotated_about_up(angle)
+    rotated = solve(instance)
     assert rotated.status is Status.CONVERGED
     q_rot = quat.from_axis_angle([1.0, 0.0, 0.0], angle)
     expected_r = quat.rotate(q_rot, nominal.trajectory.x[:, 0:3])
     np.testing.assert_allclose(rotated.trajectory.x[:, 0:3], expected_r, atol=1e-3)
     assert rotated.trajectory.p[0] == pytest.approx(nominal.trajectory.p[0], abs=1e-3)
     assert rotated.cost == pytest.approx(nominal.cost, abs=1e-4)
-    agree = np.mean(rotated.tight_flags() == nominal.tight_flags())
-    assert agree == 1.0
+    # The same tight rows, up to the solver's tolerance: a row tight at 1e-5 in one solution is
+    # tight at 1e-4 in the other (a gimbal row sits at -3e-6 in one and -1.1e-5 in the other).
+    strict = _tight(PDGInstance(), nominal, 1e-5), _tight(instance, rotated, 1e-5)
+    loose = _tight(PDGInstance(), nominal, 1e-4), _tight(instance, rotated, 1e-4)
+    assert strict[0].sum() >= 5  # the nominal solution rides its thrust and gimbal bounds
+    assert not np.any(strict[0] & ~loose[1]) and not np.any(strict[1] & ~loose[0])
 
 
 def test_instance_violating_a_state_constraint_is_a_status_not_a_crash():

@@ -136,13 +136,27 @@ class PDGSubproblem:
         penalty = cp.sum(cp.abs(self.nu)) + cp.sum(self.buffers)
         cost = -X[-1, 13] + self.lambda_ * penalty
         if self.prox_weight > 0.0:  # a constant, so that the product stays DPP
-            deviation = (
-                cp.sum_squares(X - self.x_ref)
-                + cp.sum_squares(U - self.u_ref)
-                + cp.square(sigma - self.sigma_ref)
-            )
-            cost = cost + self.prox_weight * deviation
+            cost = cost + self.prox_weight * self._deviation_without_constant()
         return cp.Problem(cp.Minimize(cost), constraints)
+
+    def _deviation_without_constant(self) -> cp.Expression:
+        """``|X - X_bar|^2 + |U - U_bar|^2 + (sigma - sigma_bar)^2`` less its constant part.
+
+        Expanded as ``|z|^2 - 2 <z_bar, z>``: cvxpy canonicalizes ``sum_squares`` of a bare
+        variable straight into the quadratic objective, whereas ``sum_squares(z - z_bar)``
+        gets an auxiliary variable and an equality row per entry (851 of each at N = 50, a
+        third of the conic problem). Same minimizer; the constant ``|z_bar|^2`` is left out
+        (the linearized cost ``L`` is computed from the solution, not from the objective).
+        """
+        X, U, sigma = self.X, self.U, self.sigma
+        return (
+            cp.sum_squares(X)
+            + cp.sum_squares(U)
+            + cp.square(sigma)
+            - 2.0 * cp.sum(cp.multiply(self.x_ref, X))
+            - 2.0 * cp.sum(cp.multiply(self.u_ref, U))
+            - 2.0 * self.sigma_ref * sigma
+        )
 
     def set_instance(self, instance: PDGInstance) -> None:
         """Write the boundary conditions and constraint bounds of ``instance``."""
