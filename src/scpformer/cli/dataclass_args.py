@@ -78,3 +78,9 @@ def overrides(args: argparse.Namespace, cls: type, prefix: str = "") -> dict[str
         if value is not None:
             out[f.name] = tuple(value) if isinstance(value, list) else value
     return out
+
+
+def with_overrides(base: Any, args: argparse.Namespace, cls: type, prefix: str = "") -> Any:
+    """``base`` (an instance of the dataclass ``cls``) with the command-line overrides applied."""
+    changes = overrides(args, cls, prefix)
+    return dataclasses.replace(base, **changes) if changes else base

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
+from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
 from scpformer.problems.rendezvous.instance import RendezvousInstance, sample_instances
 from scpformer.problems.rendezvous.problem import (
     PROBLEMS,
@@ -54,19 +54,14 @@ def config_from_args(args: argparse.Namespace) -> RendezvousSolverConfig:
     )
 
 
-def _merged(base: Any, args: argparse.Namespace, cls: type, prefix: str) -> Any:
-    changes = overrides(args, cls, prefix)
-    return dataclasses.replace(base, **changes) if changes else base
-
-
 def scenario_from_args(
     args: argparse.Namespace, base: RendezvousInstance | None = None
 ) -> tuple[RendezvousScenario, TargetOrbit]:
     """Scenario and target orbit (of ``base`` or Table 1) with the command-line overrides."""
-    scenario = _merged(
+    scenario = with_overrides(
         base.scenario if base else RendezvousScenario(), args, RendezvousScenario, "scenario"
     )
-    target = _merged(base.target if base else TargetOrbit(), args, TargetOrbit, "target")
+    target = with_overrides(base.target if base else TargetOrbit(), args, TargetOrbit, "target")
     return scenario, target
 
 

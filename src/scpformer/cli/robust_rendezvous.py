@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
+from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
 from scpformer.cli.rendezvous import print_rows
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.robust_rendezvous.instance import RobustInstance, sample_instances
@@ -52,16 +52,11 @@ def config_from_args(args: argparse.Namespace) -> RobustSolverConfig:
     )
 
 
-def _merged(base: Any, args: argparse.Namespace, cls: type, prefix: str) -> Any:
-    changes = overrides(args, cls, prefix)
-    return dataclasses.replace(base, **changes) if changes else base
-
-
 def common_from_args(args: argparse.Namespace, base: RobustInstance | None) -> dict[str, Any]:
     """Scenario, target and uncertainty (of ``base`` or the tables) with the overrides."""
-    scenario = _merged(base.scenario if base else RobustScenario(), args, RobustScenario,
+    scenario = with_overrides(base.scenario if base else RobustScenario(), args, RobustScenario,
                        "scenario")  # fmt: skip
-    target = _merged(base.target if base else robust_target(), args, TargetOrbit, "target")
+    target = with_overrides(base.target if base else robust_target(), args, TargetOrbit, "target")
     unc = base.uncertainty if base else RobustInstance().uncertainty
     if getattr(args, "delta", None) is not None:
         unc = dataclasses.replace(unc, delta=args.delta)
