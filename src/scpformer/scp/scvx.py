@@ -38,6 +38,7 @@ from scpformer.scp.solution import (
     Timing,
     Trajectory,
     Verification,
+    verified_status,
 )
 from scpformer.validation import check_in_range, check_positive
 
@@ -220,8 +221,7 @@ def _finish(
     t_verify = time.perf_counter()
     verification = problem.verify(z)
     t_verify = time.perf_counter() - t_verify
-    if status is Status.CONVERGED and not verification.passed:
-        status, message = Status.VERIFICATION_FAILED, verification.message
+    status, message = verified_status(status, message, verification)
     if status is Status.MAX_ITERATIONS:
         message = f"no convergence in {len(history)} iterations (penalty {ev.penalty:.3g})"
     timing = Timing(

@@ -64,6 +64,7 @@ from scpformer.scp.solution import (
     Timing,
     Trajectory,
     Verification,
+    verified_status,
 )
 from scpformer.validation import check_finite, check_positive
 
@@ -467,8 +468,7 @@ def _finish(
     t_verify = time.perf_counter()
     verification = problem.verify(state.z)
     t_verify = time.perf_counter() - t_verify
-    if status is Status.CONVERGED and not verification.passed:
-        status, message = Status.VERIFICATION_FAILED, verification.message
+    status, message = verified_status(status, message, verification)
     if status is Status.MAX_ITERATIONS:
         message = f"no convergence in {len(history)} iterations (chi {state.evaluation.chi:.3g})"
     timing = Timing(

@@ -75,6 +75,19 @@ class Verification:
     message: str = ""
 
 
+def verified_status(
+    status: Status, message: str, verification: Verification | None
+) -> tuple[Status, str]:
+    """``CONVERGED`` stands only if the nonlinear verification passed (DESIGN invariant).
+
+    A converged SCP loop whose trajectory fails the independent check becomes
+    ``VERIFICATION_FAILED`` with the verification's message; any other status is kept.
+    """
+    if status is Status.CONVERGED and verification is not None and not verification.passed:
+        return Status.VERIFICATION_FAILED, verification.message or message
+    return status, message
+
+
 @dataclass(frozen=True)
 class Timing:
     """Wall-time split of a solve, in seconds."""

@@ -66,6 +66,7 @@ from scpformer.scp.solution import (
     Timing,
     Trajectory,
     Verification,
+    verified_status,
 )
 
 ProblemKind = Literal["tpbvp", "convex", "scp"]
@@ -607,8 +608,7 @@ def _finish(
             setup.instance, setup.model, sol.x, sol.dv, kind, setup.config.verification
         )
         t_ver = time.perf_counter() - t0
-        if status is Status.CONVERGED and not verification.passed:
-            status = Status.VERIFICATION_FAILED
+        status, message = verified_status(status, message, verification)
     ok = sol is not None and sol.ok
     timing = Timing(
         total=time.perf_counter() - start,
