@@ -129,6 +129,50 @@ def _build_rendezvous(args: argparse.Namespace) -> DatasetFamily:
 register_family_arguments("rendezvous", _add_rendezvous_arguments, _build_rendezvous)
 
 
+def _add_robust_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
+    from scpformer.cli.dataclass_args import add_dataclass_arguments
+    from scpformer.cli.robust_rendezvous import add_config_arguments
+    from scpformer.problems.robust_rendezvous.instance import RobustSampleRanges
+    from scpformer.problems.robust_rendezvous.scenario import MODES
+
+    parser.add_argument(
+        "--mode",
+        choices=MODES,
+        default="chance",
+        help="passive safety of the last stage: deterministic (X = 0) or chance (default)",
+    )
+    parser.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="skip the final check of each stage (statuses then rest on SCvx* alone)",
+    )
+    add_dataclass_arguments(
+        parser, RobustSampleRanges, prefix="range", title="sampling ranges of theta (Table 1)"
+    )
+    add_config_arguments(parser)
+
+
+def _build_robust_rendezvous(args: argparse.Namespace) -> DatasetFamily:
+    from scpformer.cli.dataclass_args import overrides
+    from scpformer.cli.robust_rendezvous import common_from_args, config_from_args
+    from scpformer.data.robust_rendezvous_family import RobustDataConfig, RobustRendezvousFamily
+    from scpformer.problems.robust_rendezvous.instance import RobustSampleRanges
+
+    config = RobustDataConfig(
+        ranges=RobustSampleRanges(**overrides(args, RobustSampleRanges, "range")),
+        solver=config_from_args(args),
+        mode=args.mode,
+        verify=not args.no_verify,
+        **common_from_args(args, None),
+    )
+    return RobustRendezvousFamily(config)
+
+
+register_family_arguments(
+    "robust-rendezvous", _add_robust_rendezvous_arguments, _build_robust_rendezvous
+)
+
+
 def _clear_errors(handler: Handler) -> Handler:
     """Turn operating-system errors (permissions, missing paths) into one-line errors."""
 

@@ -6,13 +6,13 @@ family's :func:`~DatasetFamily.schema`. The engine owns everything else: seeds, 
 limits, shards, manifests, splits. Families are found by name through a registry that imports
 their module lazily, so a family lands by adding one module that defines ``SPEC``:
 
-=====================  ==========================================  =========================
-name                   module                                      status
-=====================  ==========================================  =========================
-``pdg6dof``            :mod:`scpformer.data.pdg6dof_family`        implemented
-``rendezvous``         ``scpformer.data.rendezvous_family``        lands with its problem
-``robust-rendezvous``  ``scpformer.data.robust_rendezvous_family``  lands with its problem
-=====================  ==========================================  =========================
+=====================  ===============================================  ===========
+name                   module                                           status
+=====================  ===============================================  ===========
+``pdg6dof``            :mod:`scpformer.data.pdg6dof_family`             implemented
+``rendezvous``         :mod:`scpformer.data.rendezvous_family`          implemented
+``robust-rendezvous``  :mod:`scpformer.data.robust_rendezvous_family`   implemented
+=====================  ===============================================  ===========
 
 Every sample also carries the engine's :data:`COMMON_FIELDS` (index, base index, status,
 message, wall time).
@@ -24,8 +24,9 @@ import dataclasses
 import importlib
 import types
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from importlib import metadata
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -214,6 +215,17 @@ def get_family_spec(name: str) -> FamilySpec:
 def build_family(name: str, config: Mapping[str, Any] | None = None) -> DatasetFamily:
     """The family ``name`` built from a resolved config dict (a manifest's), or defaults."""
     return get_family_spec(name).build(config)
+
+
+def package_versions(packages: Iterable[str]) -> dict[str, str]:
+    """Installed version of each named package (``"unknown"`` when not installed)."""
+    out = {}
+    for name in packages:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "unknown"
+    return out
 
 
 def dataclass_from_dict(cls: type, data: Mapping[str, Any]) -> Any:

@@ -34,12 +34,17 @@ import dataclasses
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib import metadata
 from typing import Any, ClassVar
 
 import numpy as np
 
-from scpformer.data.family import FamilySpec, Field, SampleResult, dataclass_from_dict
+from scpformer.data.family import (
+    FamilySpec,
+    Field,
+    SampleResult,
+    dataclass_from_dict,
+    package_versions,
+)
 from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
 from scpformer.problems.pdg6dof.guess import straight_line_guess
@@ -154,7 +159,7 @@ class PDG6DoFFamily:
 
     def versions(self) -> dict[str, str]:
         packages = ("numpy", "scipy", "cvxpy", self.config.solver.scvx.solver)
-        return {name: _version(name) for name in packages}
+        return package_versions(packages)
 
     def warm_up(self) -> None:
         from scpformer.problems.pdg6dof.subproblem import compiled_subproblem
@@ -205,13 +210,6 @@ class PDG6DoFFamily:
         if z is not None:
             out.update(x=z.x, u=z.u, tf=float(z.p[0]), t=solution.t)
         return out
-
-
-def _version(package: str) -> str:
-    try:
-        return metadata.version(package)
-    except metadata.PackageNotFoundError:
-        return "unknown"
 
 
 def build(config: Mapping[str, Any] | None = None) -> PDG6DoFFamily:

@@ -46,12 +46,17 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib import metadata
 from typing import Any, ClassVar
 
 import numpy as np
 
-from scpformer.data.family import FamilySpec, Field, SampleResult, dataclass_from_dict
+from scpformer.data.family import (
+    FamilySpec,
+    Field,
+    SampleResult,
+    dataclass_from_dict,
+    package_versions,
+)
 from scpformer.problems.rendezvous.instance import (
     RendezvousInstance,
     SampleRanges,
@@ -170,8 +175,13 @@ def twin_fields(
     model: LinearModel,
     solution: Solution,
     solve_time: float,
+    ctg: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """One solved twin's values for :func:`twin_schema` (only what exists; the rest is fill)."""
+    """One solved twin's values for :func:`twin_schema` (only what exists; the rest is fill).
+
+    ``ctg`` replaces the keep-out constraint-to-go of Eqs. 5, 21 (the robust family passes
+    its Eq. 7 violation budget).
+    """
     p = prefix
     out: dict[str, Any] = {
         f"{p}_status": solution.status.value,
@@ -186,8 +196,10 @@ def twin_fields(
         out[f"{p}_terminal_miss"] = ver.terminal_error.get("position_m", math.nan)
         out[f"{p}_max_gap"] = ver.max_defect
     z = solution.trajectory
-    if z is not None:
+    if z is not None and ctg is None:
         out.update(sequence_fields(p, instance.scenario, model, z.x, z.u))
+    elif z is not None:
+        out.update(art_sequences(p, z.x, model.rtn(z.x), z.u, ctg))
     return out
 
 
@@ -254,7 +266,7 @@ class RendezvousFamily:
 
     def versions(self) -> dict[str, str]:
         packages = ("numpy", "scipy", "cvxpy", self.config.solver.scp.solver)
-        return {name: _version(name) for name in packages}
+        return package_versions(packages)
 
     def warm_up(self) -> None:
         sc, solver = self.config.scenario, self.config.solver.scp.solver
@@ -310,13 +322,6 @@ class RendezvousFamily:
         if warm.trajectory is not None:
             out["ws_roe"] = warm.trajectory.x
         return out
-
-
-def _version(package: str) -> str:
-    try:
-        return metadata.version(package)
-    except metadata.PackageNotFoundError:
-        return "unknown"
 
 
 def build(config: Mapping[str, Any] | None = None) -> RendezvousFamily:
