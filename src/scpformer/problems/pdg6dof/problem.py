@@ -19,7 +19,7 @@ from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.guess import straight_line_guess
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.subproblem import compiled_subproblem, trust_region_scales
-from scpformer.scp.conic import SOLVED
+from scpformer.scp.conic import SOLVED, start_cold
 from scpformer.scp.discretization import FOHDiscretization, foh_discretize
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Status, Trajectory, Verification
@@ -83,6 +83,7 @@ class PDGProblem:
         self.subproblem = compiled_subproblem(
             config.n_nodes, config.fix_roll, config.prox_weight, config.scvx.solver
         )
+        start_cold(self.subproblem.problem)  # the run's solves reuse one solver object
 
     def dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return pd.dynamics(self.model, x, u)

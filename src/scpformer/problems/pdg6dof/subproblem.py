@@ -196,7 +196,7 @@ class PDGSubproblem:
         self.eta_u.value = eta * self.scale_u
         self.eta_sigma.value = eta * self.scale_sigma
         self.lambda_.value = lambda_
-        call = solve_timed(self.problem, solver)
+        call = solve_timed(self.problem, solver, reuse=True)
         if not call.solved or self.X.value is None:
             return _failed(call.status, call.wall_time, call.solver_time)
         nu, buffers = self.nu.value, np.maximum(self.buffers.value, 0.0)

@@ -42,6 +42,7 @@ from scpformer.problems.robust_rendezvous.safety import (
 )
 from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig, check_mode
 from scpformer.problems.robust_rendezvous.subproblem import compiled_safety_subproblem
+from scpformer.scp.conic import start_cold
 from scpformer.scp.scvx_star import NonlinearEvaluation, SCvxStar, SubproblemResult
 from scpformer.scp.solution import (
     IterationRecord,
@@ -132,6 +133,7 @@ class PassiveSafetyProblem:
         self.bounds = boundary(instance, self.model)
         self.n_rows = 1 if collision_only else config.n_linearized
         self.sub = compiled_safety_subproblem(instance.n_nodes, config.scvx.solver, self.n_rows)
+        start_cold(self.sub.problem)  # the run's solves reuse one solver object
         Gamma = self.model.Phi @ self.model.B
         self.sub.set_dynamics(self.model.Phi, Gamma, self.bounds.x_init, self.bounds.x_final)
 

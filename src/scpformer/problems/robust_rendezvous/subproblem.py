@@ -165,7 +165,7 @@ class SafetySubproblem:
     # -- solve ---------------------------------------------------------------------------
     def solve(self, solver: str = "clarabel") -> ConicResult:
         """Solve with the current parameters; a failing solve is a status, never a raise."""
-        call = solve_timed(self.problem, solver)
+        call = solve_timed(self.problem, solver, reuse=True)
         if not call.solved or self.X.value is None:
             return ConicResult(call.status, None, None, None, math.nan, call.solver_time)
         u = self.U.value / U_SCALE
