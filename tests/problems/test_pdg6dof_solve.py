@@ -87,3 +87,13 @@ def test_every_conic_solver_reaches_the_same_trajectory(nominal, solver):
     assert other.status is Status.CONVERGED
     assert other.cost == pytest.approx(nominal.cost, abs=1e-4)
     assert other.trajectory.p[0] == pytest.approx(nominal.trajectory.p[0], abs=1e-3)
+
+
+def test_a_solve_does_not_depend_on_what_the_process_solved_before(nominal):
+    # The subproblem and its solver object are shared by every solve in a process (updated in
+    # place, scpformer.scp.conic): results must not depend on the process's history, or a
+    # dataset would differ with the number of workers.
+    solve(PDGInstance(m0=2.2))
+    again = solve(PDGInstance())
+    np.testing.assert_array_equal(again.trajectory.x, nominal.trajectory.x)
+    np.testing.assert_array_equal(again.trajectory.u, nominal.trajectory.u)

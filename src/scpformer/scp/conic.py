@@ -94,10 +94,10 @@ def solve_timed(problem: cp.Problem, solver: str, reuse: bool = False) -> ConicC
 def start_cold(problem: cp.Problem) -> None:
     """Make the next :func:`solve_timed` of ``problem`` build a fresh solver object.
 
-    cvxpy keeps the solver object of a parametric problem in ``Problem._solver_cache``; an
-    updated Clarabel solver keeps the equilibration of the data it was built with, so its
-    results depend (at round-off level) on what it solved before. Clearing it at the start of
-    each SCP run makes every run independent of the process's history.
+    cvxpy keeps the solver object of a parametric problem in ``Problem._solver_cache``. An
+    updated solver could carry state from earlier data (Clarabel reuses its KKT structure and
+    scaling); no difference was measured, but clearing it at the start of each SCP run
+    guarantees that a run does not depend on what the process solved before.
     """
     problem._solver_cache.clear()
 
