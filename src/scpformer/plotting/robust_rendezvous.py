@@ -29,8 +29,19 @@ def _rt_ellipse(cov_rt: np.ndarray, center: np.ndarray, q: float, **kw) -> Ellip
     return Ellipse((center[1], center[0]), w, h, angle=angle, **kw)
 
 
-def plot_drift_arcs(ax, instance: RobustInstance, x: np.ndarray, u: np.ndarray, every: int = 4):
-    """Fig. 7: controlled path, free-drift arcs of every ``every``-th node, ellipses at ``t*``."""
+def plot_drift_arcs(
+    ax,
+    instance: RobustInstance,
+    x: np.ndarray,
+    u: np.ndarray,
+    every: int = 4,
+    zoom: float | None = None,
+):
+    """Fig. 7: controlled path, free-drift arcs of every ``every``-th node, ellipses at ``t*``.
+
+    ``zoom`` frames the axes at ``zoom`` times the approach ellipsoid around the target, where
+    the arcs pass closest and the ellipses are visible; ``None`` shows the whole transfer.
+    """
     model = linear_model(instance)
     dense = drift_geometry(instance)
     rec = safety_record(instance, x, u)
@@ -56,16 +67,25 @@ def plot_drift_arcs(ax, instance: RobustInstance, x: np.ndarray, u: np.ndarray, 
                              label=name))  # fmt: skip
     ax.set_xlabel("T [m]")
     ax.set_ylabel("R [m]")
-    ax.set_aspect("equal", adjustable="datalim")
     ax.legend(loc="best", fontsize=8)
-    ax.set_title(f"free-drift arcs ({q:.2f}-sigma ellipses at t*)")
+    if zoom is None:
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"free-drift arcs ({q:.2f}-sigma ellipses at t*)")
+        return
+    r_max, t_max = zoom * np.asarray(instance.scenario.ae_semi_axes_m[:2])
+    half = max(r_max, t_max)
+    ax.set_xlim(-half, half)
+    ax.set_ylim(-half, half)
+    ax.set_aspect("equal")
+    ax.set_title(f"near the target ({zoom:g} x approach ellipsoid)")
 
 
 def plot_constraint_history(ax, instance: RobustInstance, x: np.ndarray, u: np.ndarray) -> None:
     """Fig. 8: Eq. 15 with (dark) and without (light) the margin; > 0 is a violation."""
     rec = safety_record(instance, x, u)
     nodes = np.arange(instance.n_nodes)
-    ax.axhspan(0.0, max(1.0, float(np.max(rec["eq15"]))), color="tab:green", alpha=0.15)
+    top = max(1.0, float(np.max(rec["eq15"])))
+    ax.axhspan(0.0, top, color="tab:red", alpha=0.12, label="violation")
     ax.plot(nodes, rec["eq15_mean"], color="tab:blue", alpha=0.4, label="M*(x) (mean)")
     ax.plot(nodes, rec["eq15"], color="tab:blue", label="M*(x) + beta")
     ax.axvline(instance.scenario.n_ae_to_koz, color="k", ls=":", lw=0.8)
@@ -79,10 +99,12 @@ def plot_constraint_history(ax, instance: RobustInstance, x: np.ndarray, u: np.n
 def plot_solution(
     instance: RobustInstance, x: np.ndarray, u: np.ndarray, path: str | Path | None = None
 ):
-    """Figs. 7 and 8 side by side; saved to ``path`` when given. Returns the figure."""
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 5.5))
+    """Fig. 7 (whole transfer and near the target) and Fig. 8 side by side; saved to ``path``
+    when given. Returns the figure."""
+    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(18, 5.5))
     plot_drift_arcs(ax1, instance, x, u)
-    plot_constraint_history(ax2, instance, x, u)
+    plot_drift_arcs(ax2, instance, x, u, every=2, zoom=2.0)
+    plot_constraint_history(ax3, instance, x, u)
     fig.tight_layout()
     if path is not None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
