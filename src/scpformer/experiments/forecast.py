@@ -78,10 +78,14 @@ def forecast_metrics(
         Impulses (N, 3) [m/s].
     """
     n = np.asarray(true_dv).shape[0]
-    pred_rtn, true_rtn = (_check(k, v, (n + 1, 6)) for k, v in (("pred_rtn", pred_rtn),
-                                                                  ("true_rtn", true_rtn)))  # fmt: skip
-    pred_roe, true_roe = (_check(k, v, (n + 1, 6)) for k, v in (("pred_roe", pred_roe),
-                                                                  ("true_roe", true_roe)))  # fmt: skip
+    pred_rtn, true_rtn = (
+        _check("pred_rtn", pred_rtn, (n + 1, 6)),
+        _check("true_rtn", true_rtn, (n + 1, 6)),
+    )
+    pred_roe, true_roe = (
+        _check("pred_roe", pred_roe, (n + 1, 6)),
+        _check("true_roe", true_roe, (n + 1, 6)),
+    )
     pred_dv, true_dv = _check("pred_dv", pred_dv, (n, 3)), _check("true_dv", true_dv, (n, 3))
     d_rtn, d_roe = pred_rtn - true_rtn, pred_roe - true_roe
     fired_true = np.linalg.norm(true_dv, axis=1) > IMPULSE_THRESHOLD
