@@ -78,9 +78,7 @@ def test_reward_and_constraint_to_go_follow_the_datasets_sequences(rendezvous, n
     assert np.allclose(fed_ctg, stored["cvx_ctg"][:N], rtol=1e-6)
 
 
-def test_robust_replay_reproduces_the_tpbvp_and_its_eq7_budget_with_the_target_token(
-    robust, norm
-):
+def test_robust_replay_reproduces_the_tpbvp_and_its_eq7_budget_with_the_target_token(robust, norm):
     instance, tpbvp = robust
     z = tpbvp.trajectory
     for mode in ("chance", "deterministic"):
@@ -98,9 +96,7 @@ def test_robust_replay_reproduces_the_tpbvp_and_its_eq7_budget_with_the_target_t
 
 
 # -- Algorithm 1: transformer only ----------------------------------------------------------
-def test_transformer_only_takes_next_states_from_the_model_dynamics_mode_does_not(
-    rendezvous, norm
-):
+def test_transformer_only_takes_next_states_from_the_model_dynamics_mode_does_not(rendezvous, norm):
     (instance, _), (cvx, _) = rendezvous
     z = cvx.trajectory
     model_lm = linear_model(instance)
@@ -159,9 +155,7 @@ def test_rejected_guess_falls_back_to_the_convex_warm_start(robust, norm):
     assert result.record.to_dict()["used"] == "tpbvp"
 
 
-def test_replayed_tpbvp_is_accepted_when_safe_enough_and_rejected_by_a_stricter_check(
-    robust, norm
-):
+def test_replayed_tpbvp_is_accepted_when_safe_enough_and_rejected_by_a_stricter_check(robust, norm):
     instance, tpbvp = robust
     u = tpbvp.trajectory.u[None]
     budget = trajectory_violations(instance, tpbvp.trajectory.x, tpbvp.trajectory.u)[0]
@@ -204,7 +198,7 @@ def test_acceptance_check_rejects_bad_bounds():
 
 
 def test_bad_arguments_are_clear_errors(rendezvous, robust, norm):
-    (instance, _), (cvx, _) = rendezvous
+    _, (cvx, _) = rendezvous
     model = replay_model(norm, cvx.trajectory.u[None])
     cases = [
         ({"rtg": 0.3}, "rtg must be a finite R"),
@@ -234,9 +228,7 @@ def test_a_model_with_a_short_context_is_refused(rendezvous, norm):
         ArtWarmStart(model, norm, rtg=-0.2).guess(instance)
 
 
-def test_from_checkpoint_wraps_the_checkpoints_model_frame_and_family(
-    monkeypatch, robust, norm
-):
+def test_from_checkpoint_wraps_the_checkpoints_model_frame_and_family(monkeypatch, robust, norm):
     instance, tpbvp = robust
     model = replay_model(norm, tpbvp.trajectory.u[None])
     asked = {}
