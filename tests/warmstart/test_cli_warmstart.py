@@ -36,9 +36,17 @@ def test_art_without_a_model_is_a_usage_error(family, capsys):
     assert err.count("\n") == 1
 
 
-def test_a_model_without_art_is_a_usage_error(capsys, tmp_path):
+def test_art_flags_without_art_are_a_usage_error(capsys, tmp_path):
     assert main(["solve", "rendezvous", "--model", str(tmp_path)]) == 2
-    assert "--model is used with --warmstart art only" in capsys.readouterr().err
+    assert "--model: used with --warmstart art only" in capsys.readouterr().err
+    assert main(["solve", "robust-rendezvous", "--rtg", "-2", "--art-mode", "dynamics"]) == 2
+    assert "--art-mode, --rtg: used with --warmstart art only" in capsys.readouterr().err
+
+
+def test_art_applies_to_the_scp_problem_only(capsys):
+    argv = ["solve", "rendezvous", "--problem", "convex", "--warmstart", "art", "--model", "R"]
+    assert main(argv) == 2
+    assert "--warmstart art applies to --problem scp only" in capsys.readouterr().err
 
 
 def test_rendezvous_art_summary_shows_the_warm_start_beside_the_scp(checkpoint, capsys):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from warmstart_standins import AffineNormalization, ReplayModel, replay_model
@@ -151,3 +153,15 @@ def test_6dof_solve_takes_a_provider_and_records_it():
     assert by_provider.extras["warmstart"]["source"] == "straight_line"
     assert by_provider.status is by_default.status
     assert by_provider.cost == pytest.approx(by_default.cost, rel=1e-9)
+
+
+def test_art_on_an_infeasible_instance_reports_the_convex_failure(norm):
+    instance = sample_instances(np.random.default_rng(0), 1)[0]
+    scenario = dataclasses.replace(instance.scenario, cone_vertex_setback_m=0.0)
+    instance = dataclasses.replace(instance, scenario=scenario)
+    provider = ArtWarmStart(ReplayModel(np.zeros((1, N, 3))), norm)
+    result = provider.guess(instance)
+    assert result.trajectory is None and not result.record.accepted
+    assert "no R(t_1) = -J_CVX: the convex warm start failed" in result.record.reason
+    sol = solve(instance, "scp", provider, verify=False)
+    assert sol.status is Status.INFEASIBLE_INSTANCE and "warm start failed" in sol.message

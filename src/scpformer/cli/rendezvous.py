@@ -183,9 +183,9 @@ def run_solve(args: argparse.Namespace) -> int:
     instance = instance_from_args(args)
     config = config_from_args(args)
     verify = not args.no_verify
-    provider = art_provider(args, "rendezvous", config=config)
-    if args.problem != "scp" and provider is not None:
+    if args.problem != "scp" and args.warmstart == "art":
         raise ValueError("--warmstart art applies to --problem scp only")
+    provider = art_provider(args, "rendezvous", config=config)
     warm = None
     if args.problem == "scp":
         provider = provider or RendezvousConvexWarmStart(args.warmstart, config)

@@ -28,26 +28,33 @@ def add_warmstart_arguments(
     group.add_argument(
         "--art-mode",
         choices=ART_MODES,
-        default="dynamics",
         help="ART inference: dynamics in the loop (Algorithm 2) or transformer only "
         "(Algorithm 1) (default: dynamics)",
     )
     group.add_argument(
         "--rtg", type=float, metavar="R", help="R(t_1) [m/s], <= 0 (default: -J_CVX)"
     )
-    group.add_argument("--ctg", type=float, default=0.0, metavar="C", help="C(t_1) (default: 0)")
+    group.add_argument("--ctg", type=float, metavar="C", help="C(t_1) (default: 0)")
 
 
 def art_provider(args: argparse.Namespace, family: str, **kwargs: Any) -> WarmStart | None:
     """The ART provider of ``--warmstart art --model RUN``, or None for a named warm start."""
+    art_flags = {"--model": args.model, "--art-mode": args.art_mode, "--rtg": args.rtg,
+                 "--ctg": args.ctg}  # fmt: skip
     if args.warmstart != "art":
-        if args.model is not None:
-            raise ValueError("--model is used with --warmstart art only")
+        given = [flag for flag, value in art_flags.items() if value is not None]
+        if given:
+            raise ValueError(f"{', '.join(given)}: used with --warmstart art only")
         return None
     if args.model is None:
         raise ValueError("--warmstart art needs --model RUN (a training run or checkpoint file)")
     return ArtWarmStart.from_checkpoint(
-        args.model, family=family, art_mode=args.art_mode, rtg=args.rtg, ctg=args.ctg, **kwargs
+        args.model,
+        family=family,
+        art_mode=args.art_mode or "dynamics",
+        rtg=args.rtg,
+        ctg=0.0 if args.ctg is None else args.ctg,
+        **kwargs,
     )
 
 

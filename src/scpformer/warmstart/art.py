@@ -312,8 +312,10 @@ class ArtWarmStart:
         ``family`` / ``frame`` are checked against the checkpoint's when given; the other
         keyword arguments are those of the constructor.
         """
-        from scpformer.train.checkpoint import load_checkpoint
-
+        try:
+            from scpformer.train.checkpoint import load_checkpoint
+        except ModuleNotFoundError as err:  # pragma: no cover - until the train package lands
+            raise ValueError(f"{path}: loading ART checkpoints needs {err.name}") from err
         ckpt = load_checkpoint(path, family=family, frame=frame, device=device)
         if ckpt.normalization is None:
             raise ValueError(f"{path}: the checkpoint holds no ART normalization")
