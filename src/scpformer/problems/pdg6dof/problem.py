@@ -264,9 +264,9 @@ def solve(
     config
         Formulation and algorithm settings (default: Table 1).
     guess
-        Initial guess: a :class:`Trajectory`, a warm start provider (:mod:`scpformer.warmstart`)
-        or its ``WarmStartResult``; default the straight-line guess. A provider's record is
-        returned in ``extras["warmstart"]``.
+        Initial guess: a :class:`Trajectory`, a warm start provider (:mod:`scpformer.warmstart`),
+        its ``WarmStartResult`` or ``"straight_line"``; default the straight-line guess. A
+        provider's record is returned in ``extras["warmstart"]``.
     eta_init
         Initial trust radius overriding ``config.scvx.eta_init`` (T-SCvx uses 0.01).
 
@@ -293,8 +293,10 @@ def solve(
     if isinstance(guess, Trajectory):
         return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
     from scpformer.warmstart.base import as_provider
+    from scpformer.warmstart.convex import StraightLineWarmStart
 
-    result = as_provider(guess, {}).guess(instance)
+    named = {"straight_line": lambda: StraightLineWarmStart(config.n_nodes)}
+    result = as_provider(guess, named).guess(instance)
     if result.trajectory is None:
         raise ValueError(f"guess: the warm start produced no trajectory ({result.record.reason})")
     solution = solve_scvx(problem, result.trajectory, config.scvx, eta_init=eta_init)

@@ -372,13 +372,16 @@ def solve(
             raise ValueError(f"warm start has no trajectory: {result.record.reason}")
         return _with_record(_assemble(instance, mode, stages, "passive_safety"), result)
     warm: Solution | Trajectory = result.trajectory
+    from_ca = False  # stage 3 starts from a converged stage 2
     if warmstart == "three_stage":
         ca = solve_safety(instance, warm, config, mode, collision_only=True, verify=verify)
         stages["collision_avoidance"] = ca
-        if ca.converged:
-            warm = ca
+        from_ca = ca.converged
+        warm = ca if from_ca else warm
+        details = {"passive_safety_from": "collision_avoidance" if from_ca else "tpbvp"}
+        result = replace(result, record=replace(result.record, details=details))
     final = solve_safety(instance, warm, config, mode, verify=verify)
-    if not final.converged and warmstart == "three_stage" and warm is not result.trajectory:
+    if not final.converged and from_ca:
         retry = solve_safety(instance, stages["tpbvp"], config, mode, verify=verify)
         final = retry if retry.converged else final
         final.extras["retried_from_tpbvp"] = True
