@@ -247,3 +247,28 @@ def test_from_checkpoint_wraps_the_checkpoints_model_frame_and_family(monkeypatc
     result = ws.guess(instance)
     assert np.abs(result.trajectory.x - tpbvp.trajectory.x).max() < 1e-8
     assert robust_linear_model(instance).residual(result.trajectory.x, result.trajectory.u) < 1e-8
+
+
+def test_dynamics_in_the_loop_agrees_with_the_linear_models_rollout_for_any_actions(
+    rendezvous, norm
+):
+    instances, _ = rendezvous
+    u = np.random.default_rng(7).normal(0.0, 0.01, (2, N, 3))
+    out = _rollout(instances, ReplayModel(norm.encode("action", u)), norm, frame="roe",
+                   rtg0=[-1.0, -2.0], ctg0=[0.0, 0.0])  # fmt: skip
+    for j, instance in enumerate(instances):
+        expected = linear_model(instance).rollout(instance.roe0, u[j])
+        assert np.abs(out.x[j] - expected).max() < 1e-8
+        steps = np.linalg.norm(u[j], axis=1)
+        assert np.allclose(out.rtg[j], [-1.0, -2.0][j] + np.r_[0.0, np.cumsum(steps)[:-1]])
+
+
+def test_generate_refuses_bad_conditioning(rendezvous, norm):
+    (instance, _), (cvx, _) = rendezvous
+    model = replay_model(norm, cvx.trajectory.u[None])
+    with pytest.raises(ValueError, match=r"rtg0 must be finite with shape \(1,\)"):
+        _rollout([instance], model, norm, rtg0=[-1.0, -1.0], ctg0=[0.0])
+    with pytest.raises(ValueError, match="ctg0 must be finite"):
+        _rollout([instance], model, norm, rtg0=[-1.0], ctg0=[np.nan])
+    with pytest.raises(ValueError, match="art_mode must be one of"):
+        _rollout([instance], model, norm, art_mode="greedy", rtg0=[-1.0], ctg0=[0.0])

@@ -116,6 +116,12 @@ class ArtRollout:
     time_s: float  # wall time of the whole batch [s]
 
 
+def _check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
+    return str(value)
+
+
 def _device(model: Any) -> Any:
     parameters = getattr(model, "parameters", None)
     if callable(parameters):
@@ -165,6 +171,11 @@ def generate(
 
     start = time.perf_counter()
     n, size = batch.n_steps, batch.x0.shape[0]
+    _check_choice("frame", frame, ART_FRAMES)
+    _check_choice("art_mode", art_mode, ART_MODES)
+    for name, value in (("rtg0", rtg0), ("ctg0", ctg0)):
+        if np.shape(value) != (size,) or not np.all(np.isfinite(value)):
+            raise ValueError(f"{name} must be finite with shape ({size},), got {np.shape(value)}")
     _check_context(model, n)
     device = _device(model)
 
@@ -219,12 +230,6 @@ def generate(
 # ======================================================================================
 # the provider
 # ======================================================================================
-def _check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
-    if value not in choices:
-        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
-    return str(value)
-
-
 class ArtWarmStart:
     """ART as a warm start provider (Algorithm 2 by default), with the post hoc check.
 
