@@ -94,8 +94,14 @@ def _grouped(values: Sequence[Any]) -> list[tuple[np.ndarray, Any]]:
     return [(np.array(idx), value) for value, idx in groups.items()]
 
 
-def _stack(instances: Sequence[Any], models: list[LinearModel], x0: np.ndarray, x_target,
-           groups) -> Batch:  # fmt: skip
+def _stack(
+    instances: Sequence[Any],
+    models: list[LinearModel],
+    x0: np.ndarray,
+    x_target: np.ndarray | None,
+    groups: list[tuple[np.ndarray, Any]],
+) -> Batch:
+    """The :class:`Batch` of ``instances`` (one N for all)."""
     n = {m.Phi.shape[0] for m in models}
     if len(n) != 1:
         raise ValueError(f"instances must have one number of impulses N, got {sorted(n)}")
@@ -140,7 +146,7 @@ class RendezvousArtFamily:
         """``C(t_1)`` of a whole trajectory (Eqs. 5, 21)."""
         return float(constraint_to_go(model.rtn(x), instance.scenario)[0])
 
-    def fallback(self, config: Any = None, mode: str = "chance") -> WarmStart:
+    def fallback(self, config: Any = None) -> WarmStart:
         """The convex Problem 2 (the ART paper's CVX warm start and ``J_CVX``)."""
         return RendezvousConvexWarmStart("convex", config)
 
@@ -209,7 +215,7 @@ class RobustArtFamily:
         """``C(t_1)`` of a whole trajectory (Eq. 7 budget)."""
         return float(trajectory_violations(instance, x, u, self.mode)[0])
 
-    def fallback(self, config: Any = None, mode: str | None = None) -> WarmStart:
+    def fallback(self, config: Any = None) -> WarmStart:
         """The convex TPBVP (the robust paper's CVX warm start and ``J_CVX``)."""
         return RobustTpbvpWarmStart(config, self.mode)
 
