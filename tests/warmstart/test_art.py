@@ -272,3 +272,15 @@ def test_generate_refuses_bad_conditioning(rendezvous, norm):
         _rollout([instance], model, norm, rtg0=[-1.0], ctg0=[np.nan])
     with pytest.raises(ValueError, match="art_mode must be one of"):
         _rollout([instance], model, norm, art_mode="greedy", rtg0=[-1.0], ctg0=[0.0])
+
+
+def test_from_checkpoint_takes_a_loaded_checkpoint_and_checks_its_family(rendezvous, norm):
+    (instance, _), (cvx, _) = rendezvous
+    model = replay_model(norm, cvx.trajectory.u[None])
+    ckpt = types.SimpleNamespace(model=model, normalization=norm, frame="rtn", family="rendezvous")
+    ws = ArtWarmStart.from_checkpoint(ckpt, family="rendezvous", rtg=-cvx.cost)
+    assert np.abs(ws.guess(instance).trajectory.x - cvx.trajectory.x).max() < 1e-8
+    with pytest.raises(ValueError, match="a rendezvous checkpoint, not robust-rendezvous"):
+        ArtWarmStart.from_checkpoint(ckpt, family="robust-rendezvous")
+    with pytest.raises(ValueError, match="holds no ART normalization"):
+        ArtWarmStart.from_checkpoint(types.SimpleNamespace(**{**vars(ckpt), "normalization": None}))

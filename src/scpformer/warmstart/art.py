@@ -305,24 +305,30 @@ class ArtWarmStart:
     @classmethod
     def from_checkpoint(
         cls,
-        path: str | Path,
+        path: str | Path | Any,
         *,
         family: str | None = None,
         frame: str | None = None,
         device: str = "cpu",
         **kwargs: Any,
     ) -> ArtWarmStart:
-        """Load ``RUN/checkpoint.pt`` (or the file) and wrap its model.
+        """Wrap the model of ``RUN/checkpoint.pt``, the file, or a loaded ``Checkpoint``.
 
-        ``family`` / ``frame`` are checked against the checkpoint's when given; the other
+        A path goes through :func:`scpformer.train.checkpoint.load_checkpoint`, which checks
+        ``family`` / ``frame`` when given; a loaded checkpoint is checked here. The other
         keyword arguments are those of the constructor.
         """
-        try:
-            from scpformer.train.checkpoint import load_checkpoint
-        except ModuleNotFoundError as err:  # pragma: no cover - until the train package lands
-            raise ValueError(f"{path}: loading ART checkpoints needs {err.name}") from err
-        ckpt = load_checkpoint(path, family=family, frame=frame, device=device)
-        if ckpt.normalization is None:
+        ckpt = path
+        if isinstance(path, str | Path):
+            try:
+                from scpformer.train.checkpoint import load_checkpoint
+            except ModuleNotFoundError as err:  # pragma: no cover - until scpformer.train lands
+                raise ValueError(f"{path}: loading ART checkpoints needs {err.name}") from err
+            ckpt = load_checkpoint(path, family=family, frame=frame, device=device)
+        for name, wanted in (("family", family), ("frame", frame)):
+            if wanted is not None and getattr(ckpt, name) != wanted:
+                raise ValueError(f"{path}: a {getattr(ckpt, name)} checkpoint, not {wanted}")
+        if getattr(ckpt, "normalization", None) is None:
             raise ValueError(f"{path}: the checkpoint holds no ART normalization")
         return cls(ckpt.model, ckpt.normalization, frame=ckpt.frame, family=ckpt.family,
                    **kwargs)  # fmt: skip
