@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,12 @@ import numpy as np
 from tqdm import tqdm
 
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
+from scpformer.cli.warmstart import (
+    add_warmstart_arguments,
+    art_provider,
+    comparison_rows,
+    warmstart_line,
+)
 from scpformer.problems.rendezvous.instance import RendezvousInstance, sample_instances
 from scpformer.problems.rendezvous.problem import (
     PROBLEMS,
@@ -29,6 +36,7 @@ from scpformer.problems.rendezvous.scenario import (
     VerificationTolerances,
 )
 from scpformer.scp.solution import Solution, Status
+from scpformer.warmstart import RendezvousConvexWarmStart, WarmStartResult
 
 
 # ======================================================================================
@@ -83,11 +91,8 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
         default="scp",
         help="which OCP: tpbvp (1), convex (2) or scp (3) (default: scp)",
     )
-    parser.add_argument(
-        "--warmstart",
-        choices=WARMSTARTS,
-        default="convex",
-        help="initial guess of Problem 3 (default: convex)",
+    add_warmstart_arguments(
+        parser, WARMSTARTS, "convex", "initial guess of Problem 3: Problem 1 (tpbvp), 2 (convex)"
     )
     source = parser.add_mutually_exclusive_group()
     source.add_argument(
@@ -135,12 +140,17 @@ def summary_rows(solution: Solution, instance: RendezvousInstance) -> list[tuple
     rows = [("status", solution.status.value), ("iterations", str(solution.iterations))]
     if solution.message:
         rows.append(("message", solution.message))
+    ctg = math.nan
     if solution.trajectory is not None:
         rtn = linear_model(instance).rtn(solution.trajectory.x)
+        ctg = int(constraint_to_go(rtn, instance.scenario)[0])
         rows += [
             ("cost sum |dv|", f"{1e3 * solution.cost:.3f} mm/s"),
-            ("constraint-to-go C(t_0)", str(int(constraint_to_go(rtn, instance.scenario)[0]))),
+            ("constraint-to-go C(t_0)", str(ctg)),
         ]
+    if "warmstart" in solution.extras:
+        record = solution.extras["warmstart"]
+        rows += comparison_rows(record, solution, ctg, cost_scale=1e3, cost_unit="mm/s", digits=3)
     ver = solution.verification
     if ver is not None:
         te = ver.terminal_error
@@ -173,10 +183,14 @@ def run_solve(args: argparse.Namespace) -> int:
     instance = instance_from_args(args)
     config = config_from_args(args)
     verify = not args.no_verify
+    if args.problem != "scp" and args.warmstart == "art":
+        raise ValueError("--warmstart art applies to --problem scp only")
+    provider = art_provider(args, "rendezvous", config=config)
     warm = None
     if args.problem == "scp":
-        warm = solve(instance, args.warmstart, config=config, verify=False)
-        print(f"warm start ({args.warmstart}): {warm.status.value} in {warm.timing.total:.3f} s")
+        provider = provider or RendezvousConvexWarmStart(args.warmstart, config)
+        warm = provider.guess(instance)  # the SCP always runs after it
+        print(warmstart_line(warm.record, warm.solution))
         solution = solve(instance, "scp", warm, config=config, verify=verify)
     else:
         solution = solve(instance, args.problem, config=config, verify=verify)
@@ -188,7 +202,7 @@ def run_solve(args: argparse.Namespace) -> int:
             save_solution(args.out, solution, instance)
             print(f"wrote {args.out}")
         if args.plot:
-            _plot(args.plot, solution, instance, warm, args.warmstart)
+            _plot(args.plot, solution, instance, warm)
             print(f"wrote {args.plot}")
     return 0 if solution.converged else 1
 
@@ -197,8 +211,7 @@ def _plot(
     path: Path,
     solution: Solution,
     instance: RendezvousInstance,
-    warm: Solution | None,
-    warm_name: str,
+    warm: WarmStartResult | None,
 ) -> None:
     from scpformer.plotting.rendezvous import plot_trajectory
     from scpformer.problems.rendezvous.io import constants_record
@@ -207,7 +220,7 @@ def _plot(
     reference = None
     if warm is not None and warm.trajectory is not None:
         x = warm.trajectory.x
-        reference = {"rtn": model.rtn(x), "roe": x, "label": f"warm start ({warm_name})"}
+        reference = {"rtn": model.rtn(x), "roe": x, "label": f"warm start ({warm.record.used})"}
     x = solution.trajectory.x
     constants = constants_record(instance)
     constants["period_s"] = instance.target.period_s

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import math
 import re
 import time
 from pathlib import Path
@@ -15,9 +16,20 @@ from tqdm import tqdm
 
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
 from scpformer.cli.rendezvous import print_rows
+from scpformer.cli.warmstart import (
+    add_warmstart_arguments,
+    art_provider,
+    comparison_rows,
+    warmstart_line,
+)
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.robust_rendezvous.instance import RobustInstance, sample_instances
-from scpformer.problems.robust_rendezvous.problem import solve, solve_safety, solve_tpbvp
+from scpformer.problems.robust_rendezvous.problem import (
+    WARMSTARTS,
+    solve,
+    solve_safety,
+    solve_tpbvp,
+)
 from scpformer.problems.robust_rendezvous.scenario import (
     MODES,
     WAYPOINTS,
@@ -81,11 +93,8 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--waypoint", help=f"pre-docking state: {', '.join(WAYPOINTS)} (default: instance's)"
     )
-    parser.add_argument(
-        "--warmstart",
-        choices=("three_stage", "tpbvp"),
-        default="three_stage",
-        help="three_stage (dataset procedure) or tpbvp (PS-CVX) (default: three_stage)",
+    add_warmstart_arguments(
+        parser, WARMSTARTS, "three_stage", "three_stage (dataset procedure), tpbvp (PS-CVX)"
     )
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--instance", type=Path, help="instance JSON (x0_rtn, waypoint, ...)")
@@ -128,8 +137,12 @@ def summary_rows(solution: Solution) -> list[tuple[str, str]]:
         rows.append(("message", solution.message))
     if solution.trajectory is not None:
         rows.append(("cost sum |dv|", f"{solution.cost:.4f} m/s"))
+    ctg = math.nan
     if "violation_budget" in ex:
-        rows.append(("violation budget C(t_0)", str(int(ex["violation_budget"][0]))))
+        ctg = int(ex["violation_budget"][0])
+        rows.append(("violation budget C(t_0)", str(ctg)))
+    if "warmstart" in ex:
+        rows += comparison_rows(ex["warmstart"], solution, ctg)
     if solution.timing is not None:
         tm = solution.timing
         rows += [
@@ -145,7 +158,12 @@ def run_solve(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     if args.monte_carlo < 0:
         raise ValueError(f"--monte-carlo must be >= 0, got {args.monte_carlo}")
-    solution = solve(instance, config, args.mode, warmstart=args.warmstart)
+    provider = art_provider(args, "robust-rendezvous", config=config, mode=args.mode)
+    warmstart: Any = args.warmstart
+    if provider is not None:  # PS-ART: the guess first, then SCvx* always runs
+        warmstart = provider.guess(instance)
+        print(warmstart_line(warmstart.record))
+    solution = solve(instance, config, args.mode, warmstart=warmstart)
     print_rows(summary_rows(solution))
     if solution.trajectory is not None:
         x, u = solution.trajectory.x, solution.trajectory.u

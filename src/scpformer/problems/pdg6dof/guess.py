@@ -13,6 +13,7 @@ import numpy as np
 
 from scpformer.dynamics import quaternion as quat
 from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.scp.solution import Trajectory
 
 
 def upright_attitude(q0: np.ndarray) -> np.ndarray:
@@ -41,6 +42,12 @@ def straight_line_guess(
     u[:, 0] = np.clip(u[:, 0], c.T_min, c.T_max)
     tf = cubic_final_time(instance)
     return x, u, tf
+
+
+def straight_line_trajectory(instance: PDGInstance, n_nodes: int) -> Trajectory:
+    """:func:`straight_line_guess` as a trajectory ``z = (x, u, p = (t_f,))``."""
+    x, u, tf = straight_line_guess(instance, n_nodes)
+    return Trajectory(x=x, u=u, p=np.array([tf]))
 
 
 def cubic_acceleration(instance: PDGInstance, tf: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -9,14 +9,15 @@ and the non-convex thrust lower bound can be violated by an iterate.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from scpformer.dynamics import powered_descent as pd
 from scpformer.problems.pdg6dof import constraints as con
-from scpformer.problems.pdg6dof.guess import straight_line_guess
+from scpformer.problems.pdg6dof.guess import straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.subproblem import compiled_subproblem, trust_region_scales
 from scpformer.scp.conic import SOLVED, start_cold
@@ -92,8 +93,7 @@ class PDGProblem:
         return pd.jacobians(self.model, x, u)
 
     def initial_guess(self) -> Trajectory:
-        x, u, tf = straight_line_guess(self.instance, self.config.n_nodes)
-        return Trajectory(x=x, u=u, p=np.array([tf]))
+        return straight_line_trajectory(self.instance, self.config.n_nodes)
 
     def node_times(self, z: Trajectory) -> np.ndarray:
         return np.linspace(0.0, float(z.p[0]), self.config.n_nodes)
@@ -252,7 +252,7 @@ def verify_trajectory(
 def solve(
     instance: PDGInstance,
     config: PDGSolverConfig | None = None,
-    guess: Trajectory | None = None,
+    guess: Any = None,
     eta_init: float | None = None,
 ) -> Solution:
     """Solve the 6-DoF free-final-time minimum-fuel problem (Eqs. 2-6) with SCvx.
@@ -264,7 +264,9 @@ def solve(
     config
         Formulation and algorithm settings (default: Table 1).
     guess
-        Initial guess (warm start); default the straight-line guess.
+        Initial guess: a :class:`Trajectory`, a warm start provider (:mod:`scpformer.warmstart`),
+        its ``WarmStartResult`` or ``"straight_line"``; default the straight-line guess. A
+        provider's record is returned in ``extras["warmstart"]``.
     eta_init
         Initial trust radius overriding ``config.scvx.eta_init`` (T-SCvx uses 0.01).
 
@@ -288,4 +290,14 @@ def solve(
     problem = PDGProblem(instance, config)
     if guess is None:
         guess = problem.initial_guess()
-    return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
+    if isinstance(guess, Trajectory):
+        return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
+    from scpformer.warmstart.base import as_provider
+    from scpformer.warmstart.convex import StraightLineWarmStart
+
+    named = {"straight_line": lambda: StraightLineWarmStart(config.n_nodes)}
+    result = as_provider(guess, named).guess(instance)
+    if result.trajectory is None:
+        raise ValueError(f"guess: the warm start produced no trajectory ({result.record.reason})")
+    solution = solve_scvx(problem, result.trajectory, config.scvx, eta_init=eta_init)
+    return replace(solution, extras={**solution.extras, "warmstart": result.record.to_dict()})

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any, Literal
 
 import numpy as np
@@ -565,29 +566,29 @@ def run_scp(
         state = SCPState(state.k + 1, scp.beta * state.zeta, sol.x, sol.cost)
 
 
-def _warm_start(setup: _Setup, warmstart: Any) -> tuple[np.ndarray | None, float, Solution | None]:
-    """Reference states and cost from a name, a Solution, a Trajectory or an (N+1, 6) array."""
+def _warm_start(
+    setup: _Setup, warmstart: Any
+) -> tuple[np.ndarray | None, float, Solution | None, Any]:
+    """Reference states, their cost, the solve behind them and the warm start's record.
+
+    ``warmstart`` is a provider (:mod:`scpformer.warmstart`), a precomputed
+    ``WarmStartResult``, a name of :data:`WARMSTARTS` (the convex provider of Problem 1 or
+    2), a Solution, a Trajectory or an (N+1, 6) array (a fixed guess).
+    """
+    from scpformer.warmstart.base import as_provider
+    from scpformer.warmstart.convex import RendezvousConvexWarmStart
+
     n = setup.instance.n_nodes
-    if isinstance(warmstart, str):
-        if warmstart not in WARMSTARTS:
-            raise ValueError(f"warmstart must be one of {WARMSTARTS}, got {warmstart!r}")
-        warm = _solve_convex(setup, warmstart, False, time.perf_counter())
-        if warm.trajectory is None:
-            return None, math.nan, warm
-        return warm.trajectory.x, warm.cost, warm
-    if isinstance(warmstart, Solution):
-        if warmstart.trajectory is None:
-            return None, math.nan, warmstart
-        warmstart = warmstart.trajectory
-    if isinstance(warmstart, Trajectory):
-        x = np.asarray(warmstart.x, dtype=float)
-        u = np.asarray(warmstart.u, dtype=float)
-        J = float(np.linalg.norm(u, axis=1).sum()) if u.shape == (n, 3) else math.inf
-    else:
-        x, J = np.asarray(warmstart, dtype=float), math.inf
+    named = {kind: partial(RendezvousConvexWarmStart, kind, setup.config) for kind in WARMSTARTS}
+    result = as_provider(warmstart, named).guess(setup.instance)
+    if result.trajectory is None:
+        return None, math.nan, result.solution, result.record
+    x = np.asarray(result.trajectory.x, dtype=float)
+    u = np.asarray(result.trajectory.u, dtype=float)
+    J = result.record.cost if u.shape == (n, 3) and math.isfinite(result.record.cost) else math.inf
     if x.shape != (n + 1, 6) or not np.all(np.isfinite(x)):
         raise ValueError(f"warmstart states must be finite with shape ({n + 1}, 6), got {x.shape}")
-    return x, J, None
+    return x, J, result.solution, result.record
 
 
 def _finish(
@@ -658,9 +659,11 @@ def solve(
         Which OCP to solve.
     warmstart
         Problem 3 only: the initial reference, ``"tpbvp"`` or ``"convex"`` (solved here), a
-        :class:`~scpformer.scp.solution.Solution` (e.g. of Problem 2, to time the SCP alone),
-        a :class:`~scpformer.scp.solution.Trajectory` or ROE states (N+1, 6) [m] (e.g. from a
-        learned model). ``J_0`` of Eq. 19 is the warm start's cost when it carries impulses.
+        warm start provider (:mod:`scpformer.warmstart`, e.g. ``ArtWarmStart``) or its
+        precomputed ``WarmStartResult``, a :class:`~scpformer.scp.solution.Solution` (e.g. of
+        Problem 2, to time the SCP alone), a :class:`~scpformer.scp.solution.Trajectory` or
+        ROE states (N+1, 6) [m]. ``J_0`` of Eq. 19 is the warm start's cost when it carries
+        impulses. The guess only starts the SCP; it is never returned as the solution.
     config
         SCP constants, conic solver and verification tolerances (default: Table 1).
     verify
@@ -670,7 +673,9 @@ def solve(
     -------
     Solution
         ``trajectory.x`` (N+1, 6) ROE [m], ``trajectory.u`` (N, 3) impulses [m/s],
-        ``trajectory.p`` empty; ``t`` (N+1,) [s]; ``cost`` = ``sum |dv|_2`` [m/s]. A failing
+        ``trajectory.p`` empty; ``t`` (N+1,) [s]; ``cost`` = ``sum |dv|_2`` [m/s];
+        Problem 3: ``extras["warmstart"]``, the warm start's record (``WarmStartRecord.to_dict``:
+        source, time, cost, constraint-to-go, acceptance and fallback). A failing
         conic solve is a status (``INFEASIBLE_INSTANCE`` for a certified infeasible convex
         problem, else ``SOLVER_FAILED``), never an exception.
     """
@@ -683,12 +688,16 @@ def solve(
     setup = _setup(instance, config)
     if problem != "scp":
         return _solve_convex(setup, problem, verify, start)
-    x_warm, J_warm, warm = _warm_start(setup, warmstart)
-    warm_solver = warm.timing.solver if warm is not None and isinstance(warmstart, str) else 0.0
+    x_warm, J_warm, warm, record = _warm_start(setup, warmstart)
+    timed_warm = warm is not None and warm.timing is not None and isinstance(warmstart, str)
+    warm_solver = warm.timing.solver if timed_warm else 0.0
     if x_warm is None:
-        infeasible = warm.status is Status.INFEASIBLE_INSTANCE
+        infeasible = warm is not None and warm.status is Status.INFEASIBLE_INSTANCE
         status = Status.INFEASIBLE_INSTANCE if infeasible else Status.SOLVER_FAILED
-        message = f"warm start failed: {warm.message}"
-        return _finish(setup, "scp", status, None, [], message, start, verify, warm_solver)
-    status, best, history, message = run_scp(setup, x_warm, J_warm)
-    return _finish(setup, "scp", status, best, history, message, start, verify, warm_solver)
+        message = f"warm start failed: {warm.message if warm is not None else record.reason}"
+        solution = _finish(setup, "scp", status, None, [], message, start, verify, warm_solver)
+    else:
+        status, best, history, message = run_scp(setup, x_warm, J_warm)
+        solution = _finish(setup, "scp", status, best, history, message, start, verify,
+                           warm_solver)  # fmt: skip
+    return replace(solution, extras={**solution.extras, "warmstart": record.to_dict()})

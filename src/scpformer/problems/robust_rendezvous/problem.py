@@ -322,7 +322,7 @@ def solve(
     config: RobustSolverConfig | None = None,
     mode: str = "chance",
     *,
-    warmstart: str | Solution | Trajectory = "three_stage",
+    warmstart: Any = "three_stage",
     verify: bool = True,
 ) -> Solution:
     """Solve the passively safe rendezvous (Eq. 1) and keep the final feasible solution.
@@ -339,7 +339,9 @@ def solve(
     warmstart
         ``"three_stage"`` (TPBVP -> collision avoidance -> passive safety, the dataset
         procedure), ``"tpbvp"`` (passive safety straight from the TPBVP: PS-CVX of the paper),
-        or a :class:`Solution` / :class:`Trajectory` (e.g. a learned warm start: PS-ART).
+        a warm start provider (:mod:`scpformer.warmstart`, e.g. ``ArtWarmStart``: PS-ART) or
+        its precomputed ``WarmStartResult``, or a :class:`Solution` / :class:`Trajectory`.
+        The guess only starts SCvx*; it is never returned as the solution.
     verify
         Check the final trajectory (:meth:`PassiveSafetyProblem.verify`).
 
@@ -350,7 +352,8 @@ def solve(
         [m/s]; ``status`` is that of the passive-safety problem; ``extras``: ``stage`` (which
         stage produced the trajectory), ``stage_status``, ``stage_iterations``,
         ``stage_wall_s``, ``mode``, ``retried_from_tpbvp`` (present when stage 3 ran twice),
-        ``violation_budget`` (Eq. 7, ``C(t_i)``, (N+1,)). A
+        ``violation_budget`` (Eq. 7, ``C(t_i)``, (N+1,)), ``warmstart`` (the warm start's
+        record, ``WarmStartRecord.to_dict``: source, time, cost, C(t_1), acceptance). A
         failing conic solve is a status with the solver's reason, never an exception.
     """
     if not isinstance(instance, RobustInstance):
@@ -360,23 +363,54 @@ def solve(
     if isinstance(warmstart, str) and warmstart not in WARMSTARTS:
         raise ValueError(f"warmstart must be one of {', '.join(WARMSTARTS)}, got {warmstart!r}")
     stages: dict[str, Solution] = {}
-    warm: Solution | Trajectory = warmstart  # type: ignore[assignment]
-    if isinstance(warmstart, str):
-        stages["tpbvp"] = warm = solve_tpbvp(instance, config)
-        if warm.trajectory is None:
-            return _assemble(instance, mode, stages, "passive_safety")
-        if warmstart == "three_stage":
-            ca = solve_safety(instance, warm, config, mode, collision_only=True, verify=verify)
-            stages["collision_avoidance"] = ca
-            if ca.converged:
-                warm = ca
+    result = _warm_start(instance, warmstart, config, mode)
+    solved = result.solution if not isinstance(warmstart, Solution) else None
+    if solved is not None and solved.extras.get("stage") == "tpbvp":
+        stages["tpbvp"] = solved  # the provider's TPBVP, kept if passive safety fails
+    if result.trajectory is None:
+        if "tpbvp" not in stages:
+            raise ValueError(f"warm start has no trajectory: {result.record.reason}")
+        return _with_record(_assemble(instance, mode, stages, "passive_safety"), result)
+    warm: Solution | Trajectory = result.trajectory
+    from_ca = False  # stage 3 starts from a converged stage 2
+    if warmstart == "three_stage":
+        ca = solve_safety(instance, warm, config, mode, collision_only=True, verify=verify)
+        stages["collision_avoidance"] = ca
+        from_ca = ca.converged
+        warm = ca if from_ca else warm
+        details = {"passive_safety_from": "collision_avoidance" if from_ca else "tpbvp"}
+        result = replace(result, record=replace(result.record, details=details))
     final = solve_safety(instance, warm, config, mode, verify=verify)
-    if not final.converged and warmstart == "three_stage" and warm is not stages["tpbvp"]:
+    if not final.converged and from_ca:
         retry = solve_safety(instance, stages["tpbvp"], config, mode, verify=verify)
         final = retry if retry.converged else final
         final.extras["retried_from_tpbvp"] = True
     stages["passive_safety"] = final
-    return _assemble(instance, mode, stages, "passive_safety")
+    return _with_record(_assemble(instance, mode, stages, "passive_safety"), result)
+
+
+def _warm_start(instance: RobustInstance, warmstart: Any, config: RobustSolverConfig,
+                mode: str) -> Any:  # fmt: skip
+    """The warm start's result: names map onto the TPBVP provider (``three_stage`` starts
+    from it too), a Solution or Trajectory onto a fixed guess (:mod:`scpformer.warmstart`)."""
+    from scpformer.warmstart.base import as_provider
+    from scpformer.warmstart.convex import RobustTpbvpWarmStart
+
+    named = dict.fromkeys(WARMSTARTS, lambda: RobustTpbvpWarmStart(config, mode))
+    provider = as_provider(warmstart, named)
+    provider_mode = getattr(provider, "mode", mode)
+    if provider_mode != mode:
+        raise ValueError(f"warmstart: the provider's mode {provider_mode!r} differs from {mode!r}")
+    result = provider.guess(instance)
+    if isinstance(warmstart, str):
+        record = replace(result.record, source=warmstart)
+        result = replace(result, record=record)
+    return result
+
+
+def _with_record(solution: Solution, result: Any) -> Solution:
+    """``solution`` with the warm start's record in ``extras["warmstart"]``."""
+    return replace(solution, extras={**solution.extras, "warmstart": result.record.to_dict()})
 
 
 def _assemble(

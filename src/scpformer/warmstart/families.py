@@ -1,0 +1,231 @@
+"""What ART inference needs to know about a problem family, batched over instances.
+
+For each family: the exact discrete dynamics ``x_{k+1} = Phi_k (x_k + B_k u_k)`` in scaled
+mean ROE (the STM and control input matrix of the family's
+:class:`~scpformer.problems.rendezvous.problem.LinearModel`, ART paper Eq. 10, robust paper
+Eq. 1), the map ``Psi_k`` to the RTN frame (ART paper Eq. 9), the instantaneous constraint
+violation ``C_k`` that decreases the constraint-to-go (ART paper Eqs. 5, 21: keep-out zone;
+robust paper Eq. 7: passive safety with the chance margin), the target-state token of the
+robust paper (the waypoint's relative state) and the convex warm start that sets
+``R(t_1) = -J_CVX`` and serves as the fallback.
+
+A :class:`Batch` holds the instances' matrices stacked, so that the generation loop of
+:mod:`scpformer.warmstart.art` advances every instance with one ``einsum`` per step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from scpformer.problems.rendezvous.instance import RendezvousInstance
+from scpformer.problems.rendezvous.problem import (
+    CTG_TOL,
+    LinearModel,
+    constraint_to_go,
+    keep_out_slack,
+    linear_model,
+)
+from scpformer.problems.robust_rendezvous.instance import RobustInstance
+from scpformer.problems.robust_rendezvous.problem import boundary
+from scpformer.problems.robust_rendezvous.safety import (
+    VIOLATION_TOL,
+    DriftGeometry,
+    drift_geometry,
+    evaluate_safety,
+    trajectory_violations,
+    violation_flags,
+)
+from scpformer.problems.robust_rendezvous.safety import linear_model as robust_linear_model
+from scpformer.problems.robust_rendezvous.scenario import check_mode
+from scpformer.warmstart.base import WarmStart
+from scpformer.warmstart.convex import (
+    RendezvousConvexWarmStart,
+    RobustTpbvpWarmStart,
+    check_instance,
+)
+
+ART_FAMILIES = ("rendezvous", "robust-rendezvous")
+ART_FRAMES = ("rtn", "roe")
+
+
+@dataclass(frozen=True)
+class Batch:
+    """Stacked linear models of B instances with N impulses each."""
+
+    instances: tuple[Any, ...]
+    models: tuple[LinearModel, ...]
+    Phi: np.ndarray  # (B, N, 6, 6) STM Phi(t_{k+1}, t_k)
+    B: np.ndarray  # (B, N, 6, 3) control input matrix [s]
+    Psi: np.ndarray  # (B, N+1, 6, 6) scaled ROE [m] -> RTN [m, m/s]
+    x0: np.ndarray  # (B, 6) initial ROE [m]
+    x_target: np.ndarray | None  # (B, 6) ROE of the target-state token (robust), or None
+    groups: tuple[tuple[np.ndarray, Any], ...]  # (indices, shared constraint data) per group
+
+    @property
+    def n_steps(self) -> int:
+        """N, the number of impulses."""
+        return self.Phi.shape[1]
+
+    def step(self, k: int, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``x_{k+1} = Phi_k (x_k + B_k u_k)`` (Eq. 10) for every instance, (B, 6) [m]."""
+        y = x + np.einsum("bij,bj->bi", self.B[:, k], u)
+        return np.einsum("bij,bj->bi", self.Phi[:, k], y)
+
+    def to_frame(self, k: int, x: np.ndarray, frame: str) -> np.ndarray:
+        """ROE ``x`` (B, 6) at node ``k`` in ``frame``: ``Psi_k x`` (Eq. 9) or ``x`` itself."""
+        return np.einsum("bij,bj->bi", self.Psi[:, k], x) if frame == "rtn" else x
+
+    def from_frame(self, k: int, state: np.ndarray, frame: str) -> np.ndarray:
+        """Inverse of :meth:`to_frame` (``Psi_k`` is invertible)."""
+        if frame != "rtn":
+            return state
+        return np.linalg.solve(self.Psi[:, k], state[..., None])[..., 0]
+
+
+def _grouped(values: Sequence[Any]) -> list[tuple[np.ndarray, Any]]:
+    """Indices of equal values, in first-seen order (e.g. instances sharing a scenario)."""
+    groups: dict[Any, list[int]] = {}
+    for i, value in enumerate(values):
+        groups.setdefault(value, []).append(i)
+    return [(np.array(idx), value) for value, idx in groups.items()]
+
+
+def _stack(
+    instances: Sequence[Any],
+    models: list[LinearModel],
+    x0: np.ndarray,
+    x_target: np.ndarray | None,
+    groups: list[tuple[np.ndarray, Any]],
+) -> Batch:
+    """The :class:`Batch` of ``instances`` (one N for all)."""
+    n = {m.Phi.shape[0] for m in models}
+    if len(n) != 1:
+        raise ValueError(f"instances must have one number of impulses N, got {sorted(n)}")
+    return Batch(
+        instances=tuple(instances),
+        models=tuple(models),
+        Phi=np.stack([m.Phi for m in models]),
+        B=np.stack([m.B for m in models]),
+        Psi=np.stack([m.Psi for m in models]),
+        x0=x0,
+        x_target=x_target,
+        groups=tuple(groups),
+    )
+
+
+@dataclass(frozen=True)
+class RendezvousArtFamily:
+    """The ISS rendezvous of the ART paper: keep-out constraint-to-go (Eqs. 5, 21)."""
+
+    name: str = "rendezvous"
+    has_target: bool = False
+
+    def batch(self, instances: Sequence[RendezvousInstance]) -> Batch:
+        for instance in instances:
+            check_instance(instance, RendezvousInstance, self.name)
+        models = [linear_model(instance) for instance in instances]
+        x0 = np.stack([instance.roe0 for instance in instances])
+        groups = _grouped([instance.scenario for instance in instances])
+        return _stack(instances, models, x0, None, groups)
+
+    def violations(self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``C_k`` of Eq. 21: 1 where node ``k <= N_wp`` lies inside the keep-out zone, (B,)."""
+        flags = np.zeros(x.shape[0], dtype=int)
+        rtn = batch.to_frame(k, x, "rtn")
+        for idx, scenario in batch.groups:
+            if k <= scenario.n_waypoint:
+                flags[idx] = keep_out_slack(rtn[idx], scenario) < -CTG_TOL
+        return flags
+
+    def trajectory_ctg(self, instance: RendezvousInstance, model: LinearModel, x: np.ndarray,
+                       u: np.ndarray) -> float:  # fmt: skip
+        """``C(t_1)`` of a whole trajectory (Eqs. 5, 21)."""
+        return float(constraint_to_go(model.rtn(x), instance.scenario)[0])
+
+    def fallback(self, config: Any = None) -> WarmStart:
+        """The convex Problem 2 (the ART paper's CVX warm start and ``J_CVX``)."""
+        return RendezvousConvexWarmStart("convex", config)
+
+
+@dataclass(frozen=True)
+class _RobustGroup:
+    """Instances sharing one uncertainty model: their drift geometry, stacked per node."""
+
+    instance: RobustInstance  # representative (supplies the uncertainty model)
+    G: np.ndarray  # (b, N, S, 3, 6) E_i D Psi Phi of each instance's drift arcs
+
+
+@dataclass(frozen=True)
+class RobustArtFamily:
+    """The chance-constrained rendezvous of the robust paper: Eq. 7 budget, target token."""
+
+    mode: str = "chance"
+    name: str = "robust-rendezvous"
+    has_target: bool = True
+
+    def __post_init__(self) -> None:
+        check_mode(self.mode)
+
+    def batch(self, instances: Sequence[RobustInstance]) -> Batch:
+        for instance in instances:
+            check_instance(instance, RobustInstance, self.name)
+        models = [robust_linear_model(instance) for instance in instances]
+        bounds = [boundary(instance, model) for instance, model in zip(instances, models,
+                                                                          strict=True)]  # fmt: skip
+        geometry = [drift_geometry(instance).G for instance in instances]
+        groups = []
+        for idx, _ in _grouped([instance.uncertainty for instance in instances]):
+            G = np.stack([geometry[i] for i in idx])
+            groups.append((idx, _RobustGroup(instances[idx[0]], G)))
+        x0 = np.stack([b.x_init for b in bounds])
+        x_target = np.stack([b.x_final for b in bounds])
+        return _stack(instances, models, x0, x_target, groups)
+
+    def violations(self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``C_k`` of Eq. 7 at node ``k`` (post-maneuver drift with the chance margin), (B,).
+
+        Node ``k``'s constraint depends on ``(x_k, u_k)`` only (its covariance of Eq. 14 is
+        local), so the instances of a group are evaluated as the nodes of one stacked
+        trajectory by :func:`~scpformer.problems.robust_rendezvous.safety.evaluate_safety`.
+        """
+        flags = np.zeros(x.shape[0], dtype=int)
+        for idx, group in batch.groups:
+            model = LinearModel(
+                t=np.zeros(idx.size + 1),
+                oe=np.zeros((idx.size + 1, 6)),
+                Phi=batch.Phi[idx, k],
+                B=batch.B[idx, k],
+                Psi=batch.Psi[idx, k],
+            )
+            G = group.G[:, k]  # (b, S, 3, 6)
+            geometry = DriftGeometry(tau=np.zeros(G.shape[1]), Phi=np.zeros(0),
+                                     Psi=np.zeros(0), G=G, E=np.zeros(0),
+                                     use_ae=np.zeros(0, dtype=bool))  # fmt: skip
+            ev = evaluate_safety(geometry, model, x[idx], u[idx], group.instance, self.mode,
+                                 margin_gradient=False)  # fmt: skip
+            flags[idx] = violation_flags(ev.h, VIOLATION_TOL)
+        return flags
+
+    def trajectory_ctg(self, instance: RobustInstance, model: LinearModel, x: np.ndarray,
+                       u: np.ndarray) -> float:  # fmt: skip
+        """``C(t_1)`` of a whole trajectory (Eq. 7 budget)."""
+        return float(trajectory_violations(instance, x, u, self.mode)[0])
+
+    def fallback(self, config: Any = None) -> WarmStart:
+        """The convex TPBVP (the robust paper's CVX warm start and ``J_CVX``)."""
+        return RobustTpbvpWarmStart(config, self.mode)
+
+
+def art_family(name: str, mode: str = "chance") -> RendezvousArtFamily | RobustArtFamily:
+    """The family adapter of ``name`` (``mode``: passive safety of the robust family)."""
+    families: dict[str, Callable[[], Any]] = {
+        "rendezvous": RendezvousArtFamily,
+        "robust-rendezvous": lambda: RobustArtFamily(mode),
+    }
+    if name not in families:
+        raise ValueError(f"family must be one of {ART_FAMILIES}, got {name!r}")
+    return families[name]()
