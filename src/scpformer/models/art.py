@@ -163,6 +163,8 @@ class ArtCache(StepCache):
     """
 
     kv: list[Tensor]  # n_layer x (2, B, h, L_max, d)
+    kv_flat: list[tuple[Tensor, Tensor]]  # views of kv[l]: keys, values (B h, L_max, d)
+    weights: list[tuple[Tensor | None, ...]]  # per block: the 12 tensors _feed reads
     mask: Tensor  # (L_max, L_max) additive causal mask
     length: int = 0  # tokens fed through the blocks
 
@@ -190,6 +192,8 @@ class ART(TokenSequenceModel):
             if name.endswith("proj.weight"):
                 nn.init.normal_(p, mean=0.0, std=residual_std(config.n_layer))
 
+        self._act = activation_fn(config.activation)
+
     def _core(self, tokens: Tensor) -> Tensor:  # (B, L, C)
         for block in self.blocks:
             tokens = block(tokens)
@@ -199,9 +203,13 @@ class ART(TokenSequenceModel):
         cfg = self.config
         length = max_steps * self.codec.tokens_per_step
         param = self.ln_f.weight
-        shape = (2, batch_size, cfg.n_head, length, cfg.n_embd // cfg.n_head)
+        d = cfg.n_embd // cfg.n_head
+        kv = [param.new_zeros(2, batch_size, cfg.n_head, length, d) for _ in self.blocks]
+        flat = [(k.view(-1, length, d), v.view(-1, length, d)) for k, v in kv]
         return ArtCache(
-            kv=[param.new_zeros(shape) for _ in range(cfg.n_layer)],
+            kv=kv,
+            kv_flat=flat,
+            weights=[_block_weights(block) for block in self.blocks],
             mask=param.new_full((length, length), float("-inf")).triu(1),  # (L, L)
             target=target,
             batch_size=batch_size,
@@ -211,36 +219,49 @@ class ART(TokenSequenceModel):
     def _feed(self, cache: ArtCache, x: Tensor) -> Tensor:
         """Run new tokens (B, n, C) through the blocks; the last one's output (B, C).
 
-        The eager inference path: functional calls on the blocks' weights, attention written
-        out (``softmax(q K^T / sqrt(d)) V`` over the cached keys; for a few query rows this
-        is several times faster than ``scaled_dot_product_attention`` on the CPU), and the
-        last block computed for the last token only (the others' outputs are never read,
-        their keys and values are).
+        The eager inference path, cut to few operations per block: functional calls on the
+        weights gathered by :meth:`_empty_cache`, attention written out as
+        ``softmax(q K^T / sqrt(d) + mask) V`` over the cached keys with one ``baddbmm`` (for a
+        few query rows several times faster than ``scaled_dot_product_attention`` on the CPU),
+        and the last block computed for the last token only (the other tokens' outputs are
+        never read; their keys and values are).
         """
-        cfg = self.config
         b, n, c = x.shape
         start = cache.length
         end = start + n
-        h, d = cfg.n_head, c // cfg.n_head
+        h = self.config.n_head
+        d = c // h
         scale = d**-0.5
-        mask = cache.mask[start:end, :end] if n > 1 else None  # (n, end)
-        last = len(self.blocks) - 1
-        for layer, (block, kv) in enumerate(zip(self.blocks, cache.kv, strict=True)):
-            attn, mlp = block.attn, block.mlp
-            hid = functional.layer_norm(x, (c,), block.ln_1.weight, block.ln_1.bias, block.ln_1.eps)
-            qkv = functional.linear(hid, attn.qkv.weight, attn.qkv.bias).view(b, n, 3, h, d)
+        mask = cache.mask[start:end, :end]  # (n, end)
+        eps, last = self.ln_f.eps, len(cache.weights) - 1
+        for layer, (w, kv, (keys, values)) in enumerate(
+            zip(cache.weights, cache.kv, cache.kv_flat, strict=True)
+        ):
+            hid = functional.layer_norm(x, (c,), w[0], w[1], eps)
+            qkv = functional.linear(hid, w[2], w[3]).view(b, n, 3, h, d)
             kv[:, :, :, start:end] = qkv[:, :, 1:].permute(2, 0, 3, 1, 4)  # (2, B, h, n, d)
             if layer == last:  # only the last token's output is read
-                qkv, x, mask = qkv[:, -1:], x[:, -1:], None
-            q = qkv[:, :, 0].transpose(1, 2)  # (B, h, n', d)
-            scores = q @ kv[0, :, :, :end].transpose(-1, -2)  # (B, h, n', end)
-            if mask is not None:
-                scores = scores + mask
-            y = torch.softmax(scores * scale, dim=-1) @ kv[1, :, :, :end]  # (B, h, n', d)
-            y = y.transpose(1, 2).reshape(b, -1, c)  # (B, n', C)
-            x = x + functional.linear(y, attn.proj.weight, attn.proj.bias)
-            hid = functional.layer_norm(x, (c,), block.ln_2.weight, block.ln_2.bias, block.ln_2.eps)
-            hid = mlp.act(functional.linear(hid, mlp.fc.weight, mlp.fc.bias))
-            x = x + functional.linear(hid, mlp.proj.weight, mlp.proj.bias)  # (B, n', C)
+                qkv, x, mask = qkv[:, -1:], x[:, -1:], mask[-1:]
+            q = qkv[:, :, 0].transpose(1, 2).reshape(b * h, -1, d)  # (B h, n', d)
+            scores = torch.baddbmm(mask, q, keys[:, :end].transpose(1, 2), alpha=scale)
+            y = torch.bmm(torch.softmax(scores, dim=-1), values[:, :end])  # (B h, n', d)
+            y = y.view(b, h, -1, d).transpose(1, 2).reshape(b, -1, c)  # (B, n', C)
+            x = x + functional.linear(y, w[4], w[5])
+            hid = functional.layer_norm(x, (c,), w[6], w[7], eps)
+            hid = self._act(functional.linear(hid, w[8], w[9]))
+            x = x + functional.linear(hid, w[10], w[11])  # (B, n', C)
         cache.length = end
-        return self.ln_f(x[:, -1])  # (B, C)
+        return functional.layer_norm(x[:, -1], (c,), self.ln_f.weight, self.ln_f.bias, eps)
+
+
+def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
+    """The tensors of one block in the order :meth:`ART._feed` reads them."""
+    layers = (
+        block.ln_1,
+        block.attn.qkv,
+        block.attn.proj,
+        block.ln_2,
+        block.mlp.fc,
+        block.mlp.proj,
+    )
+    return tuple(t for layer in layers for t in (layer.weight, layer.bias))
