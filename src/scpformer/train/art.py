@@ -32,6 +32,8 @@ import torch
 
 from scpformer import __version__
 from scpformer.data.errors import DatasetError
+from scpformer.data.splits import SPLITS_NAME
+from scpformer.data.storage import file_sha256
 from scpformer.data.torch_views import ArtSequenceDataset
 from scpformer.train import distributed
 from scpformer.train.checkpoint import (
@@ -61,6 +63,7 @@ class ArtData:
     family: str
     frame: str
     digest: str  # sha256 of manifest.json
+    splits_digest: str  # sha256 of splits.h5 (which instances are training ones)
     n_steps: int  # N: impulses per trajectory
     validation_source: str  # how the validation instances were chosen
     train_instances: int
@@ -152,6 +155,7 @@ def load_art_data(
         family=train_view.samples.manifest.family,
         frame=frame,
         digest=manifest_digest(folder),
+        splits_digest=file_sha256(folder / SPLITS_NAME),
         n_steps=train_view.n_steps,
         validation_source=source,
         train_instances=len(np.unique(train["base_index"])),
@@ -291,8 +295,12 @@ def _run(
         seed=config.seed,
         target=wants_target,
     )
-    if previous is not None and previous["manifest_digest"] != data.digest:
-        raise ValueError(f"{out} was trained on other data than {data_folder} (manifest digest)")
+    if previous is not None:
+        stored = (previous["manifest_digest"], previous["extra"].get("splits_digest"))
+        if stored != (data.digest, data.splits_digest):
+            raise ValueError(
+                f"{out} was trained on other data or splits than those of {data_folder}"
+            )
     model = api.build_model(kind, model_config)
     if previous is not None:
         model.load_state_dict(previous["state_dict"])
@@ -304,6 +312,7 @@ def _run(
         "family": data.family,
         "frame": frame,
         "manifest_digest": data.digest,
+        "splits_digest": data.splits_digest,
         "n_steps": data.n_steps,
         "train_sequences": len(data.train),
         "train_instances": data.train_instances,
@@ -325,7 +334,11 @@ def _run(
     def save(state: FitState, training_state: dict[str, Any]) -> None:
         if not world.is_main:
             return
-        extra = training_state | {"preset": preset, "train_config": config.to_dict()}
+        extra = training_state | {
+            "preset": preset,
+            "train_config": config.to_dict(),
+            "splits_digest": data.splits_digest,
+        }
         fields = dict(
             model=model,
             kind=kind,
