@@ -51,7 +51,12 @@ class TensorData:
         return len(next(iter(self.tensors.values()))) if self.tensors else 0
 
     def batch(self, index: Tensor) -> dict[str, Tensor]:
+        """The samples at ``index`` (a gather: copies)."""
         return {name: value[index] for name, value in self.tensors.items()}
+
+    def slice(self, start: int, stop: int) -> dict[str, Tensor]:
+        """Samples ``start:stop`` (views: no copy)."""
+        return {name: value[start:stop] for name, value in self.tensors.items()}
 
     def to(self, device: torch.device) -> TensorData:
         return TensorData({name: value.to(device) for name, value in self.tensors.items()})
@@ -267,33 +272,40 @@ def _train_epoch(
     progress: bool,
     label: str,
 ) -> tuple[float, float, float, float]:
-    """One pass: (mean loss, seconds loading, seconds training, samples over all processes)."""
+    """One pass: (mean loss, seconds loading, seconds training, samples over all processes).
+
+    The epoch's samples are gathered once in their shuffled order; micro-batches are then
+    contiguous slices of it (views).
+    """
     trained.train()
     start = time.perf_counter()
-    batches = torch.tensor(indices, dtype=torch.int64, device=device).split(config.batch_size)
-    groups = [batches[i : i + config.accumulation] for i in range(0, len(batches), config.accumulation)]  # fmt: skip
-    loss_sum, count, loading_s = 0.0, 0, 0.0
-    bar = tqdm(total=len(indices), desc=label, disable=not progress, leave=False, unit="seq")
+    shuffled = TensorData(data.batch(torch.tensor(indices, dtype=torch.int64, device=device)))
+    loading_s = time.perf_counter() - start
+    bounds = [(a, min(a + config.batch_size, len(indices))) for a in range(0, len(indices), config.batch_size)]  # fmt: skip
+    groups = [bounds[i : i + config.accumulation] for i in range(0, len(bounds), config.accumulation)]  # fmt: skip
+    loss_sum, count = 0.0, 0
+    bar = tqdm(total=len(indices), desc=label, disable=not progress, leave=False, unit="seq",
+               mininterval=1.0)  # fmt: skip
     for group in groups:
-        group_size = sum(len(b) for b in group)
-        for j, index in enumerate(group):
+        group_size = group[-1][1] - group[0][0]
+        for j, (a, b) in enumerate(group):
             fetched = time.perf_counter()
-            batch = data.batch(index)
+            batch = shuffled.slice(a, b)
             loading_s += time.perf_counter() - fetched
             last = j == len(group) - 1
             sync = nullcontext() if last or world.size == 1 else trained.no_sync()
             with sync:
                 _, loss = trained(batch)
-                (loss * (len(index) / group_size)).backward()
-            loss_sum += loss.item() * len(index)
-            count += len(index)
-            bar.update(len(index))
+                (loss * ((b - a) / group_size)).backward()
+            loss_sum += loss.item() * (b - a)
+            count += b - a
+            bar.update(b - a)
         if config.grad_clip > 0:
             nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
         optimizer.step()
         scheduler.step()
         optimizer.zero_grad(set_to_none=True)
-        bar.set_postfix(loss=f"{loss_sum / count:.4g}")
+        bar.set_postfix(loss=f"{loss_sum / count:.4g}", refresh=False)
     bar.close()
     train_s = time.perf_counter() - start
     loss_sum, count = all_sum([loss_sum, float(count)], world, device)
@@ -306,18 +318,22 @@ def evaluate(
 ) -> tuple[float, float]:
     """Mean loss over ``data`` in eval mode, shared out over the processes; and seconds loading.
 
-    Runs the unwrapped model (no DDP collectives), so processes may hold unequal shares.
+    Runs the unwrapped model (no DDP collectives), so processes may hold unequal shares; each
+    takes one contiguous share, in batches of ``batch_size * accumulation``.
     """
     model.eval()
-    index = torch.arange(world.rank, len(data), world.size, device=device)
+    share = -(-len(data) // world.size)
+    first, end = world.rank * share, min((world.rank + 1) * share, len(data))
+    step = config.batch_size * config.accumulation
     loss_sum, count, loading_s = 0.0, 0, 0.0
-    for part in index.split(config.batch_size * config.accumulation):
+    for a in range(first, end, step):
+        b = min(a + step, end)
         fetched = time.perf_counter()
-        batch = data.batch(part)
+        batch = data.slice(a, b)
         loading_s += time.perf_counter() - fetched
         _, loss = model(batch)
-        loss_sum += loss.item() * len(part)
-        count += len(part)
+        loss_sum += loss.item() * (b - a)
+        count += b - a
     loss_sum, count = all_sum([loss_sum, float(count)], world, device)
     return loss_sum / count, loading_s
 
