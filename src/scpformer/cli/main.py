@@ -7,7 +7,15 @@ import argparse
 import sys
 
 from scpformer import __version__
-from scpformer.cli import bench_art, data, pdg6dof, rendezvous, robust_rendezvous, train
+from scpformer.cli import (
+    bench_art,
+    data,
+    experiment,
+    pdg6dof,
+    rendezvous,
+    robust_rendezvous,
+    train,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -31,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_generate_parser(commands)
     data.add_dataset_parser(commands)
     train.add_train_parser(commands)
+    experiment.add_experiment_parser(commands)
     return parser
 
 

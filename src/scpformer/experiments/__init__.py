@@ -1,1 +1,115 @@
-"""Experiments: the papers' tables and figures, computed from solved instances and models."""
+"""Experiments: the papers' tables and figures, computed from solved instances and models.
+
+One registry entry per paper table or figure (:data:`EXPERIMENTS`); ``scpformer experiment
+list`` names them, ``scpformer experiment run NAME`` runs one into a folder holding a CSV of
+per-instance results, PNG figures and ``report.md`` (:mod:`scpformer.experiments.runner`,
+:mod:`scpformer.experiments.report`). The modules are imported when an experiment runs.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from scpformer.experiments.runner import RunOptions
+
+
+@dataclass(frozen=True, kw_only=True)
+class Experiment:
+    """A registry entry: what it reproduces and where its ``run(options, command=...)`` lives."""
+
+    name: str
+    reproduces: str  # the paper table or figure
+    summary: str
+    module: str  # module defining run(options, *, command) -> Path of report.md
+    default_n: int  # test instances at the default size (about 20 min on two cores)
+    models: str  # what --model takes
+
+    def runner(self) -> Callable[..., Path]:
+        """The experiment's ``run`` function."""
+        return importlib.import_module(self.module).run
+
+
+_ART = "ART paper (art-rendezvous-transformer.txt)"
+_ROBUST = "robust ART paper (robust-art-chance-constrained.txt)"
+EXPERIMENTS: dict[str, Experiment] = {
+    e.name: e
+    for e in (
+        Experiment(
+            name="art-forecast-tpbvp",
+            reproduces=f"{_ART} Table 2",
+            summary="ART/GRU/LSTM forecasts of Problem 1 (TPBVP) solutions",
+            module="scpformer.experiments.forecast_study",
+            default_n=100,
+            models="ART, GRU and LSTM runs trained on Problem 1 twins",
+        ),
+        Experiment(
+            name="art-forecast-scp",
+            reproduces=f"{_ART} Table 3",
+            summary="ART/GRU/LSTM forecasts of Problem 3 (SCP) solutions",
+            module="scpformer.experiments.forecast_study",
+            default_n=100,
+            models="ART, GRU and LSTM runs (any order; kinds read from the checkpoints)",
+        ),
+        Experiment(
+            name="art-conditioning",
+            reproduces=f"{_ART} Fig. 3",
+            summary="realized vs requested constraint-to-go and reward-to-go",
+            module="scpformer.experiments.conditioning",
+            default_n=20,
+            models="one ART run",
+        ),
+        Experiment(
+            name="art-warmstart",
+            reproduces=f"{_ART} Figs. 4-6",
+            summary="SCP warm-started by CVX-TPBVP, CVX and ART, binned by C_CVX(t_1)",
+            module="scpformer.experiments.warmstart_study",
+            default_n=100,
+            models="one ART run",
+        ),
+        Experiment(
+            name="robust-warmstart",
+            reproduces=f"{_ROBUST} Figs. 5-6",
+            summary="PS-CVX/PS-ART, deterministic and chance-constrained, RTN and ROE models",
+            module="scpformer.experiments.robust_studies",
+            default_n=40,
+            models="ART runs trained on RTN and on ROE states",
+        ),
+        Experiment(
+            name="robust-trajectory",
+            reproduces=f"{_ROBUST} Figs. 7-8",
+            summary="the instance with the largest ART gain: warm starts, drift arcs, Eq. 15",
+            module="scpformer.experiments.robust_studies",
+            default_n=40,
+            models="one ART run",
+        ),
+        Experiment(
+            name="robust-posthoc",
+            reproduces=f"{_ROBUST} Figs. 9-10",
+            summary="E_R and E_C of the post hoc check and the SCP outcome with/without it",
+            module="scpformer.experiments.robust_studies",
+            default_n=40,
+            models="one ART run",
+        ),
+    )
+}
+
+
+def get_experiment(name: str) -> Experiment:
+    """The registry entry ``name`` (``ValueError`` listing the names otherwise)."""
+    if name not in EXPERIMENTS:
+        raise ValueError(f"unknown experiment {name!r}; choose one of {', '.join(EXPERIMENTS)}")
+    return EXPERIMENTS[name]
+
+
+def run_experiment(name: str, options: RunOptions, command: str = "") -> Path:
+    """Run experiment ``name``; returns the path of its ``report.md``."""
+    experiment = get_experiment(name)
+    run: Any = experiment.runner()
+    return run(options, command=command, name=name)
+
+
+__all__ = ["EXPERIMENTS", "Experiment", "RunOptions", "get_experiment", "run_experiment"]

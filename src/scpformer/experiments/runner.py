@@ -1,0 +1,412 @@
+"""What every experiment shares: options, test instances, resumable CSV, executors, provenance.
+
+An experiment run writes into its folder ``OUT``:
+
+* ``results.csv``: one row per test instance, appended as soon as the instance is done, so an
+  interrupted run loses at most the instances in flight; a rerun with the same settings skips
+  the instances already in the file (``OUT/config.json`` records the settings and a rerun with
+  different ones is refused);
+* ``*.png`` figures and ``report.md`` (see :mod:`scpformer.experiments.report`).
+
+The per-instance work runs on the dataset engine's executors
+(:mod:`scpformer.data.executors`): local worker processes by default, Ray actors with
+``--ray ADDRESS``. An experiment hands them a :class:`TaskFamily`, whose "instance" ``i`` is
+the ``i``-th task of the run (recovered from the stream the engine gives instance ``i``, whose
+``spawn_key`` is ``(i,)``), so the engine's warm-up, time limit and crash handling apply
+unchanged.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import sys
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, Protocol
+
+import numpy as np
+
+from scpformer.data.errors import DatasetError
+from scpformer.data.executors import Executor, LocalPool, RayPool
+from scpformer.data.family import SampleResult
+from scpformer.data.splits import load_splits
+from scpformer.data.storage import ShardedSamples, read_manifest
+
+RESULTS_NAME = "results.csv"
+CONFIG_NAME = "config.json"
+KEY = "index"  # the dataset sample position of a row
+DEFAULT_TIME_LIMIT = 600.0  # s per task before its worker is restarted
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunOptions:
+    """What ``scpformer experiment run`` was asked (the experiment resolves the defaults)."""
+
+    out: Path  # the experiment's folder
+    models: tuple[Path, ...] = ()  # training run folders or checkpoint files
+    data: Path | None = None  # dataset folder (split)
+    n: int | None = None  # test instances (None: the experiment's default)
+    workers: int | None = None  # local worker processes (None: every CPU)
+    ray: str | None = None  # Ray address ("local" starts one) or None for local processes
+    seed: int = 0  # seed of the instance selection (and of the executors' streams)
+    time_limit: float = DEFAULT_TIME_LIMIT  # s per task
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "out", Path(self.out))
+        object.__setattr__(self, "models", tuple(Path(m) for m in self.models))
+        if self.data is not None:
+            object.__setattr__(self, "data", Path(self.data))
+        if self.n is not None and (isinstance(self.n, bool) or int(self.n) < 1):
+            raise ValueError(f"n must be a positive integer, got {self.n!r}")
+        if self.workers is not None and int(self.workers) < 1:
+            raise ValueError(f"workers must be a positive integer, got {self.workers!r}")
+        if not (math.isfinite(self.time_limit) and self.time_limit > 0):
+            raise ValueError(f"time_limit must be positive, got {self.time_limit!r}")
+
+
+# ======================================================================================
+# inputs: dataset, test split, models
+# ======================================================================================
+def require_data(options: RunOptions) -> Path:
+    """The dataset folder of ``options`` (``ValueError`` naming ``--data`` when unusable)."""
+    if options.data is None:
+        raise ValueError("--data DIR is required (a dataset folder made by `scpformer generate`)")
+    folder = options.data
+    if not (folder / "manifest.json").is_file():
+        raise ValueError(f"--data {folder}: not a dataset folder (no manifest.json)")
+    return folder
+
+
+def require_models(options: RunOptions, count: int | None = None) -> tuple[Path, ...]:
+    """The ``--model`` paths, each an existing run folder or checkpoint file."""
+    if not options.models:
+        raise ValueError("--model RUN is required (a folder made by `scpformer train`)")
+    if count is not None and len(options.models) != count:
+        raise ValueError(f"--model: expected {count} run(s), got {len(options.models)}")
+    for path in options.models:
+        if not path.exists():
+            raise ValueError(f"--model {path}: no such run folder or checkpoint file")
+    return options.models
+
+
+def test_positions(folder: Path, n: int, seed: int) -> np.ndarray:
+    """``n`` sample positions of the test split, drawn without replacement with ``seed``.
+
+    A seeded permutation of the whole test split, cut after ``n``: a larger ``n`` extends the
+    selection of a smaller one, so a rerun with a larger ``--n`` keeps the rows already done.
+    """
+    try:
+        test = load_splits(folder).indices["test"]
+    except DatasetError as err:
+        raise ValueError(f"--data {folder}: {err}") from None
+    if test.size == 0:
+        raise ValueError(f"--data {folder}: the test split is empty")
+    order = np.random.default_rng(seed).permutation(test)
+    return order[: min(n, order.size)]
+
+
+def read_fields(folder: Path, positions: Sequence[int], names: Iterable[str]) -> list[dict]:
+    """The values of fields ``names`` of the samples at ``positions``, one dict per sample."""
+    samples = ShardedSamples(folder)
+    try:
+        known = {f.name for f in samples.manifest.schema}
+        names = list(names)
+        missing = [name for name in names if name not in known]
+        if missing:
+            raise ValueError(f"--data {folder}: the dataset has no field(s) {missing}")
+        return [{name: samples.read(name, int(p)) for name in names} for p in positions]
+    finally:
+        samples.close()
+
+
+# ======================================================================================
+# resumable per-instance results
+# ======================================================================================
+def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
+    """Record ``settings`` in ``OUT/config.json``; refuse a folder made with other settings.
+
+    ``n`` may differ (a larger run extends a smaller one); everything else must match.
+    """
+    path = out / CONFIG_NAME
+    plain = json.loads(json.dumps(settings, default=str))
+    if path.is_file():
+        try:
+            old = json.loads(path.read_text())
+        except ValueError:
+            old = None
+        if not isinstance(old, dict):
+            raise ValueError(f"--out {out}: {CONFIG_NAME} is unreadable; use a new --out")
+        ignore = {"n", "workers", "ray", "time_limit"}
+        changed = sorted(k for k in set(old) | set(plain) if k not in ignore
+                         and old.get(k) != plain.get(k))  # fmt: skip
+        if changed:
+            raise ValueError(
+                f"--out {out} holds a run with other settings ({', '.join(changed)}); "
+                "use a new --out or the same settings"
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(plain, indent=1) + "\n")
+    os.replace(tmp, path)
+
+
+class ResultsCSV:
+    """``OUT/results.csv``: rows appended and flushed one instance at a time."""
+
+    def __init__(self, path: Path, columns: Sequence[str]) -> None:
+        self.path, self.columns = Path(path), list(columns)
+        if KEY not in self.columns:
+            raise ValueError(f"columns must include {KEY!r}")
+        if self.path.is_file() and self.path.stat().st_size:
+            with self.path.open(newline="") as handle:
+                header = next(csv.reader(handle), [])
+            if header != self.columns:
+                raise ValueError(
+                    f"{self.path}: its columns differ from this experiment's; use a new --out"
+                )
+
+    def rows(self) -> list[dict[str, str]]:
+        """Every complete row written so far (a torn last line is dropped)."""
+        if not self.path.is_file():
+            return []
+        with self.path.open(newline="") as handle:
+            rows = list(csv.DictReader(handle))
+        return [r for r in rows if None not in r.values() and None not in r]
+
+    def done(self) -> set[int]:
+        """Keys of the instances already written."""
+        return {int(r[KEY]) for r in self.rows()}
+
+    def append(self, row: Mapping[str, Any]) -> None:
+        """Write one row (missing columns empty, unknown ones an error) and flush it to disk."""
+        unknown = set(row) - set(self.columns)
+        if unknown:
+            raise ValueError(f"row has columns not in the results table: {sorted(unknown)}")
+        new = not self.path.is_file() or not self.path.stat().st_size
+        if not new:
+            _terminate_last_line(self.path)
+        with self.path.open("a", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=self.columns)
+            if new:
+                writer.writeheader()
+            writer.writerow({k: _cell(row.get(k, "")) for k in self.columns})
+            handle.flush()
+            os.fsync(handle.fileno())
+
+
+def _terminate_last_line(path: Path) -> None:
+    """Drop a torn last line left by a killed run (every complete row ends with a newline)."""
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        path.write_bytes(data[: data.rfind(b"\n") + 1])
+
+
+def _cell(value: Any) -> Any:
+    if isinstance(value, float | np.floating):
+        return repr(float(value))
+    if isinstance(value, np.integer | np.bool_):
+        return value.item()
+    return value
+
+
+def column(rows: Sequence[Mapping[str, str]], name: str) -> np.ndarray:
+    """A numeric column of CSV rows (empty cells are NaN; True/False are 1/0)."""
+    values = []
+    for row in rows:
+        cell = row.get(name, "")
+        values.append({"": math.nan, "True": 1.0, "False": 0.0}.get(cell, None) if cell in
+                      ("", "True", "False") else float(cell))  # fmt: skip
+    return np.asarray(values, dtype=float)
+
+
+def series(cell: str) -> np.ndarray:
+    """A space-separated list of numbers stored in one cell (e.g. a cost history)."""
+    return np.array([float(v) for v in cell.split()], dtype=float)
+
+
+def join_series(values: Iterable[float]) -> str:
+    """Inverse of :func:`series`."""
+    return " ".join(repr(float(v)) for v in values)
+
+
+# ======================================================================================
+# executors
+# ======================================================================================
+class TaskSolver(Protocol):
+    """The per-instance work of an experiment (picklable; heavy state built in ``warm_up``)."""
+
+    def warm_up(self) -> None:
+        """Load models, compile subproblems (once per worker)."""
+
+    def solve(self, task: Any) -> dict[str, Any]:
+        """One task's CSV row (``KEY`` included)."""
+
+
+def task_index(rng: np.random.Generator) -> int:
+    """The task number ``i`` of the engine's stream ``SeedSequence(seed, spawn_key=(i,))``."""
+    key = getattr(rng.bit_generator.seed_seq, "spawn_key", ())
+    if len(key) != 1:
+        raise ValueError("not an executor instance stream (spawn_key must be (index,))")
+    return int(key[0])
+
+
+@dataclass(frozen=True)
+class TaskFamily:
+    """Experiment tasks as a :class:`~scpformer.data.family.DatasetFamily` for the executors."""
+
+    tasks: tuple[Any, ...]
+    solver: Any  # a TaskSolver
+    name: ClassVar[str] = "experiment"
+    success_statuses: ClassVar[frozenset[str]] = frozenset({"ok"})
+
+    def warm_up(self) -> None:
+        self.solver.warm_up()
+
+    def sample(self, rng: np.random.Generator) -> Any:
+        return self.tasks[task_index(rng)]
+
+    def encode_instance(self, task: Any) -> dict[str, Any]:
+        return {}
+
+    def solve(self, task: Any) -> SampleResult:
+        row = self.solver.solve(task)
+        return SampleResult("ok", "", {"row": row}, 0.0)
+
+
+@dataclass
+class Progress:
+    """Counts printed while an experiment runs."""
+
+    total: int
+    done: int = 0
+    failed: int = 0
+    stream: Any = field(default=None, repr=False)
+
+    def step(self, ok: bool) -> None:
+        self.done += 1
+        self.failed += 0 if ok else 1
+        stream = self.stream or sys.stderr
+        print(f"\r{self.done}/{self.total} instances ({self.failed} failed)", end="",
+              file=stream, flush=True)  # fmt: skip
+        if self.done == self.total:
+            print(file=stream)
+
+
+def run_tasks(
+    solver: Any,
+    tasks: Sequence[Any],
+    keys: Sequence[int],
+    options: RunOptions,
+    results: ResultsCSV,
+    failure_row: Callable[[int, str, str], dict[str, Any]],
+) -> int:
+    """Run the tasks whose key is not in ``results`` yet; append each row as it arrives.
+
+    A task that raises, times out or kills its worker gets ``failure_row(key, status,
+    message)``. Returns the number of tasks run.
+    """
+    done = results.done()
+    todo = [i for i, key in enumerate(keys) if int(key) not in done]
+    if not todo:
+        return 0
+    family = TaskFamily(tuple(tasks), solver)
+    executor = make_executor(family, options, len(todo))
+    progress = Progress(len(todo))
+    try:
+        executor.submit(todo)
+        while executor.pending():
+            for result in executor.wait(timeout=1.0):
+                row = result.fields.get("row")
+                if result.status != "ok" or row is None:
+                    row = failure_row(int(keys[result.index]), result.status, result.message)
+                results.append(row)
+                progress.step(result.status == "ok")
+    finally:
+        executor.close()
+    return len(todo)
+
+
+def make_executor(family: TaskFamily, options: RunOptions, tasks: int) -> Executor:
+    """Local processes (default) or Ray actors, never more workers than tasks."""
+    if options.ray:
+        workers = min(options.workers, tasks) if options.workers else None
+        return RayPool(family, options.seed, workers, options.time_limit, options.ray)
+    workers = min(options.workers or os.cpu_count() or 1, tasks)
+    return LocalPool(family, options.seed, workers, options.time_limit)
+
+
+# ======================================================================================
+# provenance: the commands that made the data and the models
+# ======================================================================================
+def dataset_commands(folder: Path) -> list[str]:
+    """``scpformer generate`` and ``dataset split`` lines that remake ``folder``.
+
+    Read from the manifest (family, n, seed, workers of the first run, configuration values
+    that differ from the family's defaults) and from ``splits.h5`` (fractions, seed).
+    """
+    from scpformer.data.family import build_family
+
+    manifest = read_manifest(folder)
+    line = f"scpformer generate {manifest.family} --n {manifest.n} --seed {manifest.seed}"
+    line += f" --out {folder}"
+    if manifest.shard_size != 64:
+        line += f" --shard-size {manifest.shard_size}"
+    try:
+        defaults = build_family(manifest.family).config_dict()
+        changed = _differences(defaults, manifest.config)
+    except Exception:  # an unknown or changed family: say nothing about its options
+        changed = []
+    commands = [line]
+    if changed:
+        commands.append("# configuration differing from the defaults: " + ", ".join(changed))
+    try:
+        config = load_splits(folder).config
+        fractions = " ".join(f"{f:g}" for f in config.fractions)
+        commands.append(f"scpformer dataset split {folder} --fractions {fractions} "
+                        f"--seed {config.seed}")  # fmt: skip
+    except DatasetError:
+        commands.append("# no splits.h5")
+    return commands
+
+
+def _differences(default: Any, actual: Any, path: str = "") -> list[str]:
+    if isinstance(default, Mapping) and isinstance(actual, Mapping):
+        out = []
+        for key in sorted(set(default) | set(actual)):
+            out += _differences(default.get(key), actual.get(key), f"{path}{key}.")
+        return out
+    norm = json.loads(json.dumps([default, actual], default=str))
+    return [] if norm[0] == norm[1] else [f"{path[:-1]}={norm[1]}"]
+
+
+def model_command(run: Path) -> str:
+    """The ``scpformer train`` line that remakes a run, from ``RUN/config.json``."""
+    folder = run if run.is_dir() else run.parent
+    path = folder / "config.json"
+    try:
+        config = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return f"# {run}: no readable config.json (command unknown)"
+    train = config.get("train", {})
+    parts = [f"scpformer train {config.get('kind', '?')} --data {config.get('data', '?')}",
+             f"--out {folder}", f"--preset {config.get('preset', '?')}",
+             f"--frame {config.get('frame', '?')}"]  # fmt: skip
+    for key, flag in (("epochs", "--epochs"), ("batch_size", "--batch-size"), ("lr", "--lr"),
+                      ("seed", "--seed")):  # fmt: skip
+        if key in train:
+            parts.append(f"{flag} {train[key]}")
+    return " ".join(parts)
+
+
+def settings_dict(options: RunOptions, **extra: Any) -> dict[str, Any]:
+    """The resolved settings recorded in ``config.json`` and ``report.md``."""
+    out = asdict(options)
+    out["models"] = [str(m) for m in options.models]
+    out["data"] = str(options.data) if options.data else None
+    out["out"] = str(options.out)
+    out.update(extra)
+    return out

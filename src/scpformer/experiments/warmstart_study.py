@@ -1,0 +1,420 @@
+"""``art-warmstart``: SCP warm-started by CVX-TPBVP, CVX and ART (ART paper Sec. 5, Figs. 4-6).
+
+On test-split instances of a rendezvous dataset (rebuilt from theta with the dataset's
+scenario and solver configuration), each worker solves Problem 1 (CVX-TPBVP) and Problem 2
+(CVX), generates ART's guess with Algorithm 2 conditioned on ``R(t_1) = -J_CVX``,
+``C(t_1) = 0`` (no acceptance check: the ART paper always warm-starts with ART), and runs
+the SCP of Problem 3 from each of the three. Per instance and warm start it records the SCP
+cost, status, iterations, cost after each iteration, warm-start time and SCP time.
+
+The analysis follows the paper's figures: every metric is an average over the test instances
+whose ``C_CVX(t_1)`` exceeds the value on the x-axis (the paper's grey dashed line is that
+count), plus disjoint bins for the ranges the text quotes:
+
+* suboptimality gap ``J_SCP - J_CVX`` [mm/s] (``J_CVX``, the cost of Problem 2, is a lower
+  bound of Problem 3) and ART's improvement over warm start X,
+  ``100 (gap_X - gap_ART) / gap_X`` of the bin means (Fig. 4);
+* SCP iterations, and the cost after each iteration as ``100 J_CVX / J_k`` for
+  ``C_CVX(t_1) > 1``, the last iterate held after convergence (Fig. 5);
+* warm-start and SCP runtime (Fig. 6 left): ART's warm-start time includes the CVX solve that
+  sets ``R(t_1)``; the generation alone is reported too;
+* infeasibility rate: SCP runs that return no solution (no subproblem solved) (Fig. 6 right).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
+from scpformer.data.storage import read_manifest
+from scpformer.experiments import report as rep
+from scpformer.experiments.runner import (
+    KEY,
+    RESULTS_NAME,
+    ResultsCSV,
+    RunOptions,
+    check_settings,
+    column,
+    dataset_commands,
+    join_series,
+    model_command,
+    read_fields,
+    require_data,
+    require_models,
+    run_tasks,
+    series,
+    settings_dict,
+    test_positions,
+)
+
+NAME = "art-warmstart"
+REPRODUCES = "ART paper Figs. 4-6 (SCP warm-started by CVX-TPBVP, CVX and ART)"
+DEFAULT_N = 100
+WARMSTARTS = ("tpbvp", "convex", "art")
+LABELS = {"tpbvp": "CVX-TPBVP", "convex": "CVX", "art": "ART"}
+COLORS = {"tpbvp": "tab:green", "convex": "tab:blue", "art": "tab:red"}
+THRESHOLDS = (-1, 0, 5, 10, 15, 20, 25, 30, 35, 40)  # C_CVX(t_1) > x; -1: every instance
+RANGES = ((0, 0), (1, 9), (10, 19), (20, 29), (30, 40), (41, 10**6))  # disjoint bins
+MM = 1e3  # m/s -> mm/s
+PER_WS = ("ws_time", "ws_cost", "ws_ctg", "status", "cost", "iterations", "scp_time",
+          "feasible", "history")  # fmt: skip
+COLUMNS = (KEY, "c_cvx_t1", "j_cvx", "art_generation_s",
+           *(f"{ws}_{name}" for ws in WARMSTARTS for name in PER_WS),
+           "status", "message")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Task:
+    """One test instance: its dataset position and theta."""
+
+    index: int
+    theta: np.ndarray
+
+
+class WarmstartSolver:
+    """Per-instance work of ``art-warmstart`` (runs in the executor's workers)."""
+
+    def __init__(self, checkpoint: Path, data_config: dict[str, Any], verify: bool) -> None:
+        self.checkpoint, self.data_config, self.verify = Path(checkpoint), data_config, verify
+        self._art: Any = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_art": None}
+
+    def warm_up(self) -> None:
+        import torch
+
+        from scpformer.problems.rendezvous.subproblems import compiled_subproblem
+        from scpformer.warmstart import ArtWarmStart
+
+        torch.set_num_threads(1)
+        config = RendezvousDataConfig.from_dict(self.data_config)
+        self._art = ArtWarmStart.from_checkpoint(self.checkpoint, family="rendezvous",
+                                                 acceptance=None)  # fmt: skip
+        sc = config.scenario
+        for kind in (*WARMSTARTS[:2], "scp"):
+            compiled_subproblem(kind, sc.n_nodes, sc.n_waypoint, config.solver.scp.solver)
+
+    def solve(self, task: Task) -> dict[str, Any]:
+        from scpformer.problems.rendezvous.problem import solve
+        from scpformer.warmstart import (
+            ArtWarmStart,
+            PrecomputedWarmStart,
+            RendezvousConvexWarmStart,
+        )
+
+        config = RendezvousDataConfig.from_dict(self.data_config)
+        instance = instance_from_theta(task.theta, config.scenario)
+        guesses = {kind: RendezvousConvexWarmStart(kind, config.solver).guess(instance)
+                   for kind in WARMSTARTS[:2]}  # fmt: skip
+        art = ArtWarmStart(
+            self._art.model,
+            self._art.normalization,
+            frame=self._art.frame,
+            acceptance=None,
+            fallback=PrecomputedWarmStart(guesses["convex"]),
+        )
+        guesses["art"] = art.guess(instance)  # fmt: skip
+        cvx = guesses["convex"].record
+        row: dict[str, Any] = {
+            KEY: task.index,
+            "c_cvx_t1": cvx.constraint_to_go,
+            "j_cvx": cvx.cost,
+            "art_generation_s": guesses["art"].record.details.get("generation_s", math.nan),
+            "status": "ok",
+            "message": "",
+        }
+        for ws, guess in guesses.items():
+            solution = solve(instance, "scp", PrecomputedWarmStart(guess), config.solver,
+                             verify=self.verify)  # fmt: skip
+            row.update({
+                f"{ws}_ws_time": guess.record.time_s,
+                f"{ws}_ws_cost": guess.record.cost,
+                f"{ws}_ws_ctg": guess.record.constraint_to_go,
+                f"{ws}_status": solution.status.value,
+                f"{ws}_cost": solution.cost,
+                f"{ws}_iterations": solution.iterations,
+                f"{ws}_scp_time": solution.timing.total if solution.timing else math.nan,
+                f"{ws}_feasible": solution.trajectory is not None,
+                f"{ws}_history": join_series(r.cost for r in solution.history),
+            })  # fmt: skip
+        return row
+
+
+def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
+    """The row of an instance whose work did not return."""
+    return {KEY: key, "status": status, "message": message}
+
+
+# ======================================================================================
+# the run
+# ======================================================================================
+def run(options: RunOptions, *, command: str = "", name: str = NAME, verify: bool = False) -> Path:
+    """Run ``art-warmstart`` into ``options.out``; returns the report's path.
+
+    ``verify`` replays every SCP solution through the nonlinear propagator (off: the paper
+    judges the SCP in its linear model).
+    """
+    data = require_data(options)
+    (model,) = require_models(options, 1)
+    manifest = read_manifest(data)
+    if manifest.family != "rendezvous":
+        raise ValueError(f"--data {data}: a {manifest.family} dataset, not rendezvous")
+    from scpformer.train.checkpoint import load_checkpoint
+
+    ckpt = load_checkpoint(model, family="rendezvous")  # fails fast on a wrong model
+    n = options.n or DEFAULT_N
+    positions = test_positions(data, n, options.seed)
+    settings = settings_dict(options, experiment=NAME, n=int(positions.size), verify=verify,
+                             model_kind=ckpt.kind, frame=ckpt.frame,
+                             conditioning="R(t_1) = -J_CVX, C(t_1) = 0, Algorithm 2, "
+                             "no acceptance check")  # fmt: skip
+    check_settings(options.out, settings)
+    thetas = [f["theta"] for f in read_fields(data, positions, ["theta"])]
+    tasks = [Task(int(p), np.asarray(t)) for p, t in zip(positions, thetas, strict=True)]
+    results = ResultsCSV(options.out / RESULTS_NAME, COLUMNS)
+    solver = WarmstartSolver(model, manifest.config, verify)
+    run_tasks(solver, tasks, [t.index for t in tasks], options, results, failure_row)
+    wanted = {int(p) for p in positions}
+    rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
+    provenance = [*dataset_commands(data), model_command(model)]
+    report = analyse(rows, options.out)
+    report.command, report.settings, report.provenance = command, settings, provenance
+    report.sections.insert(0, ("Instances", f"{len(rows)} of {positions.size} selected "
+                           f"test instances finished (failed or missing: "
+                           f"{positions.size - len(rows)})."))  # fmt: skip
+    return report.write(options.out)
+
+
+# ======================================================================================
+# analysis
+# ======================================================================================
+@dataclass(frozen=True)
+class Columns:
+    """The per-instance results as arrays (one entry per instance)."""
+
+    c: np.ndarray  # C_CVX(t_1)
+    j_cvx: np.ndarray  # lower bound [m/s]
+    cost: dict[str, np.ndarray]  # SCP cost per warm start [m/s]
+    feasible: dict[str, np.ndarray]  # bool
+    iterations: dict[str, np.ndarray]
+    ws_time: dict[str, np.ndarray]
+    scp_time: dict[str, np.ndarray]
+    history: dict[str, list[np.ndarray]]
+    generation: np.ndarray  # ART generation alone [s]
+
+    @classmethod
+    def from_rows(cls, rows: list[dict[str, str]]) -> Columns:
+        def per(name: str) -> dict[str, np.ndarray]:
+            return {ws: column(rows, f"{ws}_{name}") for ws in WARMSTARTS}
+
+        return cls(
+            c=column(rows, "c_cvx_t1"),
+            j_cvx=column(rows, "j_cvx"),
+            cost=per("cost"),
+            feasible={ws: v == 1.0 for ws, v in per("feasible").items()},
+            iterations=per("iterations"),
+            ws_time=per("ws_time"),
+            scp_time=per("scp_time"),
+            history={ws: [series(r[f"{ws}_history"]) for r in rows] for ws in WARMSTARTS},
+            generation=column(rows, "art_generation_s"),
+        )
+
+    def all_feasible(self) -> np.ndarray:
+        """Instances where every warm start's SCP returned a solution (cost comparisons)."""
+        ok = np.isfinite(self.j_cvx)
+        for ws in WARMSTARTS:
+            ok &= self.feasible[ws] & np.isfinite(self.cost[ws])
+        return ok
+
+    def gap(self, ws: str) -> np.ndarray:
+        """Suboptimality gap ``J_SCP - J_CVX`` [mm/s]."""
+        return MM * (self.cost[ws] - self.j_cvx)
+
+
+def _mean(values: np.ndarray, mask: np.ndarray) -> float:
+    return float(np.mean(values[mask])) if mask.any() else math.nan
+
+
+def bin_stats(cols: Columns, mask: np.ndarray) -> dict[str, float]:
+    """Every figure's metric over the instances in ``mask``."""
+    both = mask & cols.all_feasible()
+    out: dict[str, float] = {"count": int(mask.sum()), "count_feasible": int(both.sum())}
+    for ws in WARMSTARTS:
+        out[f"{ws}_gap"] = _mean(cols.gap(ws), both)
+        out[f"{ws}_iterations"] = _mean(cols.iterations[ws], both)
+        out[f"{ws}_ws_time"] = _mean(cols.ws_time[ws], mask)
+        out[f"{ws}_scp_time"] = _mean(cols.scp_time[ws], mask)
+        out[f"{ws}_infeasible_pct"] = 100.0 * _mean(~cols.feasible[ws], mask)
+    for ws in WARMSTARTS[:2]:
+        gap = out[f"{ws}_gap"]
+        out[f"improvement_vs_{ws}"] = (100.0 * (gap - out["art_gap"]) / gap
+                                       if gap > 0 else math.nan)  # fmt: skip
+    out["art_generation_s"] = _mean(cols.generation, mask)
+    return out
+
+
+def cumulative(cols: Columns) -> list[dict[str, float]]:
+    """:func:`bin_stats` over ``C_CVX(t_1) > x`` for x in :data:`THRESHOLDS`."""
+    return [{"x": x, **bin_stats(cols, cols.c > x)} for x in THRESHOLDS]
+
+
+def disjoint(cols: Columns) -> list[dict[str, Any]]:
+    """:func:`bin_stats` over the ranges of :data:`RANGES`."""
+    return [{"range": (lo, hi), **bin_stats(cols, (cols.c >= lo) & (cols.c <= hi))}
+            for lo, hi in RANGES]  # fmt: skip
+
+
+def convergence(cols: Columns, k_max: int) -> dict[str, np.ndarray]:
+    """Mean ``100 J_CVX / J_k`` after iteration k = 1..k_max for ``C_CVX(t_1) > 1``."""
+    mask = (cols.c > 1) & cols.all_feasible()
+    out = {}
+    for ws in WARMSTARTS:
+        curves = []
+        for i in np.flatnonzero(mask):
+            h = cols.history[ws][i]
+            if h.size == 0:
+                continue
+            h = np.fmin.accumulate(np.where(np.isfinite(h), h, np.inf))  # best so far
+            padded = np.concatenate([h, np.full(max(0, k_max - h.size), h[-1])])[:k_max]
+            curves.append(100.0 * cols.j_cvx[i] / padded)
+        out[ws] = np.mean(curves, axis=0) if curves else np.full(k_max, math.nan)
+    return out
+
+
+def analyse(rows: list[dict[str, str]], out: Path) -> rep.Report:
+    """Tables, figures and the paper-vs-ours rows of the finished instances."""
+    report = rep.Report(name=NAME, reproduces=REPRODUCES, command="", settings={})
+    if not rows:
+        report.sections.append(("Results", "No instance finished."))
+        return report
+    cols = Columns.from_rows(rows)
+    cum, bins = cumulative(cols), disjoint(cols)
+    report.figures += _figures(cols, cum, out)
+    report.sections.append(("Results by C_CVX(t_1) > x (the paper's curves)", _table(cum, "x")))
+    report.sections.append(("Results in disjoint C_CVX(t_1) ranges", _table(bins, "range")))
+    report.comparisons += _comparisons(cols, cum, bins)
+    return report
+
+
+def _table(stats: list[dict[str, Any]], key: str) -> str:
+    header = [f"C_CVX {'>' if key == 'x' else 'in'}", "n (all 3 solved)",
+              *(f"gap {LABELS[ws]} [mm/s]" for ws in WARMSTARTS),
+              "ART impr. vs CVX [%]", "ART impr. vs TPBVP [%]",
+              *(f"iter. {LABELS[ws]}" for ws in WARMSTARTS),
+              *(f"WS+SCP {LABELS[ws]} [s]" for ws in WARMSTARTS),
+              *(f"infeas. {LABELS[ws]} [%]" for ws in WARMSTARTS)]  # fmt: skip
+    rows = []
+    for s in stats:
+        label = ("all" if s["x"] < 0 else s["x"]) if key == "x" else (
+            f"[{s['range'][0]}, {s['range'][1]}]" if s["range"][1] < 10**6
+            else f">= {s['range'][0]}")  # fmt: skip
+        rows.append([label, f"{s['count']} ({s['count_feasible']})",
+                     *(rep.fmt(s[f"{ws}_gap"]) for ws in WARMSTARTS),
+                     rep.fmt(s["improvement_vs_convex"]), rep.fmt(s["improvement_vs_tpbvp"]),
+                     *(rep.fmt(s[f"{ws}_iterations"]) for ws in WARMSTARTS),
+                     *(f"{rep.fmt(s[f'{ws}_ws_time'], 2)}+{rep.fmt(s[f'{ws}_scp_time'], 2)}"
+                       for ws in WARMSTARTS),
+                     *(rep.fmt(s[f"{ws}_infeasible_pct"]) for ws in WARMSTARTS)])  # fmt: skip
+    return rep.markdown_table(header, rows)
+
+
+def _comparisons(cols: Columns, cum: list[dict], bins: list[dict]) -> list[rep.Comparison]:
+    gt0 = next(s for s in cum if s["x"] == 0)
+    every = next(s for s in cum if s["x"] < 0)
+    b3040 = next(s for s in bins if s["range"] == (30, 40))
+    C = rep.Comparison
+    share = 100.0 * float(np.mean(cols.c > 0))
+    return [
+        C(quantity="share of test instances with C_CVX(t_1) > 0 [%]", paper="~50",
+          ours=rep.fmt(share), note=f"{cols.c.size} instances"),
+        C(quantity="ART improvement of the gap vs CVX, C_CVX > 0 [%]", paper="> 20",
+          ours=rep.fmt(gt0["improvement_vs_convex"]), note=f"n = {gt0['count_feasible']}"),
+        C(quantity="ART improvement of the gap vs CVX-TPBVP, C_CVX > 0 [%]", paper="> 20",
+          ours=rep.fmt(gt0["improvement_vs_tpbvp"]), note=f"n = {gt0['count_feasible']}"),
+        C(quantity="ART improvement vs CVX, C_CVX in [30, 40] [%]", paper="up to 80",
+          ours=rep.fmt(b3040["improvement_vs_convex"]), note=f"n = {b3040['count_feasible']}"),
+        C(quantity="ART improvement vs CVX-TPBVP, C_CVX in [30, 40] [%]", paper="up to ~90",
+          ours=rep.fmt(b3040["improvement_vs_tpbvp"]), note=f"n = {b3040['count_feasible']}"),
+        C(quantity="SCP iterations saved by ART vs CVX, C_CVX in [30, 40]", paper="up to ~1.5",
+          ours=rep.fmt(b3040["convex_iterations"] - b3040["art_iterations"]),
+          note=f"n = {b3040['count_feasible']}"),
+        C(quantity="ART generation time (Algorithm 2) [s]", paper="~0.5 (GPU machine)",
+          ours=rep.fmt(every["art_generation_s"]), note="mean, one instance per call, 1 thread"),
+        C(quantity="convex warm start time (CVX) [s]", paper="~0.15",
+          ours=rep.fmt(every["convex_ws_time"]), note="mean"),
+        C(quantity="SCP time saved by ART vs CVX, C_CVX in [30, 40] [s]", paper="up to 1",
+          ours=rep.fmt(b3040["convex_scp_time"] - b3040["art_scp_time"])),
+        C(quantity="total time WS + SCP, CVX / CVX-TPBVP / ART [s]", paper="~2 each",
+          ours=" / ".join(rep.fmt(every[f"{ws}_ws_time"] + every[f"{ws}_scp_time"])
+                          for ws in ("convex", "tpbvp", "art")), note="mean over all"),
+        C(quantity="SCP infeasibility rate, CVX-TPBVP / CVX / ART [%]",
+          paper="Fig. 6 only (no number in the text)",
+          ours=" / ".join(rep.fmt(every[f"{ws}_infeasible_pct"]) for ws in WARMSTARTS)),
+    ]  # fmt: skip
+
+
+def _plot_lines(ax: Any, x: np.ndarray, cum: list[dict], key: str, ylabel: str) -> None:
+    for ws in WARMSTARTS:
+        ax.plot(x, [s[f"{ws}_{key}"] for s in cum], "o-", color=COLORS[ws], label=LABELS[ws])
+    ax.set_xlabel("C_CVX(t_1) > x")
+    ax.set_ylabel(ylabel)
+
+
+def _counts(ax: Any, x: np.ndarray, cum: list[dict]) -> None:
+    """The paper's grey dashed line: instances with C_CVX(t_1) > x."""
+    twin = ax.twinx()
+    twin.plot(x, [s["count"] for s in cum], "--", color="grey", label="samples")
+    twin.set_ylabel("test samples", color="grey")
+
+
+def _figures(cols: Columns, cum: list[dict], out: Path) -> list[tuple[str, str]]:
+    x = np.array([s["x"] for s in cum], dtype=float)
+    files = []
+    fig, (a, b) = rep.new_figure()
+    _plot_lines(a, x, cum, "gap", "suboptimality gap J_SCP - J_CVX [mm/s]")
+    a.legend()
+    _counts(a, x, cum)
+    for ws in WARMSTARTS[:2]:
+        b.plot(x, [s[f"improvement_vs_{ws}"] for s in cum], "o-", color=COLORS[ws],
+               label=f"ART vs {LABELS[ws]}")  # fmt: skip
+    b.axhline(0.0, color="black", lw=0.5)
+    b.set_xlabel("C_CVX(t_1) > x")
+    b.set_ylabel("ART improvement of the gap [%]")
+    b.legend()
+    _counts(b, x, cum)
+    files.append((rep.save_figure(fig, out / "fig4_cost.png"),
+                  "Fig. 4: suboptimality gap (left), ART's improvement (right)"))  # fmt: skip
+    fig, (a, b) = rep.new_figure()
+    _plot_lines(a, x, cum, "iterations", "SCP iterations")
+    a.legend()
+    _counts(a, x, cum)
+    k_max = max((h.size for ws in WARMSTARTS for h in cols.history[ws]), default=1)
+    for ws, curve in convergence(cols, max(k_max, 1)).items():
+        b.plot(np.arange(1, curve.size + 1), curve, "o-", color=COLORS[ws], label=LABELS[ws])
+    b.set_xlabel("SCP iteration")
+    b.set_ylabel("100 J_CVX / J_k [%] (C_CVX > 1)")
+    b.legend()
+    files.append((rep.save_figure(fig, out / "fig5_iterations.png"),
+                  "Fig. 5: SCP iterations (left), cost convergence (right)"))  # fmt: skip
+    fig, (a, b) = rep.new_figure()
+    for ws in WARMSTARTS:
+        ws_t = np.array([s[f"{ws}_ws_time"] for s in cum])
+        scp_t = np.array([s[f"{ws}_scp_time"] for s in cum])
+        a.plot(x, ws_t, "-.", color=COLORS[ws], label=f"{LABELS[ws]} WS")
+        a.plot(x, scp_t, "--", color=COLORS[ws], label=f"{LABELS[ws]} SCP")
+        a.plot(x, ws_t + scp_t, "-", color=COLORS[ws], label=f"{LABELS[ws]} Tot")
+    a.set_xlabel("C_CVX(t_1) > x")
+    a.set_ylabel("runtime [s]")
+    a.legend(fontsize=7, ncol=3)
+    _plot_lines(b, x, cum, "infeasible_pct", "SCP infeasibility rate [%]")
+    b.legend()
+    _counts(b, x, cum)
+    files.append((rep.save_figure(fig, out / "fig6_runtime.png"),
+                  "Fig. 6: runtime split (left), SCP infeasibility rate (right)"))  # fmt: skip
+    return files

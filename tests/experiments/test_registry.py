@@ -1,0 +1,52 @@
+import pytest
+
+from scpformer.cli.main import main
+from scpformer.experiments import EXPERIMENTS, RunOptions, get_experiment
+
+PAPER_ITEMS = {
+    "art-forecast-tpbvp": "Table 2", "art-forecast-scp": "Table 3",
+    "art-conditioning": "Fig. 3", "art-warmstart": "Figs. 4-6",
+    "robust-warmstart": "Figs. 5-6", "robust-trajectory": "Figs. 7-8",
+    "robust-posthoc": "Figs. 9-10",
+}  # fmt: skip
+
+
+def test_the_registry_has_one_entry_per_paper_table_or_figure():
+    assert set(EXPERIMENTS) == set(PAPER_ITEMS)
+    for name, item in PAPER_ITEMS.items():
+        assert EXPERIMENTS[name].reproduces.endswith(item)
+
+
+def test_experiment_list_names_every_experiment_and_what_it_reproduces(capsys):
+    assert main(["experiment", "list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == len(PAPER_ITEMS)
+    for name, item in PAPER_ITEMS.items():
+        assert any(line.startswith(name) and item in line for line in lines)
+
+
+def test_an_unknown_experiment_is_a_one_line_error(capsys):
+    assert main(["experiment", "run", "art-nothing", "--out", "x"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown experiment 'art-nothing'" in err[0]
+    with pytest.raises(ValueError, match="art-warmstart"):
+        get_experiment("nope")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--model", "/nonexistent/run", "--data", "/nonexistent/ds"], "--data /nonexistent/ds"),
+        ([], "--data DIR is required"),
+    ],
+)
+def test_bad_paths_are_one_line_errors(tmp_path, capsys, argv, message):
+    code = main(["experiment", "run", "art-warmstart", "--out", str(tmp_path / "o"), *argv])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+
+
+def test_run_options_reject_a_nonpositive_n(tmp_path):
+    with pytest.raises(ValueError, match="n must be a positive integer"):
+        RunOptions(out=tmp_path, n=0)
