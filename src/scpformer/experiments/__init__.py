@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +43,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces=f"{_ART} Table 2",
             summary="ART/GRU/LSTM forecasts of Problem 1 (TPBVP) solutions",
             module="scpformer.experiments.forecast_study",
-            default_n=100,
+            default_n=200,
             models="ART, GRU and LSTM runs trained on Problem 1 twins",
         ),
         Experiment(
@@ -51,7 +51,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces=f"{_ART} Table 3",
             summary="ART/GRU/LSTM forecasts of Problem 3 (SCP) solutions",
             module="scpformer.experiments.forecast_study",
-            default_n=100,
+            default_n=200,
             models="ART, GRU and LSTM runs (any order; kinds read from the checkpoints)",
         ),
         Experiment(
@@ -59,7 +59,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces=f"{_ART} Fig. 3",
             summary="realized vs requested constraint-to-go and reward-to-go",
             module="scpformer.experiments.conditioning",
-            default_n=20,
+            default_n=40,
             models="one ART run",
         ),
         Experiment(
@@ -67,7 +67,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces=f"{_ART} Figs. 4-6",
             summary="SCP warm-started by CVX-TPBVP, CVX and ART, binned by C_CVX(t_1)",
             module="scpformer.experiments.warmstart_study",
-            default_n=100,
+            default_n=300,
             models="one ART run",
         ),
         Experiment(
@@ -109,6 +109,8 @@ def run_experiment(name: str, options: RunOptions, command: str = "") -> Path:
     """Run experiment ``name``; returns the path of its ``report.md``."""
     experiment = get_experiment(name)
     run: Any = experiment.runner()
+    if options.n is None:
+        options = replace(options, n=experiment.default_n)
     return run(options, command=command, name=name)
 
 

@@ -93,6 +93,13 @@ def require_models(options: RunOptions, count: int | None = None) -> tuple[Path,
     return options.models
 
 
+def require_n(options: RunOptions) -> int:
+    """``options.n`` (:func:`scpformer.experiments.run_experiment` fills in the default)."""
+    if options.n is None:
+        raise ValueError("n is required (run through scpformer.experiments.run_experiment)")
+    return int(options.n)
+
+
 def test_positions(folder: Path, n: int, seed: int) -> np.ndarray:
     """``n`` sample positions of the test split, drawn without replacement with ``seed``.
 

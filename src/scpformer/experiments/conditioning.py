@@ -1,0 +1,201 @@
+"""``art-conditioning``: realized vs requested performance parameters (ART paper Fig. 3).
+
+For each test instance, ART generates trajectories (Algorithm 2) for a sweep of requested
+constraint-to-go ``C(t_1)`` (with ``R(t_1) = -J_CVX``) and of requested cost ``-R(t_1)``
+(with ``C(t_1) = 0``); the realized values are the generated trajectory's constraint-to-go
+(keep-out violations, Eqs. 5, 21) and cost ``sum |dv|_2``. Each instance's sweep is generated
+as one batch through the model. The sweep spans the training split's range of each parameter
+(shaded in the figure, as in the paper) and extends beyond it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
+from scpformer.data.splits import load_splits
+from scpformer.data.storage import ShardedSamples, read_manifest
+from scpformer.experiments import report as rep
+from scpformer.experiments.runner import (
+    KEY,
+    RESULTS_NAME,
+    ResultsCSV,
+    RunOptions,
+    check_settings,
+    dataset_commands,
+    join_series,
+    model_command,
+    read_fields,
+    require_data,
+    require_models,
+    require_n,
+    run_tasks,
+    series,
+    settings_dict,
+    test_positions,
+)
+
+NAME = "art-conditioning"
+SWEEP = 9  # requested values per parameter
+COLUMNS = (KEY, "j_cvx", "ctg_requested", "ctg_realized", "cost_requested_m_s",
+           "cost_realized_m_s", "status", "message")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Task:
+    index: int
+    theta: np.ndarray
+    j_cvx: float
+    ctg_requested: tuple[float, ...]
+    cost_requested: tuple[float, ...]  # -R(t_1) [m/s]
+
+
+class ConditioningSolver:
+    """One instance's sweep through ART, as one batch (runs in the workers)."""
+
+    def __init__(self, checkpoint: Path, data_config: dict[str, Any]) -> None:
+        self.checkpoint, self.data_config = checkpoint, data_config
+        self._ckpt: Any = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_ckpt": None}
+
+    def warm_up(self) -> None:
+        import torch
+
+        from scpformer.train.checkpoint import load_checkpoint
+
+        torch.set_num_threads(1)
+        self._ckpt = load_checkpoint(self.checkpoint, family="rendezvous")
+
+    def solve(self, task: Task) -> dict[str, Any]:
+        from scpformer.warmstart.art import generate
+        from scpformer.warmstart.families import RendezvousArtFamily
+
+        config = RendezvousDataConfig.from_dict(self.data_config)
+        instance = instance_from_theta(task.theta, config.scenario)
+        nc, nr = len(task.ctg_requested), len(task.cost_requested)
+        adapter = RendezvousArtFamily()
+        batch = adapter.batch([instance] * (nc + nr))
+        rtg0 = -np.concatenate([np.full(nc, task.j_cvx), task.cost_requested])
+        ctg0 = np.concatenate([task.ctg_requested, np.zeros(nr)])
+        rollout = generate(self._ckpt.model, self._ckpt.normalization, batch, adapter,
+                           frame=self._ckpt.frame, art_mode="dynamics", rtg0=rtg0, ctg0=ctg0)  # fmt: skip
+        ctg = [adapter.trajectory_ctg(instance, batch.models[i], rollout.x[i], rollout.u[i])
+               for i in range(nc)]  # fmt: skip
+        cost = np.linalg.norm(rollout.u[nc:], axis=2).sum(axis=1)
+        return {KEY: task.index, "j_cvx": task.j_cvx, "status": "ok", "message": "",
+                "ctg_requested": join_series(task.ctg_requested),
+                "ctg_realized": join_series(ctg),
+                "cost_requested_m_s": join_series(task.cost_requested),
+                "cost_realized_m_s": join_series(cost)}  # fmt: skip
+
+
+def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
+    return {KEY: key, "status": status, "message": message}
+
+
+def training_ranges(folder: Path) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Ranges of ``C(t_1)`` and of the cost over the training split's trajectories."""
+    train = load_splits(folder).indices["train"]
+    samples = ShardedSamples(folder)
+    try:
+        ctg = np.concatenate([samples.column(f"{t}_ctg")[train, 0] for t in ("cvx", "scp")])
+        cost = np.concatenate([samples.column(f"{t}_cost")[train] for t in ("cvx", "scp")])
+    finally:
+        samples.close()
+    ctg, cost = ctg[np.isfinite(ctg)], cost[np.isfinite(cost)]
+    if not (ctg.size and cost.size):
+        raise ValueError(f"--data {folder}: no solved training trajectory")
+    return (float(ctg.min()), float(ctg.max())), (float(cost.min()), float(cost.max()))
+
+
+def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
+    """Run ``art-conditioning`` into ``options.out``; returns the report's path."""
+    data = require_data(options)
+    (model,) = require_models(options, 1)
+    manifest = read_manifest(data)
+    if manifest.family != "rendezvous":
+        raise ValueError(f"--data {data}: a {manifest.family} dataset, not rendezvous")
+    from scpformer.train.checkpoint import load_checkpoint
+
+    load_checkpoint(model, family="rendezvous")  # fails fast on a wrong model
+    (c_lo, c_hi), (j_lo, j_hi) = training_ranges(data)
+    ctg_sweep = tuple(float(v) for v in np.unique(np.round(np.linspace(0, 1.25 * c_hi, SWEEP))))
+    cost_sweep = tuple(float(v) for v in np.linspace(0.5 * j_lo, 1.5 * j_hi, SWEEP))
+    positions = test_positions(data, require_n(options), options.seed)
+    settings = settings_dict(options, experiment=NAME, n=int(positions.size),
+                             ctg_sweep=ctg_sweep, cost_sweep_m_s=cost_sweep,
+                             training_ctg_range=(c_lo, c_hi),
+                             training_cost_range_m_s=(j_lo, j_hi))  # fmt: skip
+    check_settings(options.out, settings)
+    tasks = [Task(int(p), np.asarray(f["theta"]), float(f["cvx_cost"]), ctg_sweep, cost_sweep)
+             for p, f in zip(positions, read_fields(data, positions, ["theta", "cvx_cost"]),
+                             strict=True) if np.isfinite(f["cvx_cost"])]  # fmt: skip
+    results = ResultsCSV(options.out / RESULTS_NAME, COLUMNS)
+    run_tasks(ConditioningSolver(model, manifest.config), tasks, [t.index for t in tasks],
+              options, results, failure_row)  # fmt: skip
+    wanted = {t.index for t in tasks}
+    rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
+    report = rep.Report(name=NAME, reproduces="ART paper Fig. 3", command=command,
+                        settings=settings,
+                        provenance=[*dataset_commands(data), model_command(model)])  # fmt: skip
+    report.sections.append(("Instances", f"{len(rows)} of {positions.size} test instances."))
+    if rows:
+        analyse(rows, (c_lo, c_hi), (j_lo, j_hi), report, options.out)
+    return report.write(options.out)
+
+
+def correlation(a: np.ndarray, b: np.ndarray) -> float:
+    """Pearson correlation of ``a`` and ``b`` (NaN when either is constant or too short)."""
+    if a.size < 2 or np.std(a) == 0.0 or np.std(b) == 0.0:
+        return float("nan")
+    return float(np.corrcoef(a, b)[0, 1])
+
+
+def analyse(rows: list[dict[str, str]], ctg_range: tuple[float, float],
+            cost_range: tuple[float, float], report: rep.Report, out: Path) -> None:  # fmt: skip
+    """Correlations, the table of means, and Fig. 3."""
+    c_req = series(rows[0]["ctg_requested"])
+    j_req = series(rows[0]["cost_requested_m_s"])
+    c_real = np.stack([series(r["ctg_realized"]) for r in rows])  # (n, sweep)
+    j_real = np.stack([series(r["cost_realized_m_s"]) for r in rows])
+    inside = (j_req >= cost_range[0]) & (j_req <= cost_range[1])
+    corr_c = correlation(np.tile(c_req, len(rows)), c_real.ravel())
+    corr_j = correlation(np.tile(j_req[inside], len(rows)), j_real[:, inside].ravel())
+    C = rep.Comparison
+    report.comparisons += [
+        C(quantity="correlation of realized vs requested C(t_1)", paper="highly correlated "
+          "(Fig. 3 top; no number)", ours=rep.fmt(corr_c)),
+        C(quantity="correlation of realized vs requested cost, inside the dataset range",
+          paper="highly correlated (Fig. 3 bottom; no number)", ours=rep.fmt(corr_j)),
+    ]  # fmt: skip
+    rows_c = [(rep.fmt(c), rep.fmt(float(np.mean(c_real[:, i]))),
+               rep.fmt(float(np.std(c_real[:, i])))) for i, c in enumerate(c_req)]  # fmt: skip
+    rows_j = [(rep.fmt(1e3 * j), rep.fmt(1e3 * float(np.mean(j_real[:, i]))),
+               "yes" if inside[i] else "no") for i, j in enumerate(j_req)]  # fmt: skip
+    report.sections.append(("Constraint-to-go sweep", rep.markdown_table(
+        ("requested C(t_1)", "realized mean", "realized std"), rows_c)))  # fmt: skip
+    report.sections.append(("Cost sweep", rep.markdown_table(
+        ("requested cost [mm/s]", "realized mean [mm/s]", "in dataset range"), rows_j)))  # fmt: skip
+    fig, (a, b) = rep.new_figure(ncols=2)
+    for ax, req, real, scale, rng, what in (
+        (a, c_req, c_real, 1.0, ctg_range, "constraint-to-go C(t_1)"),
+        (b, j_req, j_real, 1e3, cost_range, "cost -R(t_1) [mm/s]"),
+    ):
+        ax.axvspan(scale * rng[0], scale * rng[1], color="gold", alpha=0.3, label="dataset")
+        for i, x in enumerate(req):
+            ax.plot(np.full(real.shape[0], scale * x), scale * real[:, i], ".", color="tab:blue",
+                    alpha=0.5)  # fmt: skip
+        ax.plot(scale * req, scale * real.mean(axis=0), "o-", color="tab:blue", label="ART")
+        ax.plot(scale * req, scale * req, "k--", label="ideal")
+        ax.set_xlabel(f"requested {what}")
+        ax.set_ylabel(f"realized {what}")
+        ax.legend()
+    report.figures.append((rep.save_figure(fig, out / "fig3_conditioning.png"),
+                           "Fig. 3: realized vs requested constraint-to-go (left) and cost "
+                           "(right); dataset range shaded"))  # fmt: skip

@@ -1,0 +1,277 @@
+"""``art-forecast-tpbvp`` / ``art-forecast-scp``: ART paper Tables 2 and 3 (Sec. 5.1).
+
+On test-split instances, every given model (ART, GRU, LSTM; kinds read from the checkpoints)
+generates the whole trajectory transformer-only (Algorithm 1) and with the dynamics in the
+loop (Algorithm 2), one instance per call, conditioned on ``R(t_1) = -J_CVX`` (the dataset's
+Problem 2 cost: the deployable conditioning of the paper's Sec. 3) and ``C(t_1) = 0``. Each
+prediction is compared with the twin the table names by
+:func:`scpformer.experiments.forecast.forecast_metrics`; "True" is the optimizer's own cost
+and solve time as stored in the dataset (measured while the dataset was generated).
+
+Table 2 needs the Problem 1 (TPBVP) twin: the rendezvous family stores the Problem 2 and
+Problem 3 twins only, so on such a dataset ``art-forecast-tpbvp`` writes a report saying so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
+from scpformer.data.storage import read_manifest
+from scpformer.experiments import report as rep
+from scpformer.experiments.forecast import ForecastMetrics, forecast_metrics
+from scpformer.experiments.runner import (
+    KEY,
+    RESULTS_NAME,
+    ResultsCSV,
+    RunOptions,
+    check_settings,
+    column,
+    dataset_commands,
+    model_command,
+    read_fields,
+    require_data,
+    require_models,
+    require_n,
+    run_tasks,
+    settings_dict,
+    test_positions,
+)
+
+TWIN = {"art-forecast-tpbvp": "tpbvp", "art-forecast-scp": "scp"}
+TABLE = {"art-forecast-tpbvp": "Table 2", "art-forecast-scp": "Table 3"}
+PROBLEM = {"tpbvp": "Problem 1 (TPBVP)", "scp": "Problem 3 (SCP)"}
+MODES = ("transformer", "dynamics")
+KINDS = ("gru", "lstm", "art")
+METRICS = tuple(f.name for f in fields(ForecastMetrics) if f.name != "true_cost_mm_s")
+ROWS = (  # the tables' rows: (label, metric column, unit)
+    ("Trajectory RMSE, RTN pos.", "rtn_pos_rmse_m", "m"),
+    ("Trajectory RMSE, RTN vel.", "rtn_vel_rmse_mm_s", "mm/s"),
+    ("Trajectory RMSE, ROE", "roe_rmse_m", "m"),
+    ("Target RMSE, RTN pos.", "target_rtn_pos_m", "m"),
+    ("Target RMSE, RTN vel.", "target_rtn_vel_mm_s", "mm/s"),
+    ("Target RMSE, ROE", "target_roe_m", "m"),
+    ("Cost sum |dv|", "cost_mm_s", "mm/s"),
+    ("Impulse accuracy", "impulse_accuracy_pct", "%"),
+    ("Control error RMSE", "control_rmse_mm_s", "mm/s"),
+    ("Comp. time", "time_s", "s"),
+)
+# The paper's values per table, row metric -> (GRU, LSTM, ART transformer-only, GRU, LSTM,
+# ART dynamics-in-the-loop, True); None where the paper prints "-" or no row.
+PAPER: dict[str, dict[str, tuple[float | None, ...]]] = {
+    "art-forecast-tpbvp": {
+        "rtn_pos_rmse_m": (1221.50, 185.95, 140.83, 33.14, 37.38, 15.99, None),
+        "rtn_vel_rmse_mm_s": (350.33, 128.89, 134.39, 16.12, 15.60, 10.23, None),
+        "roe_rmse_m": (880.77, 122.73, 85.69, 21.49, 24.84, 14.95, None),
+        "target_rtn_pos_m": (3473.70, 334.33, 202.05, 17.69, 30.29, 19.43, None),
+        "target_rtn_vel_mm_s": (730.30, 190.08, 198.67, 11.49, 13.18, 6.90, None),
+        "target_roe_m": (2466.42, 225.08, 120.33, 15.47, 27.34, 16.10, None),
+        "cost_mm_s": (396.69, 261.52, 241.00, 267.66, 260.79, 226.14, 220.25),
+        "impulse_accuracy_pct": (22.0, 14.4, 10.2, 82.8, 86.0, 86.0, None),
+        "control_rmse_mm_s": (45.6, 43.2, 38.8, 25.7, 22.5, 13.6, None),
+        "time_s": (0.61, 0.71, 0.90, 0.35, 0.41, 0.44, 0.28),
+    },
+    "art-forecast-scp": {
+        "rtn_pos_rmse_m": (82.19, 31.05, 25.02, 18.62, 17.69, 17.94, None),
+        "rtn_vel_rmse_mm_s": (116.24, 17.30, 15.08, 14.01, 13.03, 12.35, None),
+        "roe_rmse_m": (48.28, 22.62, 17.17, 14.74, 13.42, 13.18, None),
+        "target_rtn_pos_m": (280.04, 59.52, 34.90, 19.59, 16.59, 16.83, None),
+        "target_rtn_vel_mm_s": (83.52, 26.75, 14.81, 31.18, 27.82, 20.65, None),
+        "target_roe_m": (117.76, 46.34, 25.31, 34.33, 29.32, 25.56, None),
+        "cost_mm_s": (362.42, 254.76, 249.62, 294.95, 284.37, 257.28, 241.34),
+        "time_s": (0.61, 0.71, 0.90, 0.35, 0.41, 0.44, 2.21),
+    },
+}
+COMBOS = tuple((mode, kind) for mode in MODES for kind in KINDS)  # the paper's column order
+
+
+def label(mode: str, kind: str) -> str:
+    """CSV column prefix of one model and inference mode."""
+    return f"{kind}_{mode}"
+
+
+def columns(kinds: tuple[str, ...]) -> tuple[str, ...]:
+    per = (*METRICS, "time_s")
+    combos = [label(m, k) for m in MODES for k in kinds]
+    return (KEY, "j_cvx", "true_cost_mm_s", "true_time_s",
+            *(f"{c}_{name}" for c in combos for name in per), "status", "message")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Task:
+    """One test instance: theta, ``J_CVX`` and the true twin."""
+
+    index: int
+    theta: np.ndarray
+    j_cvx: float
+    true_roe: np.ndarray
+    true_rtn: np.ndarray
+    true_dv: np.ndarray
+    true_time: float
+
+
+class ForecastSolver:
+    """Per-instance generation by every model in both modes (runs in the workers)."""
+
+    def __init__(self, checkpoints: tuple[Path, ...], data_config: dict[str, Any]) -> None:
+        self.checkpoints, self.data_config = checkpoints, data_config
+        self._models: list[Any] = []
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_models": []}
+
+    def warm_up(self) -> None:
+        import torch
+
+        from scpformer.train.checkpoint import load_checkpoint
+
+        torch.set_num_threads(1)
+        self._models = [load_checkpoint(p, family="rendezvous") for p in self.checkpoints]
+
+    def solve(self, task: Task) -> dict[str, Any]:
+        from scpformer.warmstart.art import generate
+        from scpformer.warmstart.families import RendezvousArtFamily
+
+        config = RendezvousDataConfig.from_dict(self.data_config)
+        instance = instance_from_theta(task.theta, config.scenario)
+        adapter = RendezvousArtFamily()
+        batch = adapter.batch([instance])
+        row: dict[str, Any] = {KEY: task.index, "j_cvx": task.j_cvx, "status": "ok",
+                               "message": "", "true_time_s": task.true_time,
+                               "true_cost_mm_s": 1e3 * np.linalg.norm(task.true_dv, axis=1).sum()}  # fmt: skip
+        for ckpt in self._models:
+            for mode in MODES:
+                rollout = generate(ckpt.model, ckpt.normalization, batch, adapter,
+                                   frame=ckpt.frame, art_mode=mode,
+                                   rtg0=np.array([-task.j_cvx]), ctg0=np.zeros(1))  # fmt: skip
+                x, u = rollout.x[0], rollout.u[0]
+                metrics = forecast_metrics(batch.models[0].rtn(x), x, u, task.true_rtn,
+                                           task.true_roe, task.true_dv)  # fmt: skip
+                prefix = label(mode, ckpt.kind)
+                row.update({f"{prefix}_{k}": getattr(metrics, k) for k in METRICS})
+                row[f"{prefix}_time_s"] = rollout.time_s
+        return row
+
+
+def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
+    return {KEY: key, "status": status, "message": message}
+
+
+def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp") -> Path:
+    """Run Table 2 (``art-forecast-tpbvp``) or Table 3 (``art-forecast-scp``)."""
+    if name not in TWIN:
+        raise ValueError(f"name must be one of {tuple(TWIN)}, got {name!r}")
+    data = require_data(options)
+    models = require_models(options)
+    manifest = read_manifest(data)
+    if manifest.family != "rendezvous":
+        raise ValueError(f"--data {data}: a {manifest.family} dataset, not rendezvous")
+    from scpformer.train.checkpoint import load_checkpoint
+
+    kinds = tuple(load_checkpoint(m, family="rendezvous").kind for m in models)
+    if len(set(kinds)) != len(kinds):
+        raise ValueError(f"--model: one run per model kind, got kinds {kinds}")
+    twin = TWIN[name]
+    positions = test_positions(data, require_n(options), options.seed)
+    settings = settings_dict(options, experiment=name, n=int(positions.size), kinds=list(kinds),
+                             twin=twin, conditioning="R(t_1) = -J_CVX (dataset's cvx_cost), "
+                             "C(t_1) = 0")  # fmt: skip
+    check_settings(options.out, settings)
+    report = rep.Report(name=name, reproduces=f"ART paper {TABLE[name]}", command=command,
+                        settings=settings,
+                        provenance=[*dataset_commands(data), *map(model_command, models)])  # fmt: skip
+    if f"{twin}_roe" not in {f.name for f in manifest.schema}:
+        report.sections.append(("Not run", missing_twin_text(name, twin)))
+        return report.write(options.out)
+    names = ["theta", "cvx_cost", f"{twin}_roe", f"{twin}_rtn", f"{twin}_dv",
+             f"{twin}_solve_time", "cvx_solve_time", f"{twin}_status"]  # fmt: skip
+    tasks = []
+    for p, f in zip(positions, read_fields(data, positions, names), strict=True):
+        if f[f"{twin}_status"] != "converged" or not np.isfinite(f["cvx_cost"]):
+            continue  # no true trajectory to compare with
+        true_time = float(f[f"{twin}_solve_time"]) + (float(f["cvx_solve_time"])
+                                                      if twin == "scp" else 0.0)  # fmt: skip
+        tasks.append(Task(int(p), np.asarray(f["theta"]), float(f["cvx_cost"]),
+                          np.asarray(f[f"{twin}_roe"]), np.asarray(f[f"{twin}_rtn"]),
+                          np.asarray(f[f"{twin}_dv"]), true_time))  # fmt: skip
+    results = ResultsCSV(options.out / RESULTS_NAME, columns(kinds))
+    run_tasks(ForecastSolver(models, manifest.config), tasks, [t.index for t in tasks], options,
+              results, failure_row)  # fmt: skip
+    wanted = {t.index for t in tasks}
+    rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
+    report.sections.append(("Instances", f"{len(rows)} of {positions.size} selected test "
+                            f"instances (those with a converged {twin} twin: {len(tasks)})."))  # fmt: skip
+    if rows:
+        analyse(name, rows, kinds, report, options.out)
+    return report.write(options.out)
+
+
+def missing_twin_text(name: str, twin: str) -> str:
+    return (f"{TABLE[name]} compares predictions with {PROBLEM[twin]} solutions, and this "
+            f"dataset has no `{twin}` twin: the rendezvous family stores the Problem 2 "
+            "(`cvx`) and Problem 3 (`scp`) twins only. Adding the Problem 1 twin to the "
+            "family (and training on it) is left for later; `art-forecast-scp` (Table 3) "
+            "runs on this dataset.")  # fmt: skip
+
+
+def means(rows: list[dict[str, str]], kinds: tuple[str, ...]) -> dict[str, dict[str, float]]:
+    """Test-set mean of every metric per column (``label`` or ``"true"``)."""
+    out: dict[str, dict[str, float]] = {}
+    for mode, kind in COMBOS:
+        if kind in kinds:
+            prefix = label(mode, kind)
+            out[prefix] = {k: float(np.nanmean(column(rows, f"{prefix}_{k}")))
+                           for k in (*METRICS, "time_s")}  # fmt: skip
+    out["true"] = {"cost_mm_s": float(np.mean(column(rows, "true_cost_mm_s"))),
+                   "time_s": float(np.mean(column(rows, "true_time_s")))}  # fmt: skip
+    return out
+
+
+def analyse(name: str, rows: list[dict[str, str]], kinds: tuple[str, ...], report: rep.Report,
+            out: Path) -> None:  # fmt: skip
+    """The table in the paper's layout (ours / paper), the headline claims, a figure."""
+    m = means(rows, kinds)
+    paper = PAPER[name]
+    header = ["metric", *(f"{k.upper()} {'T-only' if mode == 'transformer' else 'dyn.'}"
+                          for mode, k in COMBOS), "True"]  # fmt: skip
+    table = []
+    for title, key, unit in ROWS:
+        cells = [f"{title} [{unit}]"]
+        for j, combo in enumerate([*(label(mo, k) for mo, k in COMBOS), "true"]):
+            ours = m.get(combo, {}).get(key, math.nan)
+            ref = paper.get(key, (None,) * 7)[j]
+            cells.append(f"{rep.fmt(ours)} / {'-' if ref is None else ref}")
+        table.append(cells)
+    report.sections.append((f"{TABLE[name]}: ours / paper (test-set means, n = {len(rows)})",
+                            rep.markdown_table(header, table)))  # fmt: skip
+    art = m.get("art_dynamics", {})
+    C = rep.Comparison
+    for key, what in (("control_rmse_mm_s", "control error"), ("cost_mm_s", "cost")):
+        others = [m[label("dynamics", k)][key] for k in ("gru", "lstm") if k in kinds]
+        ours = art.get(key, math.nan)
+        ahead = bool(others) and all(ours < o for o in others)
+        report.comparisons.append(C(
+            quantity=f"ART dynamics-in-the-loop ahead of GRU and LSTM on {what}",
+            paper="yes", ours=("yes" if ahead else "no") + f" ({rep.fmt(ours)} vs "
+            + ", ".join(rep.fmt(o) for o in others) + ")"))  # fmt: skip
+    report.comparisons.append(C(
+        quantity="ART generation vs optimizer time (Table 3: ~5x faster)", paper="0.44 vs 2.21 s",
+        ours=f"{rep.fmt(art.get('time_s', math.nan))} vs {rep.fmt(m['true']['time_s'])} s",
+        note="generation: 1 thread, one instance per call; optimizer: dataset timings"))  # fmt: skip
+    fig, (a, b) = rep.new_figure()
+    combos = [c for c in (label(mo, k) for mo, k in COMBOS) if c in m]
+    for ax, key, ylabel in ((a, "control_rmse_mm_s", "control error RMSE [mm/s]"),
+                            (b, "cost_mm_s", "cost sum |dv| [mm/s]")):  # fmt: skip
+        ax.bar(range(len(combos)), [m[c][key] for c in combos], color="tab:blue")
+        if key == "cost_mm_s":
+            ax.axhline(m["true"]["cost_mm_s"], color="black", ls="--", label="True")
+            ax.legend()
+        ax.set_xticks(range(len(combos)), combos, rotation=30, fontsize=8)
+        ax.set_ylabel(ylabel)
+    report.figures.append((rep.save_figure(fig, out / "forecast.png"),
+                           f"{TABLE[name]}: control error and cost per model and mode"))  # fmt: skip

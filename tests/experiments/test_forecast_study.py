@@ -1,0 +1,62 @@
+import csv
+
+import pytest
+
+from scpformer.cli.main import main
+
+pytestmark = pytest.mark.slow
+
+
+def _run(tmp_path, tiny_data, tiny_runs, name, kinds=("art", "gru", "lstm")):
+    out = tmp_path / name
+    models = [a for k in kinds for a in ("--model", str(tiny_runs[k]))]
+    argv = ["experiment", "run", name, *models, "--data", str(tiny_data), "--n", "2",
+            "--workers", "1", "--out", str(out)]  # fmt: skip
+    return main(argv), out
+
+
+def test_table_3_compares_every_model_in_both_modes_with_the_scp_twin(
+    tmp_path, tiny_data, tiny_runs
+):
+    code, out = _run(tmp_path, tiny_data, tiny_runs, "art-forecast-scp")
+    assert code == 0
+    with (out / "results.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 2
+    for row in rows:
+        for kind in ("art", "gru", "lstm"):
+            for mode in ("transformer", "dynamics"):
+                assert float(row[f"{kind}_{mode}_cost_mm_s"]) > 0.0
+                assert float(row[f"{kind}_{mode}_time_s"]) > 0.0
+        assert float(row["true_cost_mm_s"]) > 0.0
+    text = (out / "report.md").read_text()
+    assert "Table 3: ours / paper" in text and "257.28" in text  # the paper's ART cost
+    assert (out / "forecast.png").is_file()
+
+
+def test_table_2_says_the_tpbvp_twin_is_missing(tmp_path, tiny_data, tiny_runs):
+    code, out = _run(tmp_path, tiny_data, tiny_runs, "art-forecast-tpbvp", kinds=("art",))
+    assert code == 0
+    assert "dataset has no `tpbvp` twin" in (out / "report.md").read_text()
+    assert not (out / "results.csv").exists()
+
+
+def test_two_runs_of_one_kind_are_a_one_line_error(tmp_path, tiny_data, tiny_runs, capsys):
+    code, _ = _run(tmp_path, tiny_data, tiny_runs, "art-forecast-scp", kinds=("art", "art"))
+    assert code == 2
+    assert "one run per model kind" in capsys.readouterr().err
+
+
+def test_conditioning_sweeps_requested_values_and_records_realized_ones(
+    tmp_path, tiny_data, tiny_runs
+):
+    code, out = _run(tmp_path, tiny_data, tiny_runs, "art-conditioning", kinds=("art",))
+    assert code == 0
+    with (out / "results.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    for row in rows:
+        requested = row["ctg_requested"].split()
+        assert requested[0] == "0.0" and len(row["ctg_realized"].split()) == len(requested)
+        assert len(row["cost_realized_m_s"].split()) == len(row["cost_requested_m_s"].split())
+    assert (out / "fig3_conditioning.png").is_file()
+    assert "realized vs requested C(t_1)" in (out / "report.md").read_text()
