@@ -11,8 +11,11 @@ from scpformer.data.rendezvous_family import RendezvousDataConfig, RendezvousFam
 from scpformer.data.splits import SplitConfig, make_splits
 
 N_INSTANCES = 6
-TINY = {"art": {"n_layer": 1, "n_head": 2, "n_embd": 16}, "gru": {"n_layer": 1, "n_embd": 16},
-        "lstm": {"n_layer": 1, "n_embd": 16}}  # fmt: skip
+TINY = {
+    "art": {"n_layer": 1, "n_head": 2, "n_embd": 16},
+    "gru": {"n_layer": 1, "n_embd": 16},
+    "lstm": {"n_layer": 1, "n_embd": 16},
+}
 
 
 @pytest.fixture(scope="session")
@@ -36,10 +39,18 @@ def _random_run(folder, data, kind):
     torch.manual_seed(0)
     config = preset(kind, "small", **TINY[kind])
     view = ArtSequenceDataset(data, "train", frame="rtn", normalize=False)
-    save_checkpoint(folder, model=build_model(kind, config), kind=kind, config=config,
-                    normalization=ArtNormalization.from_dataset(view), frame="rtn",
-                    family="rendezvous", manifest_digest=manifest_digest(data), seed=0,
-                    n_steps=100)  # fmt: skip
+    save_checkpoint(
+        folder,
+        model=build_model(kind, config),
+        kind=kind,
+        config=config,
+        normalization=ArtNormalization.from_dataset(view),
+        frame="rtn",
+        family="rendezvous",
+        manifest_digest=manifest_digest(data),
+        seed=0,
+        n_steps=100,
+    )
     return folder
 
 

@@ -10,8 +10,20 @@ pytestmark = pytest.mark.slow
 def _run(tmp_path, tiny_data, tiny_runs, name, kinds=("art", "gru", "lstm")):
     out = tmp_path / name
     models = [a for k in kinds for a in ("--model", str(tiny_runs[k]))]
-    argv = ["experiment", "run", name, *models, "--data", str(tiny_data), "--n", "2",
-            "--workers", "1", "--out", str(out)]  # fmt: skip
+    argv = [
+        "experiment",
+        "run",
+        name,
+        *models,
+        "--data",
+        str(tiny_data),
+        "--n",
+        "2",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+    ]
     return main(argv), out
 
 

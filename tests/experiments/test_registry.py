@@ -4,11 +4,14 @@ from scpformer.cli.main import main
 from scpformer.experiments import EXPERIMENTS, RunOptions, get_experiment
 
 PAPER_ITEMS = {
-    "art-forecast-tpbvp": "Table 2", "art-forecast-scp": "Table 3",
-    "art-conditioning": "Fig. 3", "art-warmstart": "Figs. 4-6",
-    "robust-warmstart": "Figs. 5-6", "robust-trajectory": "Figs. 7-8",
+    "art-forecast-tpbvp": "Table 2",
+    "art-forecast-scp": "Table 3",
+    "art-conditioning": "Fig. 3",
+    "art-warmstart": "Figs. 4-6",
+    "robust-warmstart": "Figs. 5-6",
+    "robust-trajectory": "Figs. 7-8",
     "robust-posthoc": "Figs. 9-10",
-}  # fmt: skip
+}
 
 
 def test_the_registry_has_one_entry_per_paper_table_or_figure():

@@ -16,8 +16,21 @@ def _rows(path):
 @pytest.fixture(scope="module")
 def warmstart_run(tmp_path_factory, tiny_data, tiny_runs):
     out = tmp_path_factory.mktemp("ws") / "art-warmstart"
-    argv = ["experiment", "run", "art-warmstart", "--model", str(tiny_runs["art"]),
-            "--data", str(tiny_data), "--n", "2", "--workers", "2", "--out", str(out)]  # fmt: skip
+    argv = [
+        "experiment",
+        "run",
+        "art-warmstart",
+        "--model",
+        str(tiny_runs["art"]),
+        "--data",
+        str(tiny_data),
+        "--n",
+        "2",
+        "--workers",
+        "2",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     return out, argv
 
@@ -60,7 +73,16 @@ def test_a_model_of_another_family_is_a_one_line_error(tmp_path, tiny_data, caps
     bad = tmp_path / "run"
     bad.mkdir()
     (bad / "checkpoint.pt").write_bytes(b"not a checkpoint")
-    argv = ["experiment", "run", "art-warmstart", "--model", str(bad), "--data",
-            str(tiny_data), "--out", str(tmp_path / "o")]  # fmt: skip
+    argv = [
+        "experiment",
+        "run",
+        "art-warmstart",
+        "--model",
+        str(bad),
+        "--data",
+        str(tiny_data),
+        "--out",
+        str(tmp_path / "o"),
+    ]
     assert main(argv) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1

@@ -40,7 +40,7 @@ def add_experiment_parser(commands: argparse._SubParsersAction) -> None:
     )
     run.add_argument("--out", type=Path, help="output folder (default: docs/results/NAME)")
     run.add_argument("--seed", type=int, default=0, help="seed of the instance selection (0)")
-    run.set_defaults(handler=run_run)  # fmt: skip
+    run.set_defaults(handler=run_run)
 
 
 def run_list(args: argparse.Namespace) -> int:

@@ -41,8 +41,16 @@ from scpformer.experiments.runner import (
 
 NAME = "art-conditioning"
 SWEEP = 9  # requested values per parameter
-COLUMNS = (KEY, "j_cvx", "ctg_requested", "ctg_realized", "cost_requested_m_s",
-           "cost_realized_m_s", "status", "message")  # fmt: skip
+COLUMNS = (
+    KEY,
+    "j_cvx",
+    "ctg_requested",
+    "ctg_realized",
+    "cost_requested_m_s",
+    "cost_realized_m_s",
+    "status",
+    "message",
+)
 
 
 @dataclass(frozen=True)
@@ -83,16 +91,31 @@ class ConditioningSolver:
         batch = adapter.batch([instance] * (nc + nr))
         rtg0 = -np.concatenate([np.full(nc, task.j_cvx), task.cost_requested])
         ctg0 = np.concatenate([task.ctg_requested, np.zeros(nr)])
-        rollout = generate(self._ckpt.model, self._ckpt.normalization, batch, adapter,
-                           frame=self._ckpt.frame, art_mode="dynamics", rtg0=rtg0, ctg0=ctg0)  # fmt: skip
-        ctg = [adapter.trajectory_ctg(instance, batch.models[i], rollout.x[i], rollout.u[i])
-               for i in range(nc)]  # fmt: skip
+        rollout = generate(
+            self._ckpt.model,
+            self._ckpt.normalization,
+            batch,
+            adapter,
+            frame=self._ckpt.frame,
+            art_mode="dynamics",
+            rtg0=rtg0,
+            ctg0=ctg0,
+        )
+        ctg = [
+            adapter.trajectory_ctg(instance, batch.models[i], rollout.x[i], rollout.u[i])
+            for i in range(nc)
+        ]
         cost = np.linalg.norm(rollout.u[nc:], axis=2).sum(axis=1)
-        return {KEY: task.index, "j_cvx": task.j_cvx, "status": "ok", "message": "",
-                "ctg_requested": join_series(task.ctg_requested),
-                "ctg_realized": join_series(ctg),
-                "cost_requested_m_s": join_series(task.cost_requested),
-                "cost_realized_m_s": join_series(cost)}  # fmt: skip
+        return {
+            KEY: task.index,
+            "j_cvx": task.j_cvx,
+            "status": "ok",
+            "message": "",
+            "ctg_requested": join_series(task.ctg_requested),
+            "ctg_realized": join_series(ctg),
+            "cost_requested_m_s": join_series(task.cost_requested),
+            "cost_realized_m_s": join_series(cost),
+        }
 
 
 def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
@@ -128,22 +151,39 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     ctg_sweep = tuple(float(v) for v in np.unique(np.round(np.linspace(0, 1.25 * c_hi, SWEEP))))
     cost_sweep = tuple(float(v) for v in np.linspace(0.5 * j_lo, 1.5 * j_hi, SWEEP))
     positions = test_positions(data, require_n(options), options.seed)
-    settings = settings_dict(options, experiment=NAME, n=int(positions.size),
-                             ctg_sweep=ctg_sweep, cost_sweep_m_s=cost_sweep,
-                             training_ctg_range=(c_lo, c_hi),
-                             training_cost_range_m_s=(j_lo, j_hi))  # fmt: skip
+    settings = settings_dict(
+        options,
+        experiment=NAME,
+        n=int(positions.size),
+        ctg_sweep=ctg_sweep,
+        cost_sweep_m_s=cost_sweep,
+        training_ctg_range=(c_lo, c_hi),
+        training_cost_range_m_s=(j_lo, j_hi),
+    )
     check_settings(options.out, settings)
-    tasks = [Task(int(p), np.asarray(f["theta"]), float(f["cvx_cost"]), ctg_sweep, cost_sweep)
-             for p, f in zip(positions, read_fields(data, positions, ["theta", "cvx_cost"]),
-                             strict=True) if np.isfinite(f["cvx_cost"])]  # fmt: skip
+    tasks = [
+        Task(int(p), np.asarray(f["theta"]), float(f["cvx_cost"]), ctg_sweep, cost_sweep)
+        for p, f in zip(positions, read_fields(data, positions, ["theta", "cvx_cost"]), strict=True)
+        if np.isfinite(f["cvx_cost"])
+    ]
     results = ResultsCSV(options.out / RESULTS_NAME, COLUMNS)
-    run_tasks(ConditioningSolver(model, manifest.config), tasks, [t.index for t in tasks],
-              options, results, failure_row)  # fmt: skip
+    run_tasks(
+        ConditioningSolver(model, manifest.config),
+        tasks,
+        [t.index for t in tasks],
+        options,
+        results,
+        failure_row,
+    )
     wanted = {t.index for t in tasks}
     rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
-    report = rep.Report(name=NAME, reproduces="ART paper Fig. 3", command=command,
-                        settings=settings,
-                        provenance=[*dataset_commands(data), model_command(model)])  # fmt: skip
+    report = rep.Report(
+        name=NAME,
+        reproduces="ART paper Fig. 3",
+        command=command,
+        settings=settings,
+        provenance=[*dataset_commands(data), model_command(model)],
+    )
     report.sections.append(("Instances", f"{len(rows)} of {positions.size} test instances."))
     if rows:
         analyse(rows, (c_lo, c_hi), (j_lo, j_hi), report, options.out)
@@ -157,8 +197,13 @@ def correlation(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(a, b)[0, 1])
 
 
-def analyse(rows: list[dict[str, str]], ctg_range: tuple[float, float],
-            cost_range: tuple[float, float], report: rep.Report, out: Path) -> None:  # fmt: skip
+def analyse(
+    rows: list[dict[str, str]],
+    ctg_range: tuple[float, float],
+    cost_range: tuple[float, float],
+    report: rep.Report,
+    out: Path,
+) -> None:
     """Correlations, the table of means, and Fig. 3."""
     c_req = series(rows[0]["ctg_requested"])
     j_req = series(rows[0]["cost_requested_m_s"])
@@ -169,19 +214,43 @@ def analyse(rows: list[dict[str, str]], ctg_range: tuple[float, float],
     corr_j = correlation(np.tile(j_req[inside], len(rows)), j_real[:, inside].ravel())
     C = rep.Comparison
     report.comparisons += [
-        C(quantity="correlation of realized vs requested C(t_1)", paper="highly correlated "
-          "(Fig. 3 top; no number)", ours=rep.fmt(corr_c)),
-        C(quantity="correlation of realized vs requested cost, inside the dataset range",
-          paper="highly correlated (Fig. 3 bottom; no number)", ours=rep.fmt(corr_j)),
-    ]  # fmt: skip
-    rows_c = [(rep.fmt(c), rep.fmt(float(np.mean(c_real[:, i]))),
-               rep.fmt(float(np.std(c_real[:, i])))) for i, c in enumerate(c_req)]  # fmt: skip
-    rows_j = [(rep.fmt(1e3 * j), rep.fmt(1e3 * float(np.mean(j_real[:, i]))),
-               "yes" if inside[i] else "no") for i, j in enumerate(j_req)]  # fmt: skip
-    report.sections.append(("Constraint-to-go sweep", rep.markdown_table(
-        ("requested C(t_1)", "realized mean", "realized std"), rows_c)))  # fmt: skip
-    report.sections.append(("Cost sweep", rep.markdown_table(
-        ("requested cost [mm/s]", "realized mean [mm/s]", "in dataset range"), rows_j)))  # fmt: skip
+        C(
+            quantity="correlation of realized vs requested C(t_1)",
+            paper="highly correlated (Fig. 3 top; no number)",
+            ours=rep.fmt(corr_c),
+        ),
+        C(
+            quantity="correlation of realized vs requested cost, inside the dataset range",
+            paper="highly correlated (Fig. 3 bottom; no number)",
+            ours=rep.fmt(corr_j),
+        ),
+    ]
+    rows_c = [
+        (rep.fmt(c), rep.fmt(float(np.mean(c_real[:, i]))), rep.fmt(float(np.std(c_real[:, i]))))
+        for i, c in enumerate(c_req)
+    ]
+    rows_j = [
+        (
+            rep.fmt(1e3 * j),
+            rep.fmt(1e3 * float(np.mean(j_real[:, i]))),
+            "yes" if inside[i] else "no",
+        )
+        for i, j in enumerate(j_req)
+    ]
+    report.sections.append(
+        (
+            "Constraint-to-go sweep",
+            rep.markdown_table(("requested C(t_1)", "realized mean", "realized std"), rows_c),
+        )
+    )
+    report.sections.append(
+        (
+            "Cost sweep",
+            rep.markdown_table(
+                ("requested cost [mm/s]", "realized mean [mm/s]", "in dataset range"), rows_j
+            ),
+        )
+    )
     fig, (a, b) = rep.new_figure(ncols=2)
     for ax, req, real, scale, rng, what in (
         (a, c_req, c_real, 1.0, ctg_range, "constraint-to-go C(t_1)"),
@@ -189,13 +258,22 @@ def analyse(rows: list[dict[str, str]], ctg_range: tuple[float, float],
     ):
         ax.axvspan(scale * rng[0], scale * rng[1], color="gold", alpha=0.3, label="dataset")
         for i, x in enumerate(req):
-            ax.plot(np.full(real.shape[0], scale * x), scale * real[:, i], ".", color="tab:blue",
-                    alpha=0.5)  # fmt: skip
+            ax.plot(
+                np.full(real.shape[0], scale * x),
+                scale * real[:, i],
+                ".",
+                color="tab:blue",
+                alpha=0.5,
+            )
         ax.plot(scale * req, scale * real.mean(axis=0), "o-", color="tab:blue", label="ART")
         ax.plot(scale * req, scale * req, "k--", label="ideal")
         ax.set_xlabel(f"requested {what}")
         ax.set_ylabel(f"realized {what}")
         ax.legend()
-    report.figures.append((rep.save_figure(fig, out / "fig3_conditioning.png"),
-                           "Fig. 3: realized vs requested constraint-to-go (left) and cost "
-                           "(right); dataset range shaded"))  # fmt: skip
+    report.figures.append(
+        (
+            rep.save_figure(fig, out / "fig3_conditioning.png"),
+            "Fig. 3: realized vs requested constraint-to-go (left) and cost "
+            "(right); dataset range shaded",
+        )
+    )

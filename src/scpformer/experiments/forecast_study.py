@@ -98,8 +98,15 @@ def label(mode: str, kind: str) -> str:
 def columns(kinds: tuple[str, ...]) -> tuple[str, ...]:
     per = (*METRICS, "time_s")
     combos = [label(m, k) for m in MODES for k in kinds]
-    return (KEY, "j_cvx", "true_cost_mm_s", "true_time_s",
-            *(f"{c}_{name}" for c in combos for name in per), "status", "message")  # fmt: skip
+    return (
+        KEY,
+        "j_cvx",
+        "true_cost_mm_s",
+        "true_time_s",
+        *(f"{c}_{name}" for c in combos for name in per),
+        "status",
+        "message",
+    )
 
 
 @dataclass(frozen=True)
@@ -141,17 +148,30 @@ class ForecastSolver:
         instance = instance_from_theta(task.theta, config.scenario)
         adapter = RendezvousArtFamily()
         batch = adapter.batch([instance])
-        row: dict[str, Any] = {KEY: task.index, "j_cvx": task.j_cvx, "status": "ok",
-                               "message": "", "true_time_s": task.true_time,
-                               "true_cost_mm_s": 1e3 * np.linalg.norm(task.true_dv, axis=1).sum()}  # fmt: skip
+        row: dict[str, Any] = {
+            KEY: task.index,
+            "j_cvx": task.j_cvx,
+            "status": "ok",
+            "message": "",
+            "true_time_s": task.true_time,
+            "true_cost_mm_s": 1e3 * np.linalg.norm(task.true_dv, axis=1).sum(),
+        }
         for ckpt in self._models:
             for mode in MODES:
-                rollout = generate(ckpt.model, ckpt.normalization, batch, adapter,
-                                   frame=ckpt.frame, art_mode=mode,
-                                   rtg0=np.array([-task.j_cvx]), ctg0=np.zeros(1))  # fmt: skip
+                rollout = generate(
+                    ckpt.model,
+                    ckpt.normalization,
+                    batch,
+                    adapter,
+                    frame=ckpt.frame,
+                    art_mode=mode,
+                    rtg0=np.array([-task.j_cvx]),
+                    ctg0=np.zeros(1),
+                )
                 x, u = rollout.x[0], rollout.u[0]
-                metrics = forecast_metrics(batch.models[0].rtn(x), x, u, task.true_rtn,
-                                           task.true_roe, task.true_dv)  # fmt: skip
+                metrics = forecast_metrics(
+                    batch.models[0].rtn(x), x, u, task.true_rtn, task.true_roe, task.true_dv
+                )
                 prefix = label(mode, ckpt.kind)
                 row.update({f"{prefix}_{k}": getattr(metrics, k) for k in METRICS})
                 row[f"{prefix}_time_s"] = rollout.time_s
@@ -178,45 +198,84 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
         raise ValueError(f"--model: one run per model kind, got kinds {kinds}")
     twin = TWIN[name]
     positions = test_positions(data, require_n(options), options.seed)
-    settings = settings_dict(options, experiment=name, n=int(positions.size), kinds=list(kinds),
-                             twin=twin, conditioning="R(t_1) = -J_CVX (dataset's cvx_cost), "
-                             "C(t_1) = 0")  # fmt: skip
+    settings = settings_dict(
+        options,
+        experiment=name,
+        n=int(positions.size),
+        kinds=list(kinds),
+        twin=twin,
+        conditioning="R(t_1) = -J_CVX (dataset's cvx_cost), C(t_1) = 0",
+    )
     check_settings(options.out, settings)
-    report = rep.Report(name=name, reproduces=f"ART paper {TABLE[name]}", command=command,
-                        settings=settings,
-                        provenance=[*dataset_commands(data), *map(model_command, models)])  # fmt: skip
+    report = rep.Report(
+        name=name,
+        reproduces=f"ART paper {TABLE[name]}",
+        command=command,
+        settings=settings,
+        provenance=[*dataset_commands(data), *map(model_command, models)],
+    )
     if f"{twin}_roe" not in {f.name for f in manifest.schema}:
         report.sections.append(("Not run", missing_twin_text(name, twin)))
         return report.write(options.out)
-    names = ["theta", "cvx_cost", f"{twin}_roe", f"{twin}_rtn", f"{twin}_dv",
-             f"{twin}_solve_time", "cvx_solve_time", f"{twin}_status"]  # fmt: skip
+    names = [
+        "theta",
+        "cvx_cost",
+        f"{twin}_roe",
+        f"{twin}_rtn",
+        f"{twin}_dv",
+        f"{twin}_solve_time",
+        "cvx_solve_time",
+        f"{twin}_status",
+    ]
     tasks = []
     for p, f in zip(positions, read_fields(data, positions, names), strict=True):
         if f[f"{twin}_status"] != "converged" or not np.isfinite(f["cvx_cost"]):
             continue  # no true trajectory to compare with
-        true_time = float(f[f"{twin}_solve_time"]) + (float(f["cvx_solve_time"])
-                                                      if twin == "scp" else 0.0)  # fmt: skip
-        tasks.append(Task(int(p), np.asarray(f["theta"]), float(f["cvx_cost"]),
-                          np.asarray(f[f"{twin}_roe"]), np.asarray(f[f"{twin}_rtn"]),
-                          np.asarray(f[f"{twin}_dv"]), true_time))  # fmt: skip
+        true_time = float(f[f"{twin}_solve_time"]) + (
+            float(f["cvx_solve_time"]) if twin == "scp" else 0.0
+        )
+        tasks.append(
+            Task(
+                int(p),
+                np.asarray(f["theta"]),
+                float(f["cvx_cost"]),
+                np.asarray(f[f"{twin}_roe"]),
+                np.asarray(f[f"{twin}_rtn"]),
+                np.asarray(f[f"{twin}_dv"]),
+                true_time,
+            )
+        )
     results = ResultsCSV(options.out / RESULTS_NAME, columns(kinds))
-    run_tasks(ForecastSolver(models, manifest.config), tasks, [t.index for t in tasks], options,
-              results, failure_row)  # fmt: skip
+    run_tasks(
+        ForecastSolver(models, manifest.config),
+        tasks,
+        [t.index for t in tasks],
+        options,
+        results,
+        failure_row,
+    )
     wanted = {t.index for t in tasks}
     rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
-    report.sections.append(("Instances", f"{len(rows)} of {positions.size} selected test "
-                            f"instances (those with a converged {twin} twin: {len(tasks)})."))  # fmt: skip
+    report.sections.append(
+        (
+            "Instances",
+            f"{len(rows)} of {positions.size} selected test "
+            f"instances (those with a converged {twin} twin: {len(tasks)}).",
+        )
+    )
     if rows:
         analyse(name, rows, kinds, report, options.out)
     return report.write(options.out)
 
 
 def missing_twin_text(name: str, twin: str) -> str:
-    return (f"{TABLE[name]} compares predictions with {PROBLEM[twin]} solutions, and this "
-            f"dataset has no `{twin}` twin: the rendezvous family stores the Problem 2 "
-            "(`cvx`) and Problem 3 (`scp`) twins only. Adding the Problem 1 twin to the "
-            "family (and training on it) is left for later; `art-forecast-scp` (Table 3) "
-            "runs on this dataset.")  # fmt: skip
+    return (
+        f"{TABLE[name]} compares predictions with {PROBLEM[twin]} solutions, and this "
+        f"dataset has no `{twin}` twin: the rendezvous family stores the Problem 2 "
+        "(`cvx`) and Problem 3 (`scp`) twins only. Adding the Problem 1 twin to the "
+        "family (and training on it) is left for later; `art-forecast-scp` (Table 3) "
+        "runs on this dataset."
+    )
 
 
 def means(rows: list[dict[str, str]], kinds: tuple[str, ...]) -> dict[str, dict[str, float]]:
@@ -225,20 +284,27 @@ def means(rows: list[dict[str, str]], kinds: tuple[str, ...]) -> dict[str, dict[
     for mode, kind in COMBOS:
         if kind in kinds:
             prefix = label(mode, kind)
-            out[prefix] = {k: float(np.nanmean(column(rows, f"{prefix}_{k}")))
-                           for k in (*METRICS, "time_s")}  # fmt: skip
-    out["true"] = {"cost_mm_s": float(np.mean(column(rows, "true_cost_mm_s"))),
-                   "time_s": float(np.mean(column(rows, "true_time_s")))}  # fmt: skip
+            out[prefix] = {
+                k: float(np.nanmean(column(rows, f"{prefix}_{k}"))) for k in (*METRICS, "time_s")
+            }
+    out["true"] = {
+        "cost_mm_s": float(np.mean(column(rows, "true_cost_mm_s"))),
+        "time_s": float(np.mean(column(rows, "true_time_s"))),
+    }
     return out
 
 
-def analyse(name: str, rows: list[dict[str, str]], kinds: tuple[str, ...], report: rep.Report,
-            out: Path) -> None:  # fmt: skip
+def analyse(
+    name: str, rows: list[dict[str, str]], kinds: tuple[str, ...], report: rep.Report, out: Path
+) -> None:
     """The table in the paper's layout (ours / paper), the headline claims, a figure."""
     m = means(rows, kinds)
     paper = PAPER[name]
-    header = ["metric", *(f"{k.upper()} {'T-only' if mode == 'transformer' else 'dyn.'}"
-                          for mode, k in COMBOS), "True"]  # fmt: skip
+    header = [
+        "metric",
+        *(f"{k.upper()} {'T-only' if mode == 'transformer' else 'dyn.'}" for mode, k in COMBOS),
+        "True",
+    ]
     table = []
     for title, key, unit in ROWS:
         cells = [f"{title} [{unit}]"]
@@ -247,31 +313,51 @@ def analyse(name: str, rows: list[dict[str, str]], kinds: tuple[str, ...], repor
             ref = paper.get(key, (None,) * 7)[j]
             cells.append(f"{rep.fmt(ours)} / {'-' if ref is None else ref}")
         table.append(cells)
-    report.sections.append((f"{TABLE[name]}: ours / paper (test-set means, n = {len(rows)})",
-                            rep.markdown_table(header, table)))  # fmt: skip
+    report.sections.append(
+        (
+            f"{TABLE[name]}: ours / paper (test-set means, n = {len(rows)})",
+            rep.markdown_table(header, table),
+        )
+    )
     art = m.get("art_dynamics", {})
     C = rep.Comparison
     for key, what in (("control_rmse_mm_s", "control error"), ("cost_mm_s", "cost")):
         others = [m[label("dynamics", k)][key] for k in ("gru", "lstm") if k in kinds]
         ours = art.get(key, math.nan)
         ahead = bool(others) and all(ours < o for o in others)
-        report.comparisons.append(C(
-            quantity=f"ART dynamics-in-the-loop ahead of GRU and LSTM on {what}",
-            paper="yes", ours=("yes" if ahead else "no") + f" ({rep.fmt(ours)} vs "
-            + ", ".join(rep.fmt(o) for o in others) + ")"))  # fmt: skip
-    report.comparisons.append(C(
-        quantity="ART generation vs optimizer time (Table 3: ~5x faster)", paper="0.44 vs 2.21 s",
-        ours=f"{rep.fmt(art.get('time_s', math.nan))} vs {rep.fmt(m['true']['time_s'])} s",
-        note="generation: 1 thread, one instance per call; optimizer: dataset timings"))  # fmt: skip
+        report.comparisons.append(
+            C(
+                quantity=f"ART dynamics-in-the-loop ahead of GRU and LSTM on {what}",
+                paper="yes",
+                ours=("yes" if ahead else "no")
+                + f" ({rep.fmt(ours)} vs "
+                + ", ".join(rep.fmt(o) for o in others)
+                + ")",
+            )
+        )
+    report.comparisons.append(
+        C(
+            quantity="ART generation vs optimizer time (Table 3: ~5x faster)",
+            paper="0.44 vs 2.21 s",
+            ours=f"{rep.fmt(art.get('time_s', math.nan))} vs {rep.fmt(m['true']['time_s'])} s",
+            note="generation: 1 thread, one instance per call; optimizer: dataset timings",
+        )
+    )
     fig, (a, b) = rep.new_figure()
     combos = [c for c in (label(mo, k) for mo, k in COMBOS) if c in m]
-    for ax, key, ylabel in ((a, "control_rmse_mm_s", "control error RMSE [mm/s]"),
-                            (b, "cost_mm_s", "cost sum |dv| [mm/s]")):  # fmt: skip
+    for ax, key, ylabel in (
+        (a, "control_rmse_mm_s", "control error RMSE [mm/s]"),
+        (b, "cost_mm_s", "cost sum |dv| [mm/s]"),
+    ):
         ax.bar(range(len(combos)), [m[c][key] for c in combos], color="tab:blue")
         if key == "cost_mm_s":
             ax.axhline(m["true"]["cost_mm_s"], color="black", ls="--", label="True")
             ax.legend()
         ax.set_xticks(range(len(combos)), combos, rotation=30, fontsize=8)
         ax.set_ylabel(ylabel)
-    report.figures.append((rep.save_figure(fig, out / "forecast.png"),
-                           f"{TABLE[name]}: control error and cost per model and mode"))  # fmt: skip
+    report.figures.append(
+        (
+            rep.save_figure(fig, out / "forecast.png"),
+            f"{TABLE[name]}: control error and cost per model and mode",
+        )
+    )

@@ -82,15 +82,34 @@ class Report:
     differences: Sequence[str] = RENDEZVOUS_DIFFERENCES
 
     def render(self) -> str:
-        parts = [f"# {self.name}: {self.reproduces}", "", "Command:", "",
-                 f"    {self.command}", "", "## Resolved configuration", "", "```json",
-                 json.dumps(self.settings, indent=1, default=str), "```", "",
-                 "## How the data and models were made", "", "```sh", *self.provenance,
-                 "```", ""]  # fmt: skip
+        parts = [
+            f"# {self.name}: {self.reproduces}",
+            "",
+            "Command:",
+            "",
+            f"    {self.command}",
+            "",
+            "## Resolved configuration",
+            "",
+            "```json",
+            json.dumps(self.settings, indent=1, default=str),
+            "```",
+            "",
+            "## How the data and models were made",
+            "",
+            "```sh",
+            *self.provenance,
+            "```",
+            "",
+        ]
         if self.comparisons:
             rows = [(c.quantity, c.paper, c.ours, c.note) for c in self.comparisons]
-            parts += ["## The paper's numbers beside ours", "",
-                      markdown_table(("quantity", "paper", "ours", "note"), rows), ""]  # fmt: skip
+            parts += [
+                "## The paper's numbers beside ours",
+                "",
+                markdown_table(("quantity", "paper", "ours", "note"), rows),
+                "",
+            ]
         for title, text in self.sections:
             parts += [f"## {title}", "", text, ""]
         if self.figures:

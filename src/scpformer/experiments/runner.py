@@ -148,8 +148,9 @@ def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
         if not isinstance(old, dict):
             raise ValueError(f"--out {out}: {CONFIG_NAME} is unreadable; use a new --out")
         ignore = {"n", "workers", "ray", "time_limit"}
-        changed = sorted(k for k in set(old) | set(plain) if k not in ignore
-                         and old.get(k) != plain.get(k))  # fmt: skip
+        changed = sorted(
+            k for k in set(old) | set(plain) if k not in ignore and old.get(k) != plain.get(k)
+        )
         if changed:
             raise ValueError(
                 f"--out {out} holds a run with other settings ({', '.join(changed)}); "
@@ -225,8 +226,11 @@ def column(rows: Sequence[Mapping[str, str]], name: str) -> np.ndarray:
     values = []
     for row in rows:
         cell = row.get(name, "")
-        values.append({"": math.nan, "True": 1.0, "False": 0.0}.get(cell, None) if cell in
-                      ("", "True", "False") else float(cell))  # fmt: skip
+        values.append(
+            {"": math.nan, "True": 1.0, "False": 0.0}.get(cell, None)
+            if cell in ("", "True", "False")
+            else float(cell)
+        )
     return np.asarray(values, dtype=float)
 
 
@@ -297,8 +301,12 @@ class Progress:
         self.done += 1
         self.failed += 0 if ok else 1
         stream = self.stream or sys.stderr
-        print(f"\r{self.done}/{self.total} instances ({self.failed} failed)", end="",
-              file=stream, flush=True)  # fmt: skip
+        print(
+            f"\r{self.done}/{self.total} instances ({self.failed} failed)",
+            end="",
+            file=stream,
+            flush=True,
+        )
         if self.done == self.total:
             print(file=stream)
 
@@ -373,8 +381,9 @@ def dataset_commands(folder: Path) -> list[str]:
     try:
         config = load_splits(folder).config
         fractions = " ".join(f"{f:g}" for f in config.fractions)
-        commands.append(f"scpformer dataset split {folder} --fractions {fractions} "
-                        f"--seed {config.seed}")  # fmt: skip
+        commands.append(
+            f"scpformer dataset split {folder} --fractions {fractions} --seed {config.seed}"
+        )
     except DatasetError:
         commands.append("# no splits.h5")
     return commands
@@ -399,11 +408,18 @@ def model_command(run: Path) -> str:
     except (OSError, ValueError):
         return f"# {run}: no readable config.json (command unknown)"
     train = config.get("train", {})
-    parts = [f"scpformer train {config.get('kind', '?')} --data {config.get('data', '?')}",
-             f"--out {folder}", f"--preset {config.get('preset', '?')}",
-             f"--frame {config.get('frame', '?')}"]  # fmt: skip
-    for key, flag in (("epochs", "--epochs"), ("batch_size", "--batch-size"), ("lr", "--lr"),
-                      ("seed", "--seed")):  # fmt: skip
+    parts = [
+        f"scpformer train {config.get('kind', '?')} --data {config.get('data', '?')}",
+        f"--out {folder}",
+        f"--preset {config.get('preset', '?')}",
+        f"--frame {config.get('frame', '?')}",
+    ]
+    for key, flag in (
+        ("epochs", "--epochs"),
+        ("batch_size", "--batch-size"),
+        ("lr", "--lr"),
+        ("seed", "--seed"),
+    ):
         if key in train:
             parts.append(f"{flag} {train[key]}")
     return " ".join(parts)

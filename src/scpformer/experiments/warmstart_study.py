@@ -61,11 +61,26 @@ COLORS = {"tpbvp": "tab:green", "convex": "tab:blue", "art": "tab:red"}
 THRESHOLDS = (-1, 0, 5, 10, 15, 20, 25, 30, 35, 40)  # C_CVX(t_1) > x; -1: every instance
 RANGES = ((0, 0), (1, 9), (10, 19), (20, 29), (30, 40), (41, 10**6))  # disjoint bins
 MM = 1e3  # m/s -> mm/s
-PER_WS = ("ws_time", "ws_cost", "ws_ctg", "status", "cost", "iterations", "scp_time",
-          "feasible", "history")  # fmt: skip
-COLUMNS = (KEY, "c_cvx_t1", "j_cvx", "art_generation_s",
-           *(f"{ws}_{name}" for ws in WARMSTARTS for name in PER_WS),
-           "status", "message")  # fmt: skip
+PER_WS = (
+    "ws_time",
+    "ws_cost",
+    "ws_ctg",
+    "status",
+    "cost",
+    "iterations",
+    "scp_time",
+    "feasible",
+    "history",
+)
+COLUMNS = (
+    KEY,
+    "c_cvx_t1",
+    "j_cvx",
+    "art_generation_s",
+    *(f"{ws}_{name}" for ws in WARMSTARTS for name in PER_WS),
+    "status",
+    "message",
+)
 
 
 @dataclass(frozen=True)
@@ -94,8 +109,9 @@ class WarmstartSolver:
 
         torch.set_num_threads(1)
         config = RendezvousDataConfig.from_dict(self.data_config)
-        self._art = ArtWarmStart.from_checkpoint(self.checkpoint, family="rendezvous",
-                                                 acceptance=None)  # fmt: skip
+        self._art = ArtWarmStart.from_checkpoint(
+            self.checkpoint, family="rendezvous", acceptance=None
+        )
         sc = config.scenario
         for kind in (*WARMSTARTS[:2], "scp"):
             compiled_subproblem(kind, sc.n_nodes, sc.n_waypoint, config.solver.scp.solver)
@@ -110,8 +126,10 @@ class WarmstartSolver:
 
         config = RendezvousDataConfig.from_dict(self.data_config)
         instance = instance_from_theta(task.theta, config.scenario)
-        guesses = {kind: RendezvousConvexWarmStart(kind, config.solver).guess(instance)
-                   for kind in WARMSTARTS[:2]}  # fmt: skip
+        guesses = {
+            kind: RendezvousConvexWarmStart(kind, config.solver).guess(instance)
+            for kind in WARMSTARTS[:2]
+        }
         art = ArtWarmStart(
             self._art.model,
             self._art.normalization,
@@ -119,7 +137,7 @@ class WarmstartSolver:
             acceptance=None,
             fallback=PrecomputedWarmStart(guesses["convex"]),
         )
-        guesses["art"] = art.guess(instance)  # fmt: skip
+        guesses["art"] = art.guess(instance)
         cvx = guesses["convex"].record
         row: dict[str, Any] = {
             KEY: task.index,
@@ -130,19 +148,22 @@ class WarmstartSolver:
             "message": "",
         }
         for ws, guess in guesses.items():
-            solution = solve(instance, "scp", PrecomputedWarmStart(guess), config.solver,
-                             verify=self.verify)  # fmt: skip
-            row.update({
-                f"{ws}_ws_time": guess.record.time_s,
-                f"{ws}_ws_cost": guess.record.cost,
-                f"{ws}_ws_ctg": guess.record.constraint_to_go,
-                f"{ws}_status": solution.status.value,
-                f"{ws}_cost": solution.cost,
-                f"{ws}_iterations": solution.iterations,
-                f"{ws}_scp_time": solution.timing.total if solution.timing else math.nan,
-                f"{ws}_feasible": solution.trajectory is not None,
-                f"{ws}_history": join_series(r.cost for r in solution.history),
-            })  # fmt: skip
+            solution = solve(
+                instance, "scp", PrecomputedWarmStart(guess), config.solver, verify=self.verify
+            )
+            row.update(
+                {
+                    f"{ws}_ws_time": guess.record.time_s,
+                    f"{ws}_ws_cost": guess.record.cost,
+                    f"{ws}_ws_ctg": guess.record.constraint_to_go,
+                    f"{ws}_status": solution.status.value,
+                    f"{ws}_cost": solution.cost,
+                    f"{ws}_iterations": solution.iterations,
+                    f"{ws}_scp_time": solution.timing.total if solution.timing else math.nan,
+                    f"{ws}_feasible": solution.trajectory is not None,
+                    f"{ws}_history": join_series(r.cost for r in solution.history),
+                }
+            )
         return row
 
 
@@ -169,10 +190,15 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME, verify: boo
 
     ckpt = load_checkpoint(model, family="rendezvous")  # fails fast on a wrong model
     positions = test_positions(data, require_n(options), options.seed)
-    settings = settings_dict(options, experiment=NAME, n=int(positions.size), verify=verify,
-                             model_kind=ckpt.kind, frame=ckpt.frame,
-                             conditioning="R(t_1) = -J_CVX, C(t_1) = 0, Algorithm 2, "
-                             "no acceptance check")  # fmt: skip
+    settings = settings_dict(
+        options,
+        experiment=NAME,
+        n=int(positions.size),
+        verify=verify,
+        model_kind=ckpt.kind,
+        frame=ckpt.frame,
+        conditioning="R(t_1) = -J_CVX, C(t_1) = 0, Algorithm 2, no acceptance check",
+    )
     check_settings(options.out, settings)
     thetas = [f["theta"] for f in read_fields(data, positions, ["theta"])]
     tasks = [Task(int(p), np.asarray(t)) for p, t in zip(positions, thetas, strict=True)]
@@ -184,9 +210,15 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME, verify: boo
     provenance = [*dataset_commands(data), model_command(model)]
     report = analyse(rows, options.out)
     report.command, report.settings, report.provenance = command, settings, provenance
-    report.sections.insert(0, ("Instances", f"{len(rows)} of {positions.size} selected "
-                           f"test instances finished (failed or missing: "
-                           f"{positions.size - len(rows)})."))  # fmt: skip
+    report.sections.insert(
+        0,
+        (
+            "Instances",
+            f"{len(rows)} of {positions.size} selected "
+            f"test instances finished (failed or missing: "
+            f"{positions.size - len(rows)}).",
+        ),
+    )
     return report.write(options.out)
 
 
@@ -258,8 +290,7 @@ def bin_stats(cols: Columns, mask: np.ndarray) -> dict[str, float]:
         out[f"{ws}_infeasible_pct"] = 100.0 * _mean(~cols.feasible[ws], mask)
     for ws in WARMSTARTS[:2]:
         gap = out[f"{ws}_gap"]
-        out[f"improvement_vs_{ws}"] = (100.0 * (gap - out["art_gap"]) / gap
-                                       if gap > 0 else math.nan)  # fmt: skip
+        out[f"improvement_vs_{ws}"] = 100.0 * (gap - out["art_gap"]) / gap if gap > 0 else math.nan
     out["art_generation_s"] = _mean(cols.generation, mask)
     return out
 
@@ -271,8 +302,9 @@ def cumulative(cols: Columns) -> list[dict[str, float]]:
 
 def disjoint(cols: Columns) -> list[dict[str, Any]]:
     """:func:`bin_stats` over the ranges of :data:`RANGES`."""
-    return [{"range": (lo, hi), **bin_stats(cols, (cols.c >= lo) & (cols.c <= hi))}
-            for lo, hi in RANGES]  # fmt: skip
+    return [
+        {"range": (lo, hi), **bin_stats(cols, (cols.c >= lo) & (cols.c <= hi))} for lo, hi in RANGES
+    ]
 
 
 def convergence(cols: Columns, k_max: int) -> dict[str, np.ndarray]:
@@ -308,24 +340,42 @@ def analyse(rows: list[dict[str, str]], out: Path) -> rep.Report:
 
 
 def _table(stats: list[dict[str, Any]], key: str) -> str:
-    header = [f"C_CVX {'>' if key == 'x' else 'in'}", "n (all 3 solved)",
-              *(f"gap {LABELS[ws]} [mm/s]" for ws in WARMSTARTS),
-              "ART impr. vs CVX [%]", "ART impr. vs TPBVP [%]",
-              *(f"iter. {LABELS[ws]}" for ws in WARMSTARTS),
-              *(f"WS+SCP {LABELS[ws]} [s]" for ws in WARMSTARTS),
-              *(f"infeas. {LABELS[ws]} [%]" for ws in WARMSTARTS)]  # fmt: skip
+    header = [
+        f"C_CVX {'>' if key == 'x' else 'in'}",
+        "n (all 3 solved)",
+        *(f"gap {LABELS[ws]} [mm/s]" for ws in WARMSTARTS),
+        "ART impr. vs CVX [%]",
+        "ART impr. vs TPBVP [%]",
+        *(f"iter. {LABELS[ws]}" for ws in WARMSTARTS),
+        *(f"WS+SCP {LABELS[ws]} [s]" for ws in WARMSTARTS),
+        *(f"infeas. {LABELS[ws]} [%]" for ws in WARMSTARTS),
+    ]
     rows = []
     for s in stats:
-        label = ("all" if s["x"] < 0 else s["x"]) if key == "x" else (
-            f"[{s['range'][0]}, {s['range'][1]}]" if s["range"][1] < 10**6
-            else f">= {s['range'][0]}")  # fmt: skip
-        rows.append([label, f"{s['count']} ({s['count_feasible']})",
-                     *(rep.fmt(s[f"{ws}_gap"]) for ws in WARMSTARTS),
-                     rep.fmt(s["improvement_vs_convex"]), rep.fmt(s["improvement_vs_tpbvp"]),
-                     *(rep.fmt(s[f"{ws}_iterations"]) for ws in WARMSTARTS),
-                     *(f"{rep.fmt(s[f'{ws}_ws_time'], 2)}+{rep.fmt(s[f'{ws}_scp_time'], 2)}"
-                       for ws in WARMSTARTS),
-                     *(rep.fmt(s[f"{ws}_infeasible_pct"]) for ws in WARMSTARTS)])  # fmt: skip
+        label = (
+            ("all" if s["x"] < 0 else s["x"])
+            if key == "x"
+            else (
+                f"[{s['range'][0]}, {s['range'][1]}]"
+                if s["range"][1] < 10**6
+                else f">= {s['range'][0]}"
+            )
+        )
+        rows.append(
+            [
+                label,
+                f"{s['count']} ({s['count_feasible']})",
+                *(rep.fmt(s[f"{ws}_gap"]) for ws in WARMSTARTS),
+                rep.fmt(s["improvement_vs_convex"]),
+                rep.fmt(s["improvement_vs_tpbvp"]),
+                *(rep.fmt(s[f"{ws}_iterations"]) for ws in WARMSTARTS),
+                *(
+                    f"{rep.fmt(s[f'{ws}_ws_time'], 2)}+{rep.fmt(s[f'{ws}_scp_time'], 2)}"
+                    for ws in WARMSTARTS
+                ),
+                *(rep.fmt(s[f"{ws}_infeasible_pct"]) for ws in WARMSTARTS),
+            ]
+        )
     return rep.markdown_table(header, rows)
 
 
@@ -336,35 +386,80 @@ def _comparisons(cols: Columns, cum: list[dict], bins: list[dict]) -> list[rep.C
     C = rep.Comparison
     share = 100.0 * float(np.mean(cols.c > 0))
     return [
-        C(quantity="share of test instances with C_CVX(t_1) > 0 [%]", paper="~50",
-          ours=rep.fmt(share), note=f"{cols.c.size} instances"),
-        C(quantity="gap of the CVX-started SCP to J_CVX, C_CVX > 0 [% of J_CVX]",
-          paper="Fig. 4 only", ours=rep.fmt(relative_gap(cols, "convex", cols.c > 0)),
-          note="the room ART can improve on"),
-        C(quantity="ART improvement of the gap vs CVX, C_CVX > 0 [%]", paper="> 20",
-          ours=rep.fmt(gt0["improvement_vs_convex"]), note=f"n = {gt0['count_feasible']}"),
-        C(quantity="ART improvement of the gap vs CVX-TPBVP, C_CVX > 0 [%]", paper="> 20",
-          ours=rep.fmt(gt0["improvement_vs_tpbvp"]), note=f"n = {gt0['count_feasible']}"),
-        C(quantity="ART improvement vs CVX, C_CVX in [30, 40] [%]", paper="up to 80",
-          ours=rep.fmt(b3040["improvement_vs_convex"]), note=f"n = {b3040['count_feasible']}"),
-        C(quantity="ART improvement vs CVX-TPBVP, C_CVX in [30, 40] [%]", paper="up to ~90",
-          ours=rep.fmt(b3040["improvement_vs_tpbvp"]), note=f"n = {b3040['count_feasible']}"),
-        C(quantity="SCP iterations saved by ART vs CVX, C_CVX in [30, 40]", paper="up to ~1.5",
-          ours=rep.fmt(b3040["convex_iterations"] - b3040["art_iterations"]),
-          note=f"n = {b3040['count_feasible']}"),
-        C(quantity="ART generation time (Algorithm 2) [s]", paper="~0.5 (GPU machine)",
-          ours=rep.fmt(every["art_generation_s"]), note="mean, one instance per call, 1 thread"),
-        C(quantity="convex warm start time (CVX) [s]", paper="~0.15",
-          ours=rep.fmt(every["convex_ws_time"]), note="mean"),
-        C(quantity="SCP time saved by ART vs CVX, C_CVX in [30, 40] [s]", paper="up to 1",
-          ours=rep.fmt(b3040["convex_scp_time"] - b3040["art_scp_time"])),
-        C(quantity="total time WS + SCP, CVX / CVX-TPBVP / ART [s]", paper="~2 each",
-          ours=" / ".join(rep.fmt(every[f"{ws}_ws_time"] + every[f"{ws}_scp_time"])
-                          for ws in ("convex", "tpbvp", "art")), note="mean over all"),
-        C(quantity="SCP infeasibility rate, CVX-TPBVP / CVX / ART [%]",
-          paper="Fig. 6 only (no number in the text)",
-          ours=" / ".join(rep.fmt(every[f"{ws}_infeasible_pct"]) for ws in WARMSTARTS)),
-    ]  # fmt: skip
+        C(
+            quantity="share of test instances with C_CVX(t_1) > 0 [%]",
+            paper="~50",
+            ours=rep.fmt(share),
+            note=f"{cols.c.size} instances",
+        ),
+        C(
+            quantity="gap of the CVX-started SCP to J_CVX, C_CVX > 0 [% of J_CVX]",
+            paper="Fig. 4 only",
+            ours=rep.fmt(relative_gap(cols, "convex", cols.c > 0)),
+            note="the room ART can improve on",
+        ),
+        C(
+            quantity="ART improvement of the gap vs CVX, C_CVX > 0 [%]",
+            paper="> 20",
+            ours=rep.fmt(gt0["improvement_vs_convex"]),
+            note=f"n = {gt0['count_feasible']}",
+        ),
+        C(
+            quantity="ART improvement of the gap vs CVX-TPBVP, C_CVX > 0 [%]",
+            paper="> 20",
+            ours=rep.fmt(gt0["improvement_vs_tpbvp"]),
+            note=f"n = {gt0['count_feasible']}",
+        ),
+        C(
+            quantity="ART improvement vs CVX, C_CVX in [30, 40] [%]",
+            paper="up to 80",
+            ours=rep.fmt(b3040["improvement_vs_convex"]),
+            note=f"n = {b3040['count_feasible']}",
+        ),
+        C(
+            quantity="ART improvement vs CVX-TPBVP, C_CVX in [30, 40] [%]",
+            paper="up to ~90",
+            ours=rep.fmt(b3040["improvement_vs_tpbvp"]),
+            note=f"n = {b3040['count_feasible']}",
+        ),
+        C(
+            quantity="SCP iterations saved by ART vs CVX, C_CVX in [30, 40]",
+            paper="up to ~1.5",
+            ours=rep.fmt(b3040["convex_iterations"] - b3040["art_iterations"]),
+            note=f"n = {b3040['count_feasible']}",
+        ),
+        C(
+            quantity="ART generation time (Algorithm 2) [s]",
+            paper="~0.5 (GPU machine)",
+            ours=rep.fmt(every["art_generation_s"]),
+            note="mean, one instance per call, 1 thread",
+        ),
+        C(
+            quantity="convex warm start time (CVX) [s]",
+            paper="~0.15",
+            ours=rep.fmt(every["convex_ws_time"]),
+            note="mean",
+        ),
+        C(
+            quantity="SCP time saved by ART vs CVX, C_CVX in [30, 40] [s]",
+            paper="up to 1",
+            ours=rep.fmt(b3040["convex_scp_time"] - b3040["art_scp_time"]),
+        ),
+        C(
+            quantity="total time WS + SCP, CVX / CVX-TPBVP / ART [s]",
+            paper="~2 each",
+            ours=" / ".join(
+                rep.fmt(every[f"{ws}_ws_time"] + every[f"{ws}_scp_time"])
+                for ws in ("convex", "tpbvp", "art")
+            ),
+            note="mean over all",
+        ),
+        C(
+            quantity="SCP infeasibility rate, CVX-TPBVP / CVX / ART [%]",
+            paper="Fig. 6 only (no number in the text)",
+            ours=" / ".join(rep.fmt(every[f"{ws}_infeasible_pct"]) for ws in WARMSTARTS),
+        ),
+    ]
 
 
 def _plot_lines(ax: Any, x: np.ndarray, cum: list[dict], key: str, ylabel: str) -> None:
@@ -389,15 +484,24 @@ def _figures(cols: Columns, cum: list[dict], out: Path) -> list[tuple[str, str]]
     a.legend()
     _counts(a, x, cum)
     for ws in WARMSTARTS[:2]:
-        b.plot(x, [s[f"improvement_vs_{ws}"] for s in cum], "o-", color=COLORS[ws],
-               label=f"ART vs {LABELS[ws]}")  # fmt: skip
+        b.plot(
+            x,
+            [s[f"improvement_vs_{ws}"] for s in cum],
+            "o-",
+            color=COLORS[ws],
+            label=f"ART vs {LABELS[ws]}",
+        )
     b.axhline(0.0, color="black", lw=0.5)
     b.set_xlabel("C_CVX(t_1) > x")
     b.set_ylabel("ART improvement of the gap [%]")
     b.legend()
     _counts(b, x, cum)
-    files.append((rep.save_figure(fig, out / "fig4_cost.png"),
-                  "Fig. 4: suboptimality gap (left), ART's improvement (right)"))  # fmt: skip
+    files.append(
+        (
+            rep.save_figure(fig, out / "fig4_cost.png"),
+            "Fig. 4: suboptimality gap (left), ART's improvement (right)",
+        )
+    )
     fig, (a, b) = rep.new_figure()
     _plot_lines(a, x, cum, "iterations", "SCP iterations")
     a.legend()
@@ -408,8 +512,12 @@ def _figures(cols: Columns, cum: list[dict], out: Path) -> list[tuple[str, str]]
     b.set_xlabel("SCP iteration")
     b.set_ylabel("100 J_CVX / J_k [%] (C_CVX > 1)")
     b.legend()
-    files.append((rep.save_figure(fig, out / "fig5_iterations.png"),
-                  "Fig. 5: SCP iterations (left), cost convergence (right)"))  # fmt: skip
+    files.append(
+        (
+            rep.save_figure(fig, out / "fig5_iterations.png"),
+            "Fig. 5: SCP iterations (left), cost convergence (right)",
+        )
+    )
     fig, (a, b) = rep.new_figure()
     for ws in WARMSTARTS:
         ws_t = np.array([s[f"{ws}_ws_time"] for s in cum])
@@ -423,6 +531,10 @@ def _figures(cols: Columns, cum: list[dict], out: Path) -> list[tuple[str, str]]
     _plot_lines(b, x, cum, "infeasible_pct", "SCP infeasibility rate [%]")
     b.legend()
     _counts(b, x, cum)
-    files.append((rep.save_figure(fig, out / "fig6_runtime.png"),
-                  "Fig. 6: runtime split (left), SCP infeasibility rate (right)"))  # fmt: skip
+    files.append(
+        (
+            rep.save_figure(fig, out / "fig6_runtime.png"),
+            "Fig. 6: runtime split (left), SCP infeasibility rate (right)",
+        )
+    )
     return files
