@@ -197,3 +197,14 @@ def test_a_gradient_step_reduces_the_loss_on_a_fixed_batch():
 def test_config_round_trips_through_its_dict():
     config = dataclasses.replace(TINY, target_dim=6)
     assert ArtConfig(**config.to_dict()) == config
+
+
+def test_generation_with_prepacked_weights_follows_weight_updates():
+    model = tiny_model(6)
+    batch = random_batch(9, 6, 6)  # batch >= 8: linear layers on oneDNN when available
+    for _ in range(2):
+        actions, _ = generate(model, batch)
+        torch.testing.assert_close(actions, model(batch)[0]["action"], rtol=1e-5, atol=1e-5)
+        with torch.no_grad():
+            for p in model.parameters():
+                p.mul_(1.5)  # in place, as an optimizer step: the packed copies must follow
