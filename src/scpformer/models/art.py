@@ -19,7 +19,8 @@ only the new tokens, the prefix is never recomputed::
         u = model.predict_action(cache, rtg, ctg, x)  # feeds [g] R C x, returns u_hat(t_i)
         x_hat = model.predict_state(cache, u)  # feeds u, returns x_hat(t_{i+1})
 
-Sizes (``paper`` preset, Table 4): 6 layers, 6 heads, 384 dimensions, 10.7 M parameters.
+Sizes: ``paper`` (Table 4) 6 layers, 6 heads, 384 dimensions, 10.7 M parameters; ``small``
+3 layers, 3 heads, 96 dimensions, 0.35 M parameters (chosen by measuring, see ART_PRESETS).
 """
 
 from __future__ import annotations
@@ -85,11 +86,15 @@ class ArtConfig:
 ART_PRESETS: dict[str, ArtConfig] = {
     # ART paper Table 4 (robust ART Table 3): 10.7 M parameters.
     "paper": ArtConfig(),
-    # Sized on this project's 2-core CPU machine (measured with
-    # benchmarks/art_presets.py, one thread for inference, two for training, ~5000 sequences
-    # of 100 steps): 4 layers x 128 dims (0.80 M parameters) keeps an epoch in minutes and
-    # the 100-step cached rollout well under 30 ms; the paper size is ~13x slower to train.
-    "small": ArtConfig(n_layer=4, n_head=4, n_embd=128, dropout=0.1),
+    # Sized by measuring on this project's shared 2-core AMD EPYC (benchmarks/art_presets.py:
+    # training epoch of 5000 random 100-step sequences at batch 32 on 2 threads; the 100-step
+    # cached rollout with the dynamics in the loop on 1 thread; CPU seconds of the process,
+    # the machine being loaded 5-6x). Decision Transformer's gym size (3 layers, 128 dims) and
+    # 4 x 128 cost 1.3-1.8x more per epoch (624 / 862 s vs 492 s) and reach 53-68 instead of
+    # 90 trajectories/s at batch 64, whose key-value reads are memory-bound (their volume
+    # scales with layers x width); 2 x 128 is as fast but shallower. 3 layers x 96 dims
+    # (0.35 M parameters) keeps an epoch at ~8 CPU-minutes.
+    "small": ArtConfig(n_layer=3, n_head=3, n_embd=96),
 }
 
 
