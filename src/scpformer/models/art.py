@@ -36,7 +36,6 @@ from torch.nn import functional
 from scpformer.models.sequence import (
     ACTIVATIONS,
     StepCache,
-    TokenCodec,
     TokenSequenceModel,
     activation_fn,
     check_sizes,
@@ -179,18 +178,7 @@ class ART(TokenSequenceModel):
     """The Autonomous Rendezvous Transformer (see the module docstring)."""
 
     def __init__(self, config: ArtConfig) -> None:
-        super().__init__()
-        if not isinstance(config, ArtConfig):
-            raise TypeError(f"config must be an ArtConfig, got {type(config).__name__}")
-        self.config = config
-        self.codec = TokenCodec(
-            n_embd=config.n_embd,
-            context=config.context,
-            state_dim=config.state_dim,
-            action_dim=config.action_dim,
-            target_dim=config.target_dim,
-        )
-        self.drop = nn.Dropout(config.dropout)
+        super().__init__(config, ArtConfig)
         self.blocks = nn.ModuleList(Block(config) for _ in range(config.n_layer))
         self.ln_f = nn.LayerNorm(config.n_embd, bias=config.bias)
         self.apply(init_weights)
