@@ -253,7 +253,7 @@ class ART(TokenSequenceModel):
         for layer, (w, kv, (keys, values)) in enumerate(
             zip(cache.weights, cache.kv, cache.kv_flat, strict=True)
         ):
-            hid = functional.layer_norm(x, (c,), w[0], w[1], eps)
+            hid = torch.layer_norm(x, (c,), w[0], w[1], eps)
             qkv = linear(hid, w[2], w[3]).view(b, n, 3, h, d)
             kv[:, :, :, start:end] = qkv[:, :, 1:].permute(2, 0, 3, 1, 4)  # (2, B, h, n, d)
             if layer == last:  # only the last token's output is read
@@ -263,11 +263,11 @@ class ART(TokenSequenceModel):
             y = torch.bmm(torch.softmax(scores, dim=-1), values[:, :end])  # (B h, n', d)
             y = y.view(b, h, -1, d).transpose(1, 2).reshape(b, -1, c)  # (B, n', C)
             x = x + linear(y, w[4], w[5])
-            hid = functional.layer_norm(x, (c,), w[6], w[7], eps)
+            hid = torch.layer_norm(x, (c,), w[6], w[7], eps)
             hid = self._act(linear(hid, w[8], w[9]))
             x = x + linear(hid, w[10], w[11])  # (B, n', C)
         cache.length = end
-        return functional.layer_norm(x[:, -1], (c,), self.ln_f.weight, self.ln_f.bias, eps)
+        return torch.layer_norm(x[:, -1], (c,), self.ln_f.weight, self.ln_f.bias, eps)
 
 
 def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
