@@ -20,7 +20,8 @@ from scpformer.cli import bench_art
 from scpformer.models.art import ART, ArtConfig
 
 CANDIDATES = {
-    "L4-C128 (chosen small)": ArtConfig(n_layer=4, n_head=4, n_embd=128),
+    "L3-C96-H3 (small)": ArtConfig(n_layer=3, n_head=3, n_embd=96),
+    "L4-C128": ArtConfig(n_layer=4, n_head=4, n_embd=128),
     "L3-C128": ArtConfig(n_layer=3, n_head=4, n_embd=128),
     "L2-C128": ArtConfig(n_layer=2, n_head=4, n_embd=128),
     "L4-C96": ArtConfig(n_layer=4, n_head=4, n_embd=96),

@@ -6,7 +6,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from test_models_art import generate, random_batch  # noqa: E402
+from test_models_art import assert_training_reduces_loss, generate, random_batch  # noqa: E402
 
 from scpformer.models.rnn import RNN_PRESETS, RnnConfig, SequenceRNN  # noqa: E402
 
@@ -34,15 +34,7 @@ def test_generation_from_the_hidden_state_equals_the_full_pass(cell, target_dim)
 @pytest.mark.parametrize("cell", ["gru", "lstm"])
 def test_a_gradient_step_reduces_the_rnn_loss(cell):
     torch.manual_seed(0)
-    model = SequenceRNN(dataclasses.replace(TINY, cell=cell)).train()
-    batch = random_batch(4, 6)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-2)
-    before = model(batch)[1]
-    for _ in range(5):
-        optimizer.zero_grad()
-        model(batch)[1].backward()
-        optimizer.step()
-    assert model(batch)[1] < before
+    assert_training_reduces_loss(SequenceRNN(dataclasses.replace(TINY, cell=cell)))
 
 
 def test_unknown_cells_and_sizes_are_errors():

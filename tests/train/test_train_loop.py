@@ -91,6 +91,9 @@ def test_presets_and_model_defaults_resolve_with_overrides_last():
     small = train_config("small", model_defaults=defaults, lr=None, epochs=2)
     assert (small.lr, small.grad_clip, small.epochs) == (5e-4, 0.5, 2)
     assert train_config("small", model_defaults=defaults, lr=1e-2).lr == 1e-2
+    table4 = {"learning_rate": 2e-5, "grad_accumulation": 4, "lr_decay": None}  # flat: paper
+    assert (train_config("paper", model_defaults=table4).lr, train_config("small", model_defaults=table4).lr) == (2e-5, 1e-3)  # fmt: skip
+    assert train_config("paper", model_defaults=table4).accumulation == 4
     with pytest.raises(ValueError, match="preset must be one of"):
         train_config("huge")
     with pytest.raises(ValueError, match="batch_size must be a positive integer"):

@@ -20,6 +20,7 @@ import torch
 from torch import nn
 
 from scpformer.data.family import Field, SampleResult
+from scpformer.data.torch_views import art_twins
 
 N_STEPS = 8
 _ROE = np.linalg.qr(np.random.default_rng(0).normal(size=(6, 6)))[0]  # a fixed "frame change"
@@ -171,8 +172,9 @@ class TinyNormalization:
     target_std: np.ndarray | None = None
 
     @classmethod
-    def from_dataset(cls, view: Any) -> TinyNormalization:
-        (state_mean, state_std), (action_mean, action_std) = view._stats["state"], view._stats["action"]
+    def from_dataset(cls, view: Any, *, targets: np.ndarray | None = None) -> TinyNormalization:
+        stats = view._stats or view._pooled(art_twins(view.samples.manifest))
+        (state_mean, state_std), (action_mean, action_std) = stats["state"], stats["action"]
         n = view.n_steps
         return cls(
             state_mean=state_mean[:n],
@@ -181,8 +183,8 @@ class TinyNormalization:
             action_std=action_std,
             rtg_scale=10.0,
             ctg_scale=float(n),
-            target_mean=state_mean[n],
-            target_std=state_std[n],
+            target_mean=None if targets is None else targets.mean(axis=0),
+            target_std=None if targets is None else targets.std(axis=0) + 1e-9,
         )
 
     def encode(self, key: str, value: Any, step: int | None = None) -> Any:

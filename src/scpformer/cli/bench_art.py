@@ -70,7 +70,8 @@ class Dynamics:
     Phi: Any  # (N, 6, 6) STMs
     B: Any  # (N, 6, 3) control input matrices [s]
     Psi: Any  # (N+1, 6, 6) ROE -> RTN
-    scenario: Any  # RendezvousScenario (keep-out zone, N_wp)
+    E_koz: Any  # (3, 3) keep-out ellipsoid: inside when |dr E_koz| < 1 (Eq. 21)
+    n_waypoint: int  # N_wp: the keep-out constraint applies at nodes 0..N_wp
 
 
 def rendezvous_dynamics(steps: int, seed: int) -> Dynamics:
@@ -90,7 +91,8 @@ def rendezvous_dynamics(steps: int, seed: int) -> Dynamics:
         Phi=as_tensor(model.Phi),
         B=as_tensor(model.B),
         Psi=as_tensor(model.Psi),
-        scenario=scenario,
+        E_koz=as_tensor(scenario.E_koz),
+        n_waypoint=scenario.n_waypoint,
     )
 
 
@@ -147,7 +149,6 @@ def rollout(policy, dynamics: Dynamics, normalization, frame: str, batch: int, s
     rtg = torch.full((batch, 1), R_T1, dtype=torch.float64)  # R(t_1) [m/s]
     ctg = torch.zeros(batch, 1, dtype=torch.float64)  # C(t_1)
     states, actions = [x], []
-    n_wp = dynamics.scenario.n_waypoint
     for k in range(steps):
         rtn = x @ dynamics.Psi[k].T  # (B, 6)
         observed = rtn if frame == "rtn" else x
@@ -160,9 +161,9 @@ def rollout(policy, dynamics: Dynamics, normalization, frame: str, batch: int, s
         policy.observe(k, u_norm)
         u = normalization.decode("action", u_norm.double(), step=k)  # (B, 3) [m/s]
         rtg = rtg - u.norm(dim=1, keepdim=True)  # Eq. 20
-        if k <= n_wp:  # Eq. 21: keep-out violation at node k
-            inside = dynamics.scenario.koz_metric(rtn[:, :3].numpy()) < 1.0
-            ctg = ctg - torch.as_tensor(inside, dtype=torch.float64)[:, None]
+        if k <= dynamics.n_waypoint:  # Eq. 21: keep-out violation at node k
+            inside = (rtn[:, :3] @ dynamics.E_koz).norm(dim=1, keepdim=True) < 1.0
+            ctg = ctg - inside.double()
         x = (x + u @ dynamics.B[k].T) @ dynamics.Phi[k].T  # Eq. 10
         states.append(x)
         actions.append(u)

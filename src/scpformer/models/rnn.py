@@ -20,7 +20,6 @@ from torch import Tensor, nn
 
 from scpformer.models.sequence import (
     StepCache,
-    TokenCodec,
     TokenSequenceModel,
     check_sizes,
     init_weights,
@@ -69,18 +68,7 @@ class SequenceRNN(TokenSequenceModel):
     """A GRU or LSTM over ART's token sequence (see the module docstring)."""
 
     def __init__(self, config: RnnConfig) -> None:
-        super().__init__()
-        if not isinstance(config, RnnConfig):
-            raise TypeError(f"config must be an RnnConfig, got {type(config).__name__}")
-        self.config = config
-        self.codec = TokenCodec(
-            n_embd=config.n_embd,
-            context=config.context,
-            state_dim=config.state_dim,
-            action_dim=config.action_dim,
-            target_dim=config.target_dim,
-        )
-        self.drop = nn.Dropout(config.dropout)
+        super().__init__(config, RnnConfig)
         core = nn.GRU if config.cell == "gru" else nn.LSTM
         self.core = core(
             config.n_embd,

@@ -184,13 +184,27 @@ class StepCache:
 class TokenSequenceModel(nn.Module):
     """Training and generation interface shared by ART and the recurrent baselines.
 
-    Subclasses set ``self.codec`` (a :class:`TokenCodec`) and ``self.drop``, and implement
+    The constructor checks the configuration's type and builds the :class:`TokenCodec`
+    (``self.codec``) and the embedding dropout (``self.drop``); subclasses implement
     ``_core(tokens) -> (B, L, C)`` (the whole sequence, training), ``_empty_cache`` and
     ``_feed(cache, tokens) -> (B, C)`` (new tokens only, generation).
     """
 
-    codec: TokenCodec
-    drop: nn.Module
+    def __init__(self, config: object, config_type: type) -> None:
+        super().__init__()
+        if not isinstance(config, config_type):
+            raise TypeError(
+                f"config must be an {config_type.__name__}, got {type(config).__name__}"
+            )
+        self.config = config
+        self.codec = TokenCodec(
+            n_embd=config.n_embd,
+            context=config.context,
+            state_dim=config.state_dim,
+            action_dim=config.action_dim,
+            target_dim=config.target_dim,
+        )
+        self.drop = nn.Dropout(config.dropout)
 
     def num_parameters(self) -> int:
         """Number of trainable parameters."""

@@ -7,8 +7,9 @@ What is specific to ART-style training lives here; the loop is :func:`scpformer.
   raw: ``normalize=False``) and gathered by the views' (sample, twin) items into tensors
   (:func:`read_sequences`; checked against the views item by item in the tests).
 * **One normalization.** ``ArtNormalization.from_dataset`` of the training view (training
-  statistics only) encodes every input once; the same object is stored in the checkpoint and
-  used at inference.
+  statistics only; with ``targets=`` the training trajectories' targets when the model takes
+  the target token) encodes every input once; the same object is stored in the checkpoint
+  and used at inference.
 * **Validation by instance.** The ``validation`` split of ``scpformer dataset split`` when it
   has instances; otherwise (the default fractions are 0.8/0/0.2) a seeded permutation of the
   training split's ``base_index`` values sets ``validation_fraction`` of the training
@@ -130,8 +131,6 @@ def load_art_data(
     """Read, split and normalize a rendezvous dataset for training (see the module docstring)."""
     start = time.perf_counter()
     folder = Path(folder)
-    stats_view = ArtSequenceDataset(folder, "train", frame=frame, normalize=True)
-    normalization = normalization_type.from_dataset(stats_view)
     train_view = ArtSequenceDataset(folder, "train", frame=frame, normalize=False)
     val_view = ArtSequenceDataset(folder, "validation", frame=frame, normalize=False)
     train = read_sequences(train_view)
@@ -148,6 +147,9 @@ def load_art_data(
             f"no validation split: {validation_fraction:g} of the training instances "
             f"(grouped by base_index, permutation seed {seed}) held out"
         )
+    # state/action statistics: the training split's (dataset split); target: the kept ones'
+    targets = {"targets": train["target"]} if target else {}
+    normalization = normalization_type.from_dataset(train_view, **targets)
     return ArtData(
         train=_encoded(train, normalization, target),
         validation=_encoded(validation, normalization, target),

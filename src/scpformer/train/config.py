@@ -96,21 +96,33 @@ def train_config(preset: str, *, model_defaults: Any = None, **overrides: Any) -
 
     ``model_defaults`` is a models package's ``TRAIN_DEFAULTS``: a mapping from preset name to
     a mapping (or an object with ``to_dict()``/dataclass fields) of training values, e.g.
-    ``{"paper": {"lr": 3e-5, "grad_clip": 1.0, "accumulation": 8}}``; common aliases such as
-    ``learning_rate`` are understood and unknown keys ignored. Its values override
+    ``{"paper": {"lr": 3e-5, "grad_clip": 1.0, "accumulation": 8}}``, or one flat mapping of
+    the paper's values (applied to ``paper`` only); common aliases such as ``learning_rate``
+    and ``grad_accumulation`` are understood, ``lr_decay: None`` means a constant schedule,
+    and unknown keys are ignored. Its values override
     :data:`TRAIN_PRESETS`; explicit ``overrides`` override both.
     """
     if preset not in TRAIN_PRESETS:
         raise ValueError(f"preset must be one of {tuple(TRAIN_PRESETS)}, got {preset!r}")
     base = TRAIN_PRESETS[preset].to_dict()
-    from_models = _as_mapping((model_defaults or {}).get(preset, {}))
     known = set(base)
-    for key, value in from_models.items():
+    for key, value in _model_defaults(model_defaults, preset).items():
         name = _ALIASES.get(key, key)
-        if name in known and name not in ("seed", "device", "epochs"):
+        if name == "lr_decay":
+            base["schedule"] = "constant" if value in (None, "none", "constant") else str(value)
+        elif name in known and name not in ("seed", "device", "epochs"):
             base[name] = value
     base.update({k: v for k, v in overrides.items() if v is not None})
     return TrainConfig.from_dict(base)
+
+
+def _model_defaults(model_defaults: Any, preset: str) -> Mapping[str, Any]:
+    """The models' training values for ``preset``: a per-preset mapping's entry, or a flat
+    mapping (the paper's Table 4 values) for ``paper`` only."""
+    defaults = _as_mapping(model_defaults) if model_defaults is not None else {}
+    if any(name in defaults for name in TRAIN_PRESETS):
+        return _as_mapping(defaults.get(preset, {}))
+    return defaults if preset == "paper" else {}
 
 
 def _as_mapping(value: Any) -> Mapping[str, Any]:

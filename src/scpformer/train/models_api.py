@@ -26,9 +26,17 @@ def default_models() -> Any:
         preset=module.preset,
         config_from_dict=module.config_from_dict,
         ArtNormalization=normalization,
-        TRAIN_DEFAULTS=getattr(module, "TRAIN_DEFAULTS", None),
+        TRAIN_DEFAULTS=_train_defaults(module),
         MODEL_KINDS=getattr(module, "MODEL_KINDS", ("art", "gru", "lstm")),
     )
+
+
+def _train_defaults(module: Any) -> Any:
+    """``TRAIN_DEFAULTS`` of the models package or of its ``art`` module (None if neither)."""
+    found = getattr(module, "TRAIN_DEFAULTS", None)
+    if found is None:
+        found = getattr(importlib.import_module("scpformer.models.art"), "TRAIN_DEFAULTS", None)
+    return found
 
 
 def resolve(models: Any | None) -> Any:
