@@ -9,7 +9,8 @@
 #
 # Environment (defaults in brackets): DATA [/work/data] dataset root, RUNS [$DATA/runs] model
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
-# instances, EPOCHS [preset's] training epochs, RAY [unset] Ray address for the solves.
+# instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] training epochs,
+# RAY [unset] Ray address for the solves.
 set -euo pipefail
 
 DATA=${DATA:-/work/data}
@@ -18,7 +19,9 @@ OUT=${OUT:-docs/results}
 WORKERS=${WORKERS:-2}
 SEED=${SEED:-0}
 N_RDV=${N_RDV:-3000}
+N_ROB=${N_ROB:-1200}
 RDV=$DATA/rdv$N_RDV
+ROB=$DATA/rob$N_ROB
 EPOCHS_FLAG=${EPOCHS:+--epochs $EPOCHS}
 RAY_FLAG=${RAY:+--ray $RAY}
 
@@ -52,5 +55,22 @@ run scpformer experiment run art-forecast-tpbvp --model "$RUNS/art-small" \
 run scpformer experiment run art-conditioning --model "$RUNS/art-small" "${common[@]}" \
   --out "$OUT/art-conditioning"
 
-# 4. robust ART paper: robust-warmstart, robust-trajectory, robust-posthoc are registered
-#    (`scpformer experiment list`) but not implemented yet; nothing to regenerate.
+# 4. robust ART paper: chance-constrained dataset (three-stage procedure), ART on RTN and on
+#    ROE states, SCvx* warm-started by CVX and ART in both passive-safety modes
+if [ ! -f "$ROB/splits.h5" ]; then
+  run scpformer generate robust-rendezvous --n "$N_ROB" --seed "$SEED" --out "$ROB" \
+    --workers "$WORKERS"
+  run scpformer dataset split "$ROB" --fractions 0.8 0.1 0.1 --seed "$SEED"
+fi
+for frame in rtn roe; do
+  if [ -f "$RUNS/robust-art-$frame/checkpoint.pt" ]; then resume=--resume; else resume=; fi
+  # shellcheck disable=SC2086
+  run scpformer train art --data "$ROB" --out "$RUNS/robust-art-$frame" --preset small \
+    --frame "$frame" --seed "$SEED" $EPOCHS_FLAG $resume
+done
+# shellcheck disable=SC2086
+run scpformer experiment run robust-warmstart --model "$RUNS/robust-art-rtn" \
+  --model "$RUNS/robust-art-roe" --data "$ROB" --workers "$WORKERS" --seed "$SEED" $RAY_FLAG \
+  --out "$OUT/robust-warmstart"
+# robust-trajectory and robust-posthoc are registered (`scpformer experiment list`) but not
+# implemented yet: nothing to regenerate for them.

@@ -59,3 +59,28 @@ def tiny_runs(tmp_path_factory, tiny_data):
     """Randomly initialized ART, GRU and LSTM run folders (kind -> folder)."""
     root = tmp_path_factory.mktemp("exp-runs")
     return {kind: _random_run(root / kind, tiny_data, kind) for kind in TINY}
+
+
+@pytest.fixture(scope="session")
+def tiny_robust(tmp_path_factory):
+    """4 chance-constrained robust instances split 1/2 train, 1/4 test, and an RTN ART run."""
+    from scpformer.cli.main import main
+    from scpformer.data.robust_rendezvous_family import RobustDataConfig, RobustRendezvousFamily
+
+    root = tmp_path_factory.mktemp("exp-robust")
+    family = RobustRendezvousFamily(RobustDataConfig(verify=False))
+    generate(family, GenerateConfig(n=4, out=root / "ds", shard_size=4, workers=2, seed=2))
+    make_splits(root / "ds", SplitConfig(fractions=(0.5, 0.25, 0.25), seed=0))
+    argv = [
+        "train",
+        "art",
+        "--data",
+        str(root / "ds"),
+        "--out",
+        str(root / "art-rtn"),
+        "--epochs",
+        "1",
+        "--no-progress",
+    ]
+    assert main(argv) == 0
+    return root / "ds", root / "art-rtn"

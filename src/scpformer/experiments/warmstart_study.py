@@ -268,14 +268,15 @@ class Columns:
         return MM * (self.cost[ws] - self.j_cvx)
 
 
-def _mean(values: np.ndarray, mask: np.ndarray) -> float:
+def mean_over(values: np.ndarray, mask: np.ndarray) -> float:
+    """Mean of ``values[mask]`` (NaN when ``mask`` selects nothing)."""
     return float(np.mean(values[mask])) if mask.any() else math.nan
 
 
 def relative_gap(cols: Columns, ws: str, mask: np.ndarray) -> float:
     """Mean ``100 (J_SCP - J_CVX) / J_CVX`` [%] of warm start ``ws`` over ``mask``."""
     both = mask & cols.all_feasible()
-    return _mean(100.0 * (cols.cost[ws] - cols.j_cvx) / cols.j_cvx, both)
+    return mean_over(100.0 * (cols.cost[ws] - cols.j_cvx) / cols.j_cvx, both)
 
 
 def bin_stats(cols: Columns, mask: np.ndarray) -> dict[str, float]:
@@ -283,15 +284,15 @@ def bin_stats(cols: Columns, mask: np.ndarray) -> dict[str, float]:
     both = mask & cols.all_feasible()
     out: dict[str, float] = {"count": int(mask.sum()), "count_feasible": int(both.sum())}
     for ws in WARMSTARTS:
-        out[f"{ws}_gap"] = _mean(cols.gap(ws), both)
-        out[f"{ws}_iterations"] = _mean(cols.iterations[ws], both)
-        out[f"{ws}_ws_time"] = _mean(cols.ws_time[ws], mask)
-        out[f"{ws}_scp_time"] = _mean(cols.scp_time[ws], mask)
-        out[f"{ws}_infeasible_pct"] = 100.0 * _mean(~cols.feasible[ws], mask)
+        out[f"{ws}_gap"] = mean_over(cols.gap(ws), both)
+        out[f"{ws}_iterations"] = mean_over(cols.iterations[ws], both)
+        out[f"{ws}_ws_time"] = mean_over(cols.ws_time[ws], mask)
+        out[f"{ws}_scp_time"] = mean_over(cols.scp_time[ws], mask)
+        out[f"{ws}_infeasible_pct"] = 100.0 * mean_over(~cols.feasible[ws], mask)
     for ws in WARMSTARTS[:2]:
         gap = out[f"{ws}_gap"]
         out[f"improvement_vs_{ws}"] = 100.0 * (gap - out["art_gap"]) / gap if gap > 0 else math.nan
-    out["art_generation_s"] = _mean(cols.generation, mask)
+    out["art_generation_s"] = mean_over(cols.generation, mask)
     return out
 
 
@@ -469,7 +470,7 @@ def _plot_lines(ax: Any, x: np.ndarray, cum: list[dict], key: str, ylabel: str) 
     ax.set_ylabel(ylabel)
 
 
-def _counts(ax: Any, x: np.ndarray, cum: list[dict]) -> None:
+def plot_counts(ax: Any, x: np.ndarray, cum: list[dict]) -> None:
     """The paper's grey dashed line: instances with C_CVX(t_1) > x."""
     twin = ax.twinx()
     twin.plot(x, [s["count"] for s in cum], "--", color="grey", label="samples")
@@ -482,7 +483,7 @@ def _figures(cols: Columns, cum: list[dict], out: Path) -> list[tuple[str, str]]
     fig, (a, b) = rep.new_figure()
     _plot_lines(a, x, cum, "gap", "suboptimality gap J_SCP - J_CVX [mm/s]")
     a.legend()
-    _counts(a, x, cum)
+    plot_counts(a, x, cum)
     for ws in WARMSTARTS[:2]:
         b.plot(
             x,
@@ -495,7 +496,7 @@ def _figures(cols: Columns, cum: list[dict], out: Path) -> list[tuple[str, str]]
     b.set_xlabel("C_CVX(t_1) > x")
     b.set_ylabel("ART improvement of the gap [%]")
     b.legend()
-    _counts(b, x, cum)
+    plot_counts(b, x, cum)
     files.append(
         (
             rep.save_figure(fig, out / "fig4_cost.png"),
@@ -505,7 +506,7 @@ def _figures(cols: Columns, cum: list[dict], out: Path) -> list[tuple[str, str]]
     fig, (a, b) = rep.new_figure()
     _plot_lines(a, x, cum, "iterations", "SCP iterations")
     a.legend()
-    _counts(a, x, cum)
+    plot_counts(a, x, cum)
     k_max = max((h.size for ws in WARMSTARTS for h in cols.history[ws]), default=1)
     for ws, curve in convergence(cols, max(k_max, 1)).items():
         b.plot(np.arange(1, curve.size + 1), curve, "o-", color=COLORS[ws], label=LABELS[ws])
@@ -530,7 +531,7 @@ def _figures(cols: Columns, cum: list[dict], out: Path) -> list[tuple[str, str]]
     a.legend(fontsize=7, ncol=3)
     _plot_lines(b, x, cum, "infeasible_pct", "SCP infeasibility rate [%]")
     b.legend()
-    _counts(b, x, cum)
+    plot_counts(b, x, cum)
     files.append(
         (
             rep.save_figure(fig, out / "fig6_runtime.png"),

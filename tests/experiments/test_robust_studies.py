@@ -1,0 +1,56 @@
+import csv
+
+import pytest
+
+from scpformer.cli.main import main
+from scpformer.experiments.robust_studies import columns
+
+pytestmark = pytest.mark.slow
+
+
+def test_robust_warmstart_runs_scvx_star_from_cvx_and_art_in_both_modes(tmp_path, tiny_robust):
+    data, run = tiny_robust
+    out = tmp_path / "robust-warmstart"
+    argv = [
+        "experiment",
+        "run",
+        "robust-warmstart",
+        "--model",
+        str(run),
+        "--data",
+        str(data),
+        "--n",
+        "1",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+    ]
+    assert main(argv) == 0
+    with (out / "results.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 1 and list(rows[0]) == list(columns(("rtn",)))
+    row = rows[0]
+    for mode in ("deterministic", "chance"):
+        assert row[f"{mode}_cvx_status"] in ("converged", "max_iterations", "solver_failed")
+        assert row[f"{mode}_art_rtn_accepted"] in ("True", "False")  # the Eq. 8 check ran
+    assert (out / "fig5_deterministic.png").is_file() and (out / "fig6_chance.png").is_file()
+    assert "PS-ART-C (RTN)" in (out / "report.md").read_text()
+
+
+def test_a_rendezvous_dataset_is_refused_by_robust_warmstart(
+    tmp_path, tiny_data, tiny_runs, capsys
+):
+    argv = [
+        "experiment",
+        "run",
+        "robust-warmstart",
+        "--model",
+        str(tiny_runs["art"]),
+        "--data",
+        str(tiny_data),
+        "--out",
+        str(tmp_path / "o"),
+    ]
+    assert main(argv) == 2
+    assert "not robust-rendezvous" in capsys.readouterr().err
