@@ -72,5 +72,9 @@ done
 run scpformer experiment run robust-warmstart --model "$RUNS/robust-art-rtn" \
   --model "$RUNS/robust-art-roe" --data "$ROB" --workers "$WORKERS" --seed "$SEED" $RAY_FLAG \
   --out "$OUT/robust-warmstart"
-# robust-trajectory and robust-posthoc are registered (`scpformer experiment list`) but not
-# implemented yet: nothing to regenerate for them.
+# the instance with the largest ART gain, and the post hoc check (RTN model, as the paper)
+for name in robust-trajectory robust-posthoc; do
+  # shellcheck disable=SC2086
+  run scpformer experiment run "$name" --model "$RUNS/robust-art-rtn" --data "$ROB" \
+    --workers "$WORKERS" --seed "$SEED" $RAY_FLAG --out "$OUT/$name"
+done

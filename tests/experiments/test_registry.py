@@ -53,8 +53,3 @@ def test_bad_paths_are_one_line_errors(tmp_path, capsys, argv, message):
 def test_run_options_reject_a_nonpositive_n(tmp_path):
     with pytest.raises(ValueError, match="n must be a positive integer"):
         RunOptions(out=tmp_path, n=0)
-
-
-def test_an_experiment_not_implemented_yet_is_a_one_line_error(tmp_path, capsys):
-    assert main(["experiment", "run", "robust-posthoc", "--out", str(tmp_path)]) == 2
-    assert "robust-posthoc: not implemented yet" in capsys.readouterr().err

@@ -54,3 +54,40 @@ def test_a_rendezvous_dataset_is_refused_by_robust_warmstart(
     ]
     assert main(argv) == 2
     assert "not robust-rendezvous" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("name", "files"),
+    [
+        ("robust-posthoc", ("fig9_posthoc.png", "fig10_posthoc_histogram.png")),
+        ("robust-trajectory", ()),
+    ],
+)
+def test_posthoc_and_trajectory_run_the_chance_constrained_study(
+    tmp_path, tiny_robust, name, files
+):
+    data, run = tiny_robust
+    out = tmp_path / name
+    argv = [
+        "experiment",
+        "run",
+        name,
+        "--model",
+        str(run),
+        "--data",
+        str(data),
+        "--n",
+        "1",
+        "--workers",
+        "1",
+        "--out",
+        str(out),
+    ]
+    assert main(argv) == 0
+    with (out / "results.csv").open(newline="") as handle:
+        (row,) = list(csv.DictReader(handle))
+    assert "deterministic_cvx_status" not in row  # chance-constrained only
+    assert row["chance_art_rtn_would_accept"] in ("True", "False")
+    for file in files:
+        assert (out / file).is_file()
+    assert "## The paper's numbers beside ours" in (out / "report.md").read_text()

@@ -17,8 +17,9 @@ the mode's own Eq. 7 budget), the suboptimality ``J_SCP - J_CVX``, the improveme
 the infeasibility rate (runs that do not converge: infeasible or at max_iterations) and the
 histogram of ``J_SCP,CVX - J_SCP,ART``.
 
-``robust-trajectory`` (Figs. 7-8) and ``robust-posthoc`` (Figs. 9-10) are registered but not
-implemented yet: their runs end with a clear error.
+``robust-trajectory`` (Figs. 7-8) and ``robust-posthoc`` (Figs. 9-10) run the same solves in
+the chance-constrained mode (the latter without the acceptance check, recording what it would
+decide); their analyses are in :mod:`scpformer.experiments.robust_posthoc`.
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ PER_SOURCE = (
     "accepted",
     "E_R",
     "E_C",
+    "would_accept",
 )
 FAMILY = "robust-rendezvous"
 
@@ -73,9 +75,9 @@ def sources(frames: tuple[str, ...]) -> tuple[str, ...]:
     return ("cvx", *(f"art_{f}" for f in frames))
 
 
-def columns(frames: tuple[str, ...]) -> tuple[str, ...]:
-    per = [f"{m}_{s}_{name}" for m in MODES for s in sources(frames) for name in PER_SOURCE]
-    budgets = [f"{m}_c_cvx_t1" for m in MODES]
+def columns(frames: tuple[str, ...], modes: tuple[str, ...] = tuple(MODES)) -> tuple[str, ...]:
+    per = [f"{m}_{s}_{name}" for m in modes for s in sources(frames) for name in PER_SOURCE]
+    budgets = [f"{m}_c_cvx_t1" for m in modes]
     return (KEY, "j_cvx", *budgets, *per, "status", "message")
 
 
@@ -93,10 +95,21 @@ class Task:
 
 
 class RobustWarmstartSolver:
-    """Per-instance work of ``robust-warmstart`` (runs in the executor's workers)."""
+    """Per-instance SCvx* from CVX and from ART in ``modes`` (runs in the executor's workers).
 
-    def __init__(self, checkpoints: tuple[Path, ...], data_config: dict[str, Any]) -> None:
+    ``check`` applies the post hoc acceptance check (Eq. 8, CVX fallback); without it ART's
+    own guess always starts SCvx* and ``would_accept`` records what the check would decide.
+    """
+
+    def __init__(
+        self,
+        checkpoints: tuple[Path, ...],
+        data_config: dict[str, Any],
+        modes: tuple[str, ...] = tuple(MODES),
+        check: bool = True,
+    ) -> None:
         self.checkpoints, self.data_config = checkpoints, data_config
+        self.modes, self.check = modes, check
         self._models: list[Any] = []
 
     def __getstate__(self) -> dict[str, Any]:
@@ -112,74 +125,106 @@ class RobustWarmstartSolver:
         self._models = [load_checkpoint(p, family=FAMILY) for p in self.checkpoints]
         build_family(FAMILY, self.data_config).warm_up()
 
-    def solve(self, task: Task) -> dict[str, Any]:
+    def instance(self, theta: np.ndarray) -> Any:
         from scpformer.data.robust_rendezvous_family import RobustDataConfig, instance_from_theta
-        from scpformer.problems.robust_rendezvous.problem import solve
-        from scpformer.warmstart import ArtWarmStart, PrecomputedWarmStart, RobustTpbvpWarmStart
 
         config = RobustDataConfig.from_dict(self.data_config)
-        instance = instance_from_theta(task.theta, config.scenario, config.uncertainty)
+        return instance_from_theta(theta, config.scenario, config.uncertainty)
+
+    def guesses(self, instance: Any, mode: str) -> dict[str, Any]:
+        """CVX's and every model's warm start (``WarmStartResult``) in ``mode``."""
+        from scpformer.data.robust_rendezvous_family import RobustDataConfig
+        from scpformer.warmstart import ArtWarmStart, PrecomputedWarmStart, RobustTpbvpWarmStart
+
+        solver = RobustDataConfig.from_dict(self.data_config).solver
+        cvx = RobustTpbvpWarmStart(solver, mode).guess(instance)
+        out = {"cvx": cvx}
+        for ckpt in self._models:
+            art = ArtWarmStart(
+                ckpt.model,
+                ckpt.normalization,
+                frame=ckpt.frame,
+                family=FAMILY,
+                mode=mode,
+                config=solver,
+                fallback=PrecomputedWarmStart(cvx),
+                acceptance="family" if self.check else None,
+            )
+            out[f"art_{ckpt.frame}"] = art.guess(instance)
+        return out
+
+    def scp(self, instance: Any, mode: str, guess: Any) -> Any:
+        """SCvx* from ``guess`` (no final verification)."""
+        from scpformer.data.robust_rendezvous_family import RobustDataConfig
+        from scpformer.problems.robust_rendezvous.problem import solve
+        from scpformer.warmstart import PrecomputedWarmStart
+
+        solver = RobustDataConfig.from_dict(self.data_config).solver
+        return solve(instance, solver, mode, warmstart=PrecomputedWarmStart(guess), verify=False)
+
+    def solve(self, task: Task) -> dict[str, Any]:
+        instance = self.instance(task.theta)
         row: dict[str, Any] = {KEY: task.index, "status": "ok", "message": ""}
-        for mode in MODES:
-            cvx = RobustTpbvpWarmStart(config.solver, mode).guess(instance)
-            row["j_cvx"] = cvx.record.cost
-            row[f"{mode}_c_cvx_t1"] = cvx.record.constraint_to_go
-            guesses = {"cvx": cvx}
-            for ckpt in self._models:
-                art = ArtWarmStart(
-                    ckpt.model,
-                    ckpt.normalization,
-                    frame=ckpt.frame,
-                    family=FAMILY,
-                    mode=mode,
-                    config=config.solver,
-                    fallback=PrecomputedWarmStart(cvx),
-                )
-                guesses[f"art_{ckpt.frame}"] = art.guess(instance)
+        for mode in self.modes:
+            guesses = self.guesses(instance, mode)
+            row["j_cvx"] = guesses["cvx"].record.cost
+            row[f"{mode}_c_cvx_t1"] = guesses["cvx"].record.constraint_to_go
             for source, guess in guesses.items():
-                prefix = f"{mode}_{source}"
-                record = guess.record
-                row.update(
-                    {
-                        f"{prefix}_ws_time": record.time_s,
-                        f"{prefix}_accepted": record.accepted,
-                        f"{prefix}_E_R": record.details.get("E_R", math.nan),
-                        f"{prefix}_E_C": record.details.get("E_C", math.nan),
-                    }
-                )
-                if guess.trajectory is None:
-                    row[f"{prefix}_status"] = "no_warm_start"
-                    row[f"{prefix}_converged"] = False
-                    continue
-                solution = solve(
-                    instance,
-                    config.solver,
-                    mode,
-                    warmstart=PrecomputedWarmStart(guess),
-                    verify=False,
-                )
-                row.update(
-                    {
-                        f"{prefix}_status": solution.status.value,
-                        f"{prefix}_cost": solution.cost,
-                        f"{prefix}_iterations": solution.iterations,
-                        f"{prefix}_scp_time": solution.timing.total
-                        if solution.timing
-                        else math.nan,
-                        f"{prefix}_converged": solution.converged,
-                    }
-                )
+                row.update(self._fields(instance, mode, f"{mode}_{source}", guess))
         return row
+
+    def _fields(self, instance: Any, mode: str, prefix: str, guess: Any) -> dict[str, Any]:
+        from scpformer.warmstart import AcceptanceCheck
+
+        record, details = guess.record, guess.record.details
+        out: dict[str, Any] = {
+            f"{prefix}_ws_time": record.time_s,
+            f"{prefix}_accepted": record.accepted,
+        }
+        if "art_cost" in details:  # an ART guess: what the Eq. 8 check says about it
+            decision = AcceptanceCheck().evaluate(
+                rtg_desired=details["rtg0"],
+                ctg_desired=details["ctg0"],
+                rtg_realized=-details["art_cost"],
+                ctg_realized=details["art_constraint_to_go"],
+            )
+            out.update(
+                {
+                    f"{prefix}_E_R": decision.E_R,
+                    f"{prefix}_E_C": decision.E_C,
+                    f"{prefix}_would_accept": decision.accepted,
+                }
+            )
+        if guess.trajectory is None:
+            return {**out, f"{prefix}_status": "no_warm_start", f"{prefix}_converged": False}
+        solution = self.scp(instance, mode, guess)
+        return {
+            **out,
+            f"{prefix}_status": solution.status.value,
+            f"{prefix}_cost": solution.cost,
+            f"{prefix}_iterations": solution.iterations,
+            f"{prefix}_scp_time": solution.timing.total if solution.timing else math.nan,
+            f"{prefix}_converged": solution.converged,
+        }
 
 
 def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
     return {KEY: key, "status": status, "message": message}
 
 
+# what each robust experiment runs: passive-safety modes, acceptance check, paper figures
+STUDIES = {
+    "robust-warmstart": (tuple(MODES), True, "robust ART paper Figs. 5-6"),
+    "robust-trajectory": (("chance",), True, "robust ART paper Figs. 7-8"),
+    "robust-posthoc": (("chance",), False, "robust ART paper Figs. 9-10"),
+}
+
+
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
-    """Run ``robust-warmstart``; the other robust entries are not implemented yet."""
-    if name != NAME:
-        raise ValueError(f"{name}: not implemented yet (issue 13); see `scpformer experiment list`")
+    """Run ``robust-warmstart``, ``robust-trajectory`` or ``robust-posthoc``."""
+    if name not in STUDIES:
+        raise ValueError(f"name must be one of {tuple(STUDIES)}, got {name!r}")
+    modes, check, reproduces = STUDIES[name]
     data = require_data(options)
     models = require_models(options)
     manifest = read_manifest(data)
@@ -193,31 +238,40 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     positions = test_positions(data, require_n(options), options.seed)
     settings = settings_dict(
         options,
-        experiment=NAME,
+        experiment=name,
         n=int(positions.size),
         frames=frames,
+        modes=modes,
         conditioning="R(t_1) = -J_CVX, C(t_1) = 0, Algorithm 2, "
-        "post hoc check (Eq. 8) with CVX fallback",
+        + ("post hoc check (Eq. 8) with CVX fallback" if check else "no acceptance check"),
     )
     check_settings(options.out, settings)
     thetas = [f["theta"] for f in read_fields(data, positions, ["theta"])]
     tasks = [Task(int(p), np.asarray(t)) for p, t in zip(positions, thetas, strict=True)]
-    results = ResultsCSV(options.out / RESULTS_NAME, columns(frames))
-    solver = RobustWarmstartSolver(models, manifest.config)
+    results = ResultsCSV(options.out / RESULTS_NAME, columns(frames, modes))
+    solver = RobustWarmstartSolver(models, manifest.config, modes, check)
     run_tasks(solver, tasks, [t.index for t in tasks], options, results, failure_row)
     wanted = {t.index for t in tasks}
     rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
     report = rep.Report(
-        name=NAME,
-        reproduces="robust ART paper Figs. 5-6",
+        name=name,
+        reproduces=reproduces,
         command=command,
         settings=settings,
         provenance=[*dataset_commands(data), *map(model_command, models)],
         differences=ROBUST_DIFFERENCES,
     )
     report.sections.append(("Instances", f"{len(rows)} of {positions.size} test instances."))
-    if rows:
+    if rows and name == "robust-warmstart":
         analyse(rows, frames, report, options.out)
+    elif rows and name == "robust-posthoc":
+        from scpformer.experiments.robust_posthoc import analyse_posthoc
+
+        analyse_posthoc(rows, frames[0], report, options.out)
+    elif rows:
+        from scpformer.experiments.robust_posthoc import show_trajectory
+
+        show_trajectory(rows, frames[0], solver, thetas, positions, report, options.out)
     return report.write(options.out)
 
 
@@ -348,9 +402,10 @@ def _figure(
         ax.legend(fontsize=7)
         plot_counts(ax, x, stats)
     cvx = column(rows, f"{mode}_cvx_cost")
+    cvx_ok = column(rows, f"{mode}_cvx_converged") == 1.0
     for s in sources(frames)[1:]:
         diff = cvx - column(rows, f"{mode}_{s}_cost")
-        diff = diff[np.isfinite(diff)]
+        diff = diff[cvx_ok & (column(rows, f"{mode}_{s}_converged") == 1.0)]
         if diff.size:
             axes[3].hist(diff, bins=20, alpha=0.6, color=colors[s], label=label(mode, s))
             for v in (diff.min(), diff.max()):
