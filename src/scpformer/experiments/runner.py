@@ -24,7 +24,7 @@ import math
 import os
 import sys
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
@@ -221,17 +221,16 @@ def _cell(value: Any) -> Any:
     return value
 
 
+_SPECIAL_CELLS = {"": math.nan, "True": 1.0, "False": 0.0}
+
+
 def column(rows: Sequence[Mapping[str, str]], name: str) -> np.ndarray:
     """A numeric column of CSV rows (empty cells are NaN; True/False are 1/0)."""
-    values = []
-    for row in rows:
-        cell = row.get(name, "")
-        values.append(
-            {"": math.nan, "True": 1.0, "False": 0.0}.get(cell, None)
-            if cell in ("", "True", "False")
-            else float(cell)
-        )
-    return np.asarray(values, dtype=float)
+    cells = (row.get(name, "") for row in rows)
+    return np.array(
+        [_SPECIAL_CELLS.get(c, None) if c in _SPECIAL_CELLS else float(c) for c in cells],
+        dtype=float,
+    )
 
 
 def series(cell: str) -> np.ndarray:
@@ -290,25 +289,22 @@ class TaskFamily:
 
 @dataclass
 class Progress:
-    """Counts printed while an experiment runs."""
+    """Counts printed (to stderr) while an experiment runs."""
 
     total: int
     done: int = 0
     failed: int = 0
-    stream: Any = field(default=None, repr=False)
 
     def step(self, ok: bool) -> None:
         self.done += 1
         self.failed += 0 if ok else 1
-        stream = self.stream or sys.stderr
+        end = "\n" if self.done == self.total else ""
         print(
             f"\r{self.done}/{self.total} instances ({self.failed} failed)",
-            end="",
-            file=stream,
+            end=end,
+            file=sys.stderr,
             flush=True,
         )
-        if self.done == self.total:
-            print(file=stream)
 
 
 def run_tasks(
