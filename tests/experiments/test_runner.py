@@ -55,9 +55,12 @@ def test_the_task_index_is_recovered_from_the_executor_stream():
 @pytest.mark.slow
 def test_a_larger_n_extends_the_selection_of_a_smaller_one(tiny_data):
     from scpformer.data.splits import load_splits
-    from scpformer.experiments.runner import test_positions
+    from scpformer.experiments.runner import select_test_instances
 
-    small, large = test_positions(tiny_data, 2, seed=5), test_positions(tiny_data, 10, seed=5)
+    small, large = (
+        select_test_instances(tiny_data, 2, seed=5),
+        select_test_instances(tiny_data, 10, seed=5),
+    )
     test = load_splits(tiny_data).indices["test"]
     np.testing.assert_array_equal(large[:2], small)
     assert sorted(large) == sorted(test)  # n beyond the split: the whole test split

@@ -34,9 +34,9 @@ from scpformer.experiments.runner import (
     require_models,
     require_n,
     run_tasks,
+    select_test_instances,
     series,
     settings_dict,
-    test_positions,
 )
 
 NAME = "art-conditioning"
@@ -150,7 +150,7 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     (c_lo, c_hi), (j_lo, j_hi) = training_ranges(data)
     ctg_sweep = tuple(float(v) for v in np.unique(np.round(np.linspace(0, 1.25 * c_hi, SWEEP))))
     cost_sweep = tuple(float(v) for v in np.linspace(0.5 * j_lo, 1.5 * j_hi, SWEEP))
-    positions = test_positions(data, require_n(options), options.seed)
+    positions = select_test_instances(data, require_n(options), options.seed)
     settings = settings_dict(
         options,
         experiment=NAME,

@@ -39,8 +39,8 @@ from scpformer.experiments.runner import (
     require_models,
     require_n,
     run_tasks,
+    select_test_instances,
     settings_dict,
-    test_positions,
 )
 
 TWIN = {"art-forecast-tpbvp": "tpbvp", "art-forecast-scp": "scp"}
@@ -197,7 +197,7 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
     if len(set(kinds)) != len(kinds):
         raise ValueError(f"--model: one run per model kind, got kinds {kinds}")
     twin = TWIN[name]
-    positions = test_positions(data, require_n(options), options.seed)
+    positions = select_test_instances(data, require_n(options), options.seed)
     settings = settings_dict(
         options,
         experiment=name,

@@ -47,8 +47,8 @@ from scpformer.experiments.runner import (
     require_models,
     require_n,
     run_tasks,
+    select_test_instances,
     settings_dict,
-    test_positions,
 )
 from scpformer.experiments.warmstart_study import mean_over, plot_counts
 
@@ -235,7 +235,7 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     frames = tuple(load_checkpoint(m, family=FAMILY).frame for m in models)
     if len(set(frames)) != len(frames):
         raise ValueError(f"--model: one run per state frame (rtn, roe), got {frames}")
-    positions = test_positions(data, require_n(options), options.seed)
+    positions = select_test_instances(data, require_n(options), options.seed)
     settings = settings_dict(
         options,
         experiment=name,

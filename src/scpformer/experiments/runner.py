@@ -100,7 +100,7 @@ def require_n(options: RunOptions) -> int:
     return int(options.n)
 
 
-def test_positions(folder: Path, n: int, seed: int) -> np.ndarray:
+def select_test_instances(folder: Path, n: int, seed: int) -> np.ndarray:
     """``n`` sample positions of the test split, drawn without replacement with ``seed``.
 
     A seeded permutation of the whole test split, cut after ``n``: a larger ``n`` extends the
