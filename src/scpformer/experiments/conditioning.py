@@ -18,20 +18,18 @@ import numpy as np
 
 from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
 from scpformer.data.splits import load_splits
-from scpformer.data.storage import ShardedSamples, read_manifest
+from scpformer.data.storage import ShardedSamples
 from scpformer.experiments import report as rep
 from scpformer.experiments.runner import (
     KEY,
     RESULTS_NAME,
+    ModelSolver,
     ResultsCSV,
     RunOptions,
     check_settings,
-    dataset_commands,
     join_series,
-    model_command,
+    open_study,
     read_fields,
-    require_data,
-    require_models,
     require_n,
     run_tasks,
     select_test_instances,
@@ -62,23 +60,8 @@ class Task:
     cost_requested: tuple[float, ...]  # -R(t_1) [m/s]
 
 
-class ConditioningSolver:
+class ConditioningSolver(ModelSolver):
     """One instance's sweep through ART, as one batch (runs in the workers)."""
-
-    def __init__(self, checkpoint: Path, data_config: dict[str, Any]) -> None:
-        self.checkpoint, self.data_config = checkpoint, data_config
-        self._ckpt: Any = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_ckpt": None}
-
-    def warm_up(self) -> None:
-        import torch
-
-        from scpformer.train.checkpoint import load_checkpoint
-
-        torch.set_num_threads(1)
-        self._ckpt = load_checkpoint(self.checkpoint, family="rendezvous")
 
     def solve(self, task: Task) -> dict[str, Any]:
         from scpformer.warmstart.art import generate
@@ -91,12 +74,13 @@ class ConditioningSolver:
         batch = adapter.batch([instance] * (nc + nr))
         rtg0 = -np.concatenate([np.full(nc, task.j_cvx), task.cost_requested])
         ctg0 = np.concatenate([task.ctg_requested, np.zeros(nr)])
+        (ckpt,) = self.models
         rollout = generate(
-            self._ckpt.model,
-            self._ckpt.normalization,
+            ckpt.model,
+            ckpt.normalization,
             batch,
             adapter,
-            frame=self._ckpt.frame,
+            frame=ckpt.frame,
             art_mode="dynamics",
             rtg0=rtg0,
             ctg0=ctg0,
@@ -118,10 +102,6 @@ class ConditioningSolver:
         }
 
 
-def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
-    return {KEY: key, "status": status, "message": message}
-
-
 def training_ranges(folder: Path) -> tuple[tuple[float, float], tuple[float, float]]:
     """Ranges of ``C(t_1)`` and of the cost over the training split's trajectories."""
     train = load_splits(folder).indices["train"]
@@ -139,14 +119,8 @@ def training_ranges(folder: Path) -> tuple[tuple[float, float], tuple[float, flo
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``art-conditioning`` into ``options.out``; returns the report's path."""
-    data = require_data(options)
-    (model,) = require_models(options, 1)
-    manifest = read_manifest(data)
-    if manifest.family != "rendezvous":
-        raise ValueError(f"--data {data}: a {manifest.family} dataset, not rendezvous")
-    from scpformer.train.checkpoint import load_checkpoint
-
-    load_checkpoint(model, family="rendezvous")  # fails fast on a wrong model
+    study = open_study(options, "rendezvous", models=1)
+    data = study.data
     (c_lo, c_hi), (j_lo, j_hi) = training_ranges(data)
     ctg_sweep = tuple(float(v) for v in np.unique(np.round(np.linspace(0, 1.25 * c_hi, SWEEP))))
     cost_sweep = tuple(float(v) for v in np.linspace(0.5 * j_lo, 1.5 * j_hi, SWEEP))
@@ -167,22 +141,15 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
         if np.isfinite(f["cvx_cost"])
     ]
     results = ResultsCSV(options.out / RESULTS_NAME, COLUMNS)
-    run_tasks(
-        ConditioningSolver(model, manifest.config),
-        tasks,
-        [t.index for t in tasks],
-        options,
-        results,
-        failure_row,
+    rows = run_tasks(
+        ConditioningSolver(study.models, study.manifest.config), tasks, options, results
     )
-    wanted = {t.index for t in tasks}
-    rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
     report = rep.Report(
         name=NAME,
         reproduces="ART paper Fig. 3",
         command=command,
         settings=settings,
-        provenance=[*dataset_commands(data), model_command(model)],
+        provenance=study.provenance(),
     )
     report.sections.append(("Instances", f"{len(rows)} of {positions.size} test instances."))
     if rows:

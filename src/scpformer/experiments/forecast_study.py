@@ -22,21 +22,18 @@ from typing import Any
 import numpy as np
 
 from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
-from scpformer.data.storage import read_manifest
 from scpformer.experiments import report as rep
 from scpformer.experiments.forecast import ForecastMetrics, forecast_metrics
 from scpformer.experiments.runner import (
     KEY,
     RESULTS_NAME,
+    ModelSolver,
     ResultsCSV,
     RunOptions,
     check_settings,
     column,
-    dataset_commands,
-    model_command,
+    open_study,
     read_fields,
-    require_data,
-    require_models,
     require_n,
     run_tasks,
     select_test_instances,
@@ -111,7 +108,7 @@ def columns(kinds: tuple[str, ...]) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class Task:
-    """One test instance: theta, ``J_CVX`` and the true twin."""
+    """One test instance: its position, theta, ``J_CVX`` and the true twin."""
 
     index: int
     theta: np.ndarray
@@ -122,23 +119,8 @@ class Task:
     true_time: float
 
 
-class ForecastSolver:
+class ForecastSolver(ModelSolver):
     """Per-instance generation by every model in both modes (runs in the workers)."""
-
-    def __init__(self, checkpoints: tuple[Path, ...], data_config: dict[str, Any]) -> None:
-        self.checkpoints, self.data_config = checkpoints, data_config
-        self._models: list[Any] = []
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_models": []}
-
-    def warm_up(self) -> None:
-        import torch
-
-        from scpformer.train.checkpoint import load_checkpoint
-
-        torch.set_num_threads(1)
-        self._models = [load_checkpoint(p, family="rendezvous") for p in self.checkpoints]
 
     def solve(self, task: Task) -> dict[str, Any]:
         from scpformer.warmstart.art import generate
@@ -156,7 +138,7 @@ class ForecastSolver:
             "true_time_s": task.true_time,
             "true_cost_mm_s": 1e3 * np.linalg.norm(task.true_dv, axis=1).sum(),
         }
-        for ckpt in self._models:
+        for ckpt in self.models:
             for mode in MODES:
                 rollout = generate(
                     ckpt.model,
@@ -178,22 +160,13 @@ class ForecastSolver:
         return row
 
 
-def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
-    return {KEY: key, "status": status, "message": message}
-
-
 def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp") -> Path:
     """Run Table 2 (``art-forecast-tpbvp``) or Table 3 (``art-forecast-scp``)."""
     if name not in TWIN:
         raise ValueError(f"name must be one of {tuple(TWIN)}, got {name!r}")
-    data = require_data(options)
-    models = require_models(options)
-    manifest = read_manifest(data)
-    if manifest.family != "rendezvous":
-        raise ValueError(f"--data {data}: a {manifest.family} dataset, not rendezvous")
-    from scpformer.train.checkpoint import load_checkpoint
-
-    kinds = tuple(load_checkpoint(m, family="rendezvous").kind for m in models)
+    study = open_study(options, "rendezvous")
+    data, manifest = study.data, study.manifest
+    kinds = tuple(c.kind for c in study.checkpoints)
     if len(set(kinds)) != len(kinds):
         raise ValueError(f"--model: one run per model kind, got kinds {kinds}")
     twin = TWIN[name]
@@ -212,7 +185,7 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
         reproduces=f"ART paper {TABLE[name]}",
         command=command,
         settings=settings,
-        provenance=[*dataset_commands(data), *map(model_command, models)],
+        provenance=study.provenance(),
     )
     if f"{twin}_roe" not in {f.name for f in manifest.schema}:
         report.sections.append(("Not run", missing_twin_text(name, twin)))
@@ -246,16 +219,7 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
             )
         )
     results = ResultsCSV(options.out / RESULTS_NAME, columns(kinds))
-    run_tasks(
-        ForecastSolver(models, manifest.config),
-        tasks,
-        [t.index for t in tasks],
-        options,
-        results,
-        failure_row,
-    )
-    wanted = {t.index for t in tasks}
-    rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
+    rows = run_tasks(ForecastSolver(study.models, manifest.config), tasks, options, results)
     report.sections.append(
         (
             "Instances",

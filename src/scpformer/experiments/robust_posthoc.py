@@ -191,8 +191,7 @@ def show_trajectory(
     rows: list[dict[str, str]],
     frame: str,
     solver: Any,
-    thetas: list[Any],
-    positions: np.ndarray,
+    tasks: list[Any],
     report: rep.Report,
     out: Path,
 ) -> None:
@@ -210,7 +209,7 @@ def show_trajectory(
         report.sections.append(("Instance", "No instance where PS-CVX-C or PS-ART-C converged."))
         return
     index = int(rows[best][KEY])
-    theta = thetas[[int(p) for p in positions].index(index)]
+    theta = next(t.theta for t in tasks if t.index == index)
     solver.warm_up()
     instance = solver.instance(theta)
     guesses = solver.guesses(instance, "chance")

@@ -25,30 +25,27 @@ decide); their analyses are in :mod:`scpformer.experiments.robust_posthoc`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from scpformer.data.storage import read_manifest
 from scpformer.experiments import report as rep
 from scpformer.experiments.runner import (
     KEY,
     RESULTS_NAME,
+    InstanceTask,
+    ModelSolver,
     ResultsCSV,
     RunOptions,
     check_settings,
     column,
-    dataset_commands,
-    model_command,
-    read_fields,
-    require_data,
-    require_models,
+    open_study,
     require_n,
     run_tasks,
     select_test_instances,
     settings_dict,
+    theta_tasks,
 )
 from scpformer.experiments.warmstart_study import mean_over, plot_counts
 
@@ -88,18 +85,14 @@ def label(mode: str, source: str) -> str:
     return f"PS-{kind}-{MODES[mode]}{frame}"
 
 
-@dataclass(frozen=True)
-class Task:
-    index: int
-    theta: np.ndarray
-
-
-class RobustWarmstartSolver:
+class RobustWarmstartSolver(ModelSolver):
     """Per-instance SCvx* from CVX and from ART in ``modes`` (runs in the executor's workers).
 
     ``check`` applies the post hoc acceptance check (Eq. 8, CVX fallback); without it ART's
     own guess always starts SCvx* and ``would_accept`` records what the check would decide.
     """
+
+    family = FAMILY
 
     def __init__(
         self,
@@ -108,21 +101,13 @@ class RobustWarmstartSolver:
         modes: tuple[str, ...] = tuple(MODES),
         check: bool = True,
     ) -> None:
-        self.checkpoints, self.data_config = checkpoints, data_config
+        super().__init__(checkpoints, data_config)
         self.modes, self.check = modes, check
-        self._models: list[Any] = []
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_models": []}
 
     def warm_up(self) -> None:
-        import torch
-
         from scpformer.data.family import build_family
-        from scpformer.train.checkpoint import load_checkpoint
 
-        torch.set_num_threads(1)
-        self._models = [load_checkpoint(p, family=FAMILY) for p in self.checkpoints]
+        super().warm_up()
         build_family(FAMILY, self.data_config).warm_up()
 
     def instance(self, theta: np.ndarray) -> Any:
@@ -139,7 +124,7 @@ class RobustWarmstartSolver:
         solver = RobustDataConfig.from_dict(self.data_config).solver
         cvx = RobustTpbvpWarmStart(solver, mode).guess(instance)
         out = {"cvx": cvx}
-        for ckpt in self._models:
+        for ckpt in self.models:
             art = ArtWarmStart(
                 ckpt.model,
                 ckpt.normalization,
@@ -162,7 +147,7 @@ class RobustWarmstartSolver:
         solver = RobustDataConfig.from_dict(self.data_config).solver
         return solve(instance, solver, mode, warmstart=PrecomputedWarmStart(guess), verify=False)
 
-    def solve(self, task: Task) -> dict[str, Any]:
+    def solve(self, task: InstanceTask) -> dict[str, Any]:
         instance = self.instance(task.theta)
         row: dict[str, Any] = {KEY: task.index, "status": "ok", "message": ""}
         for mode in self.modes:
@@ -208,10 +193,6 @@ class RobustWarmstartSolver:
         }
 
 
-def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
-    return {KEY: key, "status": status, "message": message}
-
-
 # what each robust experiment runs: passive-safety modes, acceptance check, paper figures
 STUDIES = {
     "robust-warmstart": (tuple(MODES), True, "robust ART paper Figs. 5-6"),
@@ -225,17 +206,11 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     if name not in STUDIES:
         raise ValueError(f"name must be one of {tuple(STUDIES)}, got {name!r}")
     modes, check, reproduces = STUDIES[name]
-    data = require_data(options)
-    models = require_models(options)
-    manifest = read_manifest(data)
-    if manifest.family != FAMILY:
-        raise ValueError(f"--data {data}: a {manifest.family} dataset, not {FAMILY}")
-    from scpformer.train.checkpoint import load_checkpoint
-
-    frames = tuple(load_checkpoint(m, family=FAMILY).frame for m in models)
+    study = open_study(options, FAMILY)
+    frames = tuple(c.frame for c in study.checkpoints)
     if len(set(frames)) != len(frames):
         raise ValueError(f"--model: one run per state frame (rtn, roe), got {frames}")
-    positions = select_test_instances(data, require_n(options), options.seed)
+    positions = select_test_instances(study.data, require_n(options), options.seed)
     settings = settings_dict(
         options,
         experiment=name,
@@ -246,19 +221,16 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
         + ("post hoc check (Eq. 8) with CVX fallback" if check else "no acceptance check"),
     )
     check_settings(options.out, settings)
-    thetas = [f["theta"] for f in read_fields(data, positions, ["theta"])]
-    tasks = [Task(int(p), np.asarray(t)) for p, t in zip(positions, thetas, strict=True)]
+    tasks = theta_tasks(study.data, positions)
     results = ResultsCSV(options.out / RESULTS_NAME, columns(frames, modes))
-    solver = RobustWarmstartSolver(models, manifest.config, modes, check)
-    run_tasks(solver, tasks, [t.index for t in tasks], options, results, failure_row)
-    wanted = {t.index for t in tasks}
-    rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
+    solver = RobustWarmstartSolver(study.models, study.manifest.config, modes, check)
+    rows = run_tasks(solver, tasks, options, results)
     report = rep.Report(
         name=name,
         reproduces=reproduces,
         command=command,
         settings=settings,
-        provenance=[*dataset_commands(data), *map(model_command, models)],
+        provenance=study.provenance(),
         differences=ROBUST_DIFFERENCES,
     )
     report.sections.append(("Instances", f"{len(rows)} of {positions.size} test instances."))
@@ -271,7 +243,7 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     elif rows:
         from scpformer.experiments.robust_posthoc import show_trajectory
 
-        show_trajectory(rows, frames[0], solver, thetas, positions, report, options.out)
+        show_trajectory(rows, frames[0], solver, tasks, report, options.out)
     return report.write(options.out)
 
 

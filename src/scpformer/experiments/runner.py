@@ -130,6 +130,49 @@ def read_fields(folder: Path, positions: Sequence[int], names: Iterable[str]) ->
         samples.close()
 
 
+@dataclass(frozen=True)
+class Study:
+    """The checked inputs of a run: dataset, its manifest, the models and their checkpoints."""
+
+    data: Path
+    manifest: Any  # scpformer.data.storage.Manifest
+    models: tuple[Path, ...]
+    checkpoints: tuple[Any, ...]  # scpformer.train.checkpoint.Checkpoint, in --model order
+
+    def provenance(self) -> list[str]:
+        """The commands that made the dataset and the models."""
+        return [*dataset_commands(self.data), *map(model_command, self.models)]
+
+
+def open_study(options: RunOptions, family: str, models: int | None = None) -> Study:
+    """Check ``--data`` (a ``family`` dataset) and ``--model`` (``models`` runs of it)."""
+    data = require_data(options)
+    paths = require_models(options, models)
+    manifest = read_manifest(data)
+    if manifest.family != family:
+        raise ValueError(f"--data {data}: a {manifest.family} dataset, not {family}")
+    from scpformer.train.checkpoint import load_checkpoint
+
+    checkpoints = tuple(load_checkpoint(p, family=family) for p in paths)
+    return Study(data, manifest, paths, checkpoints)
+
+
+@dataclass(frozen=True)
+class InstanceTask:
+    """One test instance: its dataset position and theta."""
+
+    index: int
+    theta: np.ndarray
+
+
+def theta_tasks(folder: Path, positions: Sequence[int]) -> list[InstanceTask]:
+    """The :class:`InstanceTask` of each sample position."""
+    fields = read_fields(folder, positions, ["theta"])
+    return [
+        InstanceTask(int(p), np.asarray(f["theta"])) for p, f in zip(positions, fields, strict=True)
+    ]
+
+
 # ======================================================================================
 # resumable per-instance results
 # ======================================================================================
@@ -256,6 +299,35 @@ class TaskSolver(Protocol):
         """One task's CSV row (``KEY`` included)."""
 
 
+class ModelSolver:
+    """Base of the per-instance work that needs trained models (one torch thread per worker).
+
+    The checkpoints travel to the workers as paths and are loaded in :meth:`warm_up`.
+    """
+
+    family: ClassVar[str] = "rendezvous"
+
+    def __init__(self, checkpoints: Sequence[Path], data_config: dict[str, Any]) -> None:
+        self.checkpoints, self.data_config = tuple(checkpoints), data_config
+        self.models: list[Any] = []  # loaded Checkpoints, in the order of ``checkpoints``
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "models": []}
+
+    def warm_up(self) -> None:
+        import torch
+
+        from scpformer.train.checkpoint import load_checkpoint
+
+        torch.set_num_threads(1)
+        self.models = [load_checkpoint(p, family=self.family) for p in self.checkpoints]
+
+
+def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
+    """The row of an instance whose work did not return (error, timeout, crash)."""
+    return {KEY: key, "status": status, "message": message}
+
+
 def task_index(rng: np.random.Generator) -> int:
     """The task number ``i`` of the engine's stream ``SeedSequence(seed, spawn_key=(i,))``."""
     key = getattr(rng.bit_generator.seed_seq, "spawn_key", ())
@@ -310,35 +382,34 @@ class Progress:
 def run_tasks(
     solver: Any,
     tasks: Sequence[Any],
-    keys: Sequence[int],
     options: RunOptions,
     results: ResultsCSV,
-    failure_row: Callable[[int, str, str], dict[str, Any]],
-) -> int:
-    """Run the tasks whose key is not in ``results`` yet; append each row as it arrives.
+    on_failure: Callable[[int, str, str], dict[str, Any]] = failure_row,
+) -> list[dict[str, str]]:
+    """Run the tasks (each with an ``index``) not in ``results`` yet, appending each row.
 
-    A task that raises, times out or kills its worker gets ``failure_row(key, status,
-    message)``. Returns the number of tasks run.
+    A task that raises, times out or kills its worker gets ``on_failure(index, status,
+    message)``. Returns the finished rows (status ``ok``) of ``tasks``, done now or before.
     """
     done = results.done()
-    todo = [i for i, key in enumerate(keys) if int(key) not in done]
-    if not todo:
-        return 0
-    family = TaskFamily(tuple(tasks), solver)
-    executor = make_executor(family, options, len(todo))
-    progress = Progress(len(todo))
-    try:
-        executor.submit(todo)
-        while executor.pending():
-            for result in executor.wait(timeout=1.0):
-                row = result.fields.get("row")
-                if result.status != "ok" or row is None:
-                    row = failure_row(int(keys[result.index]), result.status, result.message)
-                results.append(row)
-                progress.step(result.status == "ok")
-    finally:
-        executor.close()
-    return len(todo)
+    todo = [i for i, task in enumerate(tasks) if int(task.index) not in done]
+    if todo:
+        executor = make_executor(TaskFamily(tuple(tasks), solver), options, len(todo))
+        progress = Progress(len(todo))
+        try:
+            executor.submit(todo)
+            while executor.pending():
+                for result in executor.wait(timeout=1.0):
+                    row = result.fields.get("row")
+                    if result.status != "ok" or row is None:
+                        key = int(tasks[result.index].index)
+                        row = on_failure(key, result.status, result.message)
+                    results.append(row)
+                    progress.step(result.status == "ok")
+        finally:
+            executor.close()
+    wanted = {int(task.index) for task in tasks}
+    return [r for r in results.rows() if int(r[KEY]) in wanted and r.get("status") == "ok"]
 
 
 def make_executor(family: TaskFamily, options: RunOptions, tasks: int) -> Executor:

@@ -31,26 +31,24 @@ from typing import Any
 import numpy as np
 
 from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
-from scpformer.data.storage import read_manifest
 from scpformer.experiments import report as rep
 from scpformer.experiments.runner import (
     KEY,
     RESULTS_NAME,
+    InstanceTask,
+    ModelSolver,
     ResultsCSV,
     RunOptions,
     check_settings,
     column,
-    dataset_commands,
     join_series,
-    model_command,
-    read_fields,
-    require_data,
-    require_models,
+    open_study,
     require_n,
     run_tasks,
     select_test_instances,
     series,
     settings_dict,
+    theta_tasks,
 )
 
 NAME = "art-warmstart"
@@ -83,40 +81,23 @@ COLUMNS = (
 )
 
 
-@dataclass(frozen=True)
-class Task:
-    """One test instance: its dataset position and theta."""
-
-    index: int
-    theta: np.ndarray
-
-
-class WarmstartSolver:
+class WarmstartSolver(ModelSolver):
     """Per-instance work of ``art-warmstart`` (runs in the executor's workers)."""
 
     def __init__(self, checkpoint: Path, data_config: dict[str, Any], verify: bool) -> None:
-        self.checkpoint, self.data_config, self.verify = Path(checkpoint), data_config, verify
-        self._art: Any = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_art": None}
+        super().__init__([checkpoint], data_config)
+        self.verify = verify
 
     def warm_up(self) -> None:
-        import torch
-
         from scpformer.problems.rendezvous.subproblems import compiled_subproblem
-        from scpformer.warmstart import ArtWarmStart
 
-        torch.set_num_threads(1)
+        super().warm_up()
         config = RendezvousDataConfig.from_dict(self.data_config)
-        self._art = ArtWarmStart.from_checkpoint(
-            self.checkpoint, family="rendezvous", acceptance=None
-        )
         sc = config.scenario
-        for kind in (*WARMSTARTS[:2], "scp"):
+        for kind in ("tpbvp", "convex", "scp"):  # compiled before any solve is timed
             compiled_subproblem(kind, sc.n_nodes, sc.n_waypoint, config.solver.scp.solver)
 
-    def solve(self, task: Task) -> dict[str, Any]:
+    def solve(self, task: InstanceTask) -> dict[str, Any]:
         from scpformer.problems.rendezvous.problem import solve
         from scpformer.warmstart import (
             ArtWarmStart,
@@ -130,10 +111,11 @@ class WarmstartSolver:
             kind: RendezvousConvexWarmStart(kind, config.solver).guess(instance)
             for kind in WARMSTARTS[:2]
         }
+        (ckpt,) = self.models
         art = ArtWarmStart(
-            self._art.model,
-            self._art.normalization,
-            frame=self._art.frame,
+            ckpt.model,
+            ckpt.normalization,
+            frame=ckpt.frame,
             acceptance=None,
             fallback=PrecomputedWarmStart(guesses["convex"]),
         )
@@ -167,11 +149,6 @@ class WarmstartSolver:
         return row
 
 
-def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
-    """The row of an instance whose work did not return."""
-    return {KEY: key, "status": status, "message": message}
-
-
 # ======================================================================================
 # the run
 # ======================================================================================
@@ -181,15 +158,9 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME, verify: boo
     ``verify`` replays every SCP solution through the nonlinear propagator (off: the paper
     judges the SCP in its linear model).
     """
-    data = require_data(options)
-    (model,) = require_models(options, 1)
-    manifest = read_manifest(data)
-    if manifest.family != "rendezvous":
-        raise ValueError(f"--data {data}: a {manifest.family} dataset, not rendezvous")
-    from scpformer.train.checkpoint import load_checkpoint
-
-    ckpt = load_checkpoint(model, family="rendezvous")  # fails fast on a wrong model
-    positions = select_test_instances(data, require_n(options), options.seed)
+    study = open_study(options, "rendezvous", models=1)
+    (ckpt,) = study.checkpoints
+    positions = select_test_instances(study.data, require_n(options), options.seed)
     settings = settings_dict(
         options,
         experiment=NAME,
@@ -200,25 +171,16 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME, verify: boo
         conditioning="R(t_1) = -J_CVX, C(t_1) = 0, Algorithm 2, no acceptance check",
     )
     check_settings(options.out, settings)
-    thetas = [f["theta"] for f in read_fields(data, positions, ["theta"])]
-    tasks = [Task(int(p), np.asarray(t)) for p, t in zip(positions, thetas, strict=True)]
     results = ResultsCSV(options.out / RESULTS_NAME, COLUMNS)
-    solver = WarmstartSolver(model, manifest.config, verify)
-    run_tasks(solver, tasks, [t.index for t in tasks], options, results, failure_row)
-    wanted = {int(p) for p in positions}
-    rows = [r for r in results.rows() if int(r[KEY]) in wanted and r["status"] == "ok"]
-    provenance = [*dataset_commands(data), model_command(model)]
+    solver = WarmstartSolver(study.models[0], study.manifest.config, verify)
+    rows = run_tasks(solver, theta_tasks(study.data, positions), options, results)
     report = analyse(rows, options.out)
-    report.command, report.settings, report.provenance = command, settings, provenance
-    report.sections.insert(
-        0,
-        (
-            "Instances",
-            f"{len(rows)} of {positions.size} selected "
-            f"test instances finished (failed or missing: "
-            f"{positions.size - len(rows)}).",
-        ),
+    report.command, report.settings, report.provenance = command, settings, study.provenance()
+    finished = (
+        f"{len(rows)} of {positions.size} selected test instances finished (failed or "
+        f"missing: {positions.size - len(rows)})."
     )
+    report.sections.insert(0, ("Instances", finished))
     return report.write(options.out)
 
 
