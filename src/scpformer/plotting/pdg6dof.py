@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from os import PathLike
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -94,7 +95,8 @@ def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained"
 
 def _save(fig: Figure, path: str | PathLike[str] | None) -> None:
     if path is not None:
-        fig.savefig(path, dpi=_DPI, format="png")
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=_DPI)  # format from the suffix
 
 
 def _bound(ax, value: float, label: str | None) -> None:

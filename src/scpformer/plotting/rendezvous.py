@@ -254,5 +254,5 @@ def plot_trajectory(
     cost = 1e3 * np.linalg.norm(dv, axis=1).sum()
     fig.suptitle(title or f"ISS rendezvous: N = {t.size - 1}, cost {cost:.1f} mm/s", fontsize=13)
     if path is not None:
-        fig.savefig(path, dpi=_DPI, format="png")
+        fig.savefig(path, dpi=_DPI)  # format from the suffix
     return fig

@@ -23,6 +23,7 @@ from scpformer.scp.conic import SOLVED, start_cold
 from scpformer.scp.discretization import FOHDiscretization, foh_discretize
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Status, Trajectory, Verification
+from scpformer.validation import check_positive, check_trajectory, check_type
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -274,7 +275,9 @@ def solve(
         ``Status.INFEASIBLE_INSTANCE`` without solving when the initial state already violates
         a state constraint.
     """
-    config = config or PDGSolverConfig()
+    check_type("instance", instance, PDGInstance)
+    config = PDGSolverConfig() if config is None else check_type("config", config, PDGSolverConfig)
+    eta_init = None if eta_init is None else check_positive("eta_init", eta_init)
     violated = con.initial_state_violations(instance)
     if violated:
         return Solution(
@@ -286,6 +289,6 @@ def solve(
             message="initial state violates " + ", ".join(violated),
         )
     problem = PDGProblem(instance, config)
-    if guess is None:
-        guess = problem.initial_guess()
+    default = problem.initial_guess()
+    guess = default if guess is None else check_trajectory("guess", guess, default)
     return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)

@@ -68,6 +68,7 @@ from scpformer.scp.solution import (
     Verification,
     verified_status,
 )
+from scpformer.validation import check_type
 
 ProblemKind = Literal["tpbvp", "convex", "scp"]
 PROBLEMS = ("tpbvp", "convex", "scp")
@@ -678,7 +679,8 @@ def solve(
         raise ValueError(f"problem must be one of {PROBLEMS}, got {problem!r}")
     if not isinstance(instance, RendezvousInstance):
         raise ValueError(f"instance must be a RendezvousInstance, got {type(instance).__name__}")
-    config = config or RendezvousSolverConfig()
+    config = RendezvousSolverConfig() if config is None else config
+    check_type("config", config, RendezvousSolverConfig)
     start = time.perf_counter()
     setup = _setup(instance, config)
     if problem != "scp":
