@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -94,15 +96,24 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with _naming(path, tmp):
         with tmp.open("wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+    return path
+
+
+@contextmanager
+def _naming(path: Path, tmp: Path) -> Iterator[None]:
+    """Remove ``tmp`` on the way out; an ``OSError`` inside names ``path``, not ``tmp``."""
+    try:
+        yield
+    except OSError as err:
+        raise type(err)(err.errno, err.strerror or str(err), str(path)) from None
     finally:
         tmp.unlink(missing_ok=True)
-    return path
 
 
 def save_npz_atomic(path: str | Path, arrays: dict[str, Any]) -> Path:
@@ -114,9 +125,7 @@ def save_npz_atomic(path: str | Path, arrays: dict[str, Any]) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
-    try:
+    with _naming(path, tmp):
         np.savez(tmp, **arrays)
         os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return path

@@ -467,12 +467,14 @@ def run_augment(args: argparse.Namespace) -> int:
         converged_only=not args.all_statuses,
         verify=not args.no_verify,
     )
-    with tqdm(desc="augment", unit="shard", file=sys.stderr, dynamic_ncols=True) as bar:
+    bars: list[tqdm] = []  # made at the first shard: an early error stays one line
 
-        def on_shard(done: int, total: int) -> None:
-            bar.total = total
-            bar.update(done - bar.n)
+    def on_shard(done: int, total: int) -> None:
+        if not bars:
+            bars.append(tqdm(desc="augment", unit="shard", file=sys.stderr, total=total))
+        bars[0].update(done - bars[0].n)
 
+    try:
         manifest = augment_dataset(
             args.source,
             args.out,
@@ -481,6 +483,9 @@ def run_augment(args: argparse.Namespace) -> int:
             on_shard=on_shard,
             on_notice=lambda text: tqdm.write(f"scpformer: {text}", file=sys.stderr),
         )
+    finally:
+        for bar in bars:
+            bar.close()
     print(f"wrote {args.out}: {manifest.counts()['samples']} samples")
     print(_solved_line(manifest))
     return 0

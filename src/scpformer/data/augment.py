@@ -180,6 +180,8 @@ def augment_dataset(
         raise ValueError(f"workers must be a positive integer, got {workers}")
     if out.exists() and not out.is_dir():
         raise DatasetError(f"--out {out} is a file, not a folder")
+    for info in src.shards:  # every source shard passes its checksum before any is read
+        storage.require_intact(source, info)
     with storage.locked_folder(out):
         return _augment_locked(source, out, src, transform, workers, on_shard, on_notice)
 
@@ -193,8 +195,6 @@ def _augment_locked(
     on_shard: Callable[[int, int], None] | None,
     on_notice: Callable[[str], None] | None,
 ) -> Manifest:
-    for info in src.shards:  # every source shard passes its checksum before any is read
-        storage.require_intact(source, info)
     manifest = _prepare(source, out, src, transform, on_notice or (lambda _: None))
     family = build(src.config)
     todo = [i for i, _ in enumerate(src.shards) if storage.shard_name(i) not in _files(manifest)]

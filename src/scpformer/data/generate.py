@@ -145,6 +145,8 @@ def generate(
 
     if config.out.exists() and not config.out.is_dir():
         raise DatasetError(f"--out {config.out} is a file, not a folder")
+    if config.out.is_dir():  # refuse another dataset's folder before adding a lock file to it
+        _check_contents(config.out, new_manifest(family, config), lambda _: None)
     with storage.locked_folder(config.out):
         return _generate_locked(family, config, on_progress, notice, notices, start)
 
@@ -215,13 +217,7 @@ def prepare_folder(
         raise DatasetError(f"--out {folder} is a file, not a folder")
     folder.mkdir(parents=True, exist_ok=True)
     wanted = new_manifest(family, config)
-    manifest_path = folder / storage.MANIFEST_NAME
-    if manifest_path.exists():
-        manifest = _resumable(storage.read_manifest(folder), wanted, folder, notice)
-    else:
-        _require_empty(folder, wanted)
-        manifest = wanted
-    manifest = repair(folder, manifest, notice)
+    manifest = repair(folder, _check_contents(folder, wanted, notice), notice)
     run = {
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "backend": "ray" if config.ray_address else "local",
@@ -233,6 +229,14 @@ def prepare_folder(
     manifest = dataclasses.replace(manifest, runs=(*manifest.runs, run))
     storage.write_manifest(folder, manifest)
     return manifest
+
+
+def _check_contents(folder: Path, wanted: Manifest, notice: NoticeCallback) -> Manifest:
+    """The manifest to resume (``wanted`` when new); refuses a folder of anything else."""
+    if (folder / storage.MANIFEST_NAME).exists():
+        return _resumable(storage.read_manifest(folder), wanted, folder, notice)
+    _require_empty(folder, wanted)
+    return wanted
 
 
 def _resumable(old: Manifest, wanted: Manifest, folder: Path, notice: NoticeCallback) -> Manifest:
