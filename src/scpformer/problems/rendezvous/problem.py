@@ -369,7 +369,7 @@ def verify_solution(
     m, kw, n = tol.samples_per_interval, sc.n_waypoint, sc.n_nodes
     try:
         truth = replay(instance, dv, tol)
-    except (RuntimeError, ValueError) as err:
+    except (ArithmeticError, RuntimeError, ValueError) as err:  # e.g. an escaping orbit
         return Verification(False, {}, math.inf, {}, {}, f"replay failed: {err}")
     nodes, dense = truth.rtn[::m], truth.rtn
     gap = nodes - model.rtn(x)
