@@ -198,3 +198,43 @@ def test_a_full_disk_at_out_names_the_path_and_keeps_the_earlier_file(
 def test_help_still_exits_zero(capsys):
     assert main(["solve", "pdg6dof", "--help"]) == 0
     assert "--plot" in capsys.readouterr().out
+
+
+def raise_(error: BaseException):
+    def solve(*args, **kwargs):
+        raise error
+
+    return solve
+
+
+FAILURE_CASES = {
+    "ctrl-c": (KeyboardInterrupt(), 130, "interrupted"),
+    "solver-crash": ("solver", 1, "the conic solver failed: CLARABEL crashed"),
+    "permission": (PermissionError(13, "Permission denied", "/x/y.npz"), 1, "/x/y.npz"),
+    "bug": (ZeroDivisionError("division by zero"), 1, "internal error (ZeroDivisionError"),
+    "out-of-memory": (MemoryError(), 1, "out of memory"),
+}
+
+
+@pytest.mark.parametrize("error, status, text", FAILURE_CASES.values(), ids=FAILURE_CASES.keys())
+def test_every_failure_during_a_solve_is_one_line_with_its_status(
+    capsys, monkeypatch, error, status, text
+):
+    import scpformer.cli.pdg6dof as command
+
+    if error == "solver":
+        from cvxpy.error import SolverError
+
+        error = SolverError("CLARABEL crashed\nwith details on a second line")
+    monkeypatch.delenv("SCPFORMER_DEBUG", raising=False)
+    monkeypatch.setattr(command, "solve", raise_(error))
+    run_one_line_error(capsys, ["solve", "pdg6dof"], status, text)
+
+
+def test_debug_mode_shows_the_traceback(monkeypatch):
+    import scpformer.cli.pdg6dof as command
+
+    monkeypatch.setenv("SCPFORMER_DEBUG", "1")
+    monkeypatch.setattr(command, "solve", raise_(ZeroDivisionError("bug")))
+    with pytest.raises(ZeroDivisionError):
+        main(["solve", "pdg6dof"])
