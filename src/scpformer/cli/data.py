@@ -318,20 +318,15 @@ def add_dataset_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``dataset info|verify|augment|split``."""
     parser = subparsers.add_parser("dataset", help="inspect, check, augment and split datasets")
     commands = parser.add_subparsers(dest="dataset_command", required=True, metavar="COMMAND")
-    info = commands.add_parser("info", help="summarize a dataset")
-    info.add_argument("dir", type=Path, metavar="DIR")
-    info.set_defaults(handler=run_info)
-    verify = commands.add_parser("verify", help="check checksums, fields and shapes")
-    verify.add_argument("dir", type=Path, metavar="DIR")
-    verify.set_defaults(handler=run_verify)
-    repair = commands.add_parser(
-        "repair",
-        help="rebuild a deleted manifest.json from the shards' own headers",
-        description="Rebuild DIR/manifest.json from the dataset header every shard carries; "
-        "intact shards of that dataset are listed, others left in place and named.",
+    folder_commands = (
+        ("info", "summarize a dataset", run_info),
+        ("verify", "check checksums, fields and shapes", run_verify),
+        ("repair", "rebuild a deleted manifest.json from the headers the shards carry", run_repair),
     )
-    repair.add_argument("dir", type=Path, metavar="DIR")
-    repair.set_defaults(handler=run_repair)
+    for name, summary, handler in folder_commands:
+        sub = commands.add_parser(name, help=summary, description=summary)
+        sub.add_argument("dir", type=Path, metavar="DIR")
+        sub.set_defaults(handler=handler)
     _add_augment_parser(commands)
     _add_split_parser(commands)
 
