@@ -105,6 +105,7 @@ class Executor(Protocol):
 def _worker_main(conn: mpc.Connection, family: DatasetFamily, seed: int) -> None:
     """Serve instance indices until told to stop; a vanished parent ends it quietly."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's handler (start method fork)
     try:
         _serve(conn, family, seed)
     except (BrokenPipeError, ConnectionResetError, EOFError):

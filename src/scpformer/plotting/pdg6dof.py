@@ -240,7 +240,7 @@ def plot_trajectory(
         Must contain ``T_min``, ``T_max``, ``delta_max_deg``, ``theta_max_deg``,
         ``omega_max_deg``, ``m_dry`` and ``gamma_gs_deg``.
     path : path-like, optional
-        If given, the figure is saved there as a PNG (dpi 120).
+        If given, the figure is saved there in the format its suffix names (dpi 120).
     title : str, optional
         Figure title.
 
@@ -380,7 +380,7 @@ def plot_history(
         One mapping per iteration with keys ``iteration``, ``cost``, ``penalty``,
         ``trust_radius`` and ``virtual_control_norm``; ``None`` values are skipped.
     path : path-like, optional
-        If given, the figure is saved there as a PNG (dpi 120).
+        If given, the figure is saved there in the format its suffix names (dpi 120).
 
     Returns
     -------

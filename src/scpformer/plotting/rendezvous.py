@@ -208,7 +208,7 @@ def plot_trajectory(
     constants : mapping
         The keys of :data:`REQUIRED_CONSTANTS` (the ``constants`` record of the .npz file).
     path : path-like, optional
-        If given, the figure is saved there as a PNG (dpi 120).
+        If given, the figure is saved there in the format its suffix names (dpi 120).
     title : str, optional
         Figure title.
     reference : mapping, optional
