@@ -10,7 +10,8 @@ from scpformer.cli.main import main
     [
         ("{not json", "malformed JSON"),
         (json.dumps({"r0": [1, 2, 3], "speed": 3}), "unknown instance field(s): speed"),
-        (json.dumps({"r0": [1, "NaN", 3]}), "r0 must be finite"),
+        ('{"r0": [1, NaN, 3]}', "r0 must be finite"),
+        (json.dumps({"r0": [1, "NaN", 3]}), "r0 must be numeric"),
         (json.dumps({"v0": [1, 2]}), "v0 must have shape (3,)"),
         (json.dumps({"m0": 1.5}), "must exceed the dry mass"),
         (json.dumps({"q0": [1, 1, 0, 0]}), "q0 must be a unit quaternion"),
