@@ -94,6 +94,9 @@ FLAG_CASES = {
         "roe0_m",
     ),
     "bad-scvx-setting": (["solve", "pdg6dof", "--scvx-rho-1", "0.9"], "rho"),
+    "scvx-iter-max-negative": (["solve", "pdg6dof", "--scvx-iter-max", "-1"], "iter_max"),
+    "constant-nan": (["solve", "pdg6dof", "--const-T-max", "nan"], "T_max"),
+    "rendezvous-int-field-float": (["solve", "rendezvous", "--scenario-n-nodes", "2.5"], "n-nodes"),
     # output paths: checked before solving
     "out-existing-folder": (["solve", "pdg6dof", "--out", "{dir}"], "is a folder"),
     "out-under-a-file": (["solve", "pdg6dof", "--out", "{file}/sub/x.npz"], "is a file"),

@@ -78,6 +78,7 @@ FLAG_CASES = {
     "generate-out-is-a-file": (gen(out="{tmp}/file.txt"), "is a file"),
     "generate-out-under-a-file": (gen(out="{tmp}/file.txt/ds"), "is a file"),
     "generate-out-not-empty": (gen(out="{tmp}/folder"), "not empty"),
+    "generate-out-read-only": (gen(out="{ro}/ds"), "cannot write"),
     "generate-ray-unreachable": (gen("--ray", "127.0.0.1:9"), "--ray"),
     "generate-ray-malformed": (gen("--ray", "nowhere"), "--ray"),
     "augment-workers-zero": (
@@ -99,8 +100,12 @@ def test_a_bad_flag_is_one_line_naming_it_and_changes_no_file(tmp_path, capsys, 
     (tmp_path / "file.txt").write_text("precious")
     (tmp_path / "folder").mkdir()
     (tmp_path / "folder" / "notes.txt").write_text("mine")
+    read_only = Path("/sys") if os.geteuid() == 0 else tmp_path / "read-only"
+    if os.geteuid() != 0:
+        read_only.mkdir(mode=0o555)
     before = snapshot(tmp_path)
-    one_line_error(capsys, [a.replace("{tmp}", str(tmp_path)) for a in argv], 2, text)
+    argv = [a.replace("{tmp}", str(tmp_path)).replace("{ro}", str(read_only)) for a in argv]
+    one_line_error(capsys, argv, 2, text)
     assert snapshot(tmp_path) == before
 
 
