@@ -5,14 +5,18 @@ A dataset is a folder::
     DIR/manifest.json        family, full resolved config, seed, versions, schema, shard list,
                              counts and checksums (rewritten atomically after every shard)
     DIR/shard-00000.h5       samples [start, stop): one HDF5 dataset per field, shape
-                             (count, *field.shape); attributes repeat the shard's identity
+                             (count, *field.shape); attributes repeat the shard's identity:
+                             ``config_sha256`` (digest of the resolved configuration) and
+                             ``dataset`` (the manifest without shards, to rebuild a lost one)
     DIR/splits.h5            (optional) grouped splits and training-set statistics
+    DIR/.lock                held (flock) by the one process writing the folder
 
 Every file is written under a temporary name (``*.tmp``), flushed to disk and renamed, so a
 killed process leaves either a whole file or a temporary one that the next run deletes. A
 shard's ``sha256`` covers its bytes; its ``content_sha256`` covers the values of the
 deterministic fields only (timings excluded), so two runs with the same seed have equal content
-digests whatever the worker count or backend.
+digests whatever the worker count or backend. Every reader checks a shard's sha256 before its
+first use in a process (:func:`require_intact`).
 """
 
 from __future__ import annotations
