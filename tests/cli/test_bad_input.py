@@ -215,6 +215,7 @@ FAILURE_CASES = {
     "solver-crash": ("solver", 1, "the conic solver failed: CLARABEL crashed"),
     "permission": (PermissionError(13, "Permission denied", "/x/y.npz"), 1, "/x/y.npz"),
     "bug": (ZeroDivisionError("division by zero"), 1, "internal error (ZeroDivisionError"),
+    "bug-type-error": (TypeError("unsupported operand"), 1, "internal error (TypeError"),
     "out-of-memory": (MemoryError(), 1, "out of memory"),
 }
 

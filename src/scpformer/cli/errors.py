@@ -2,16 +2,16 @@
 
 Every failure ends with exactly one line ``scpformer: error: ...`` on stderr:
 
-==========================================  ============================================  ====
-failure                                     example                                       exit
-==========================================  ============================================  ====
-usage (argparse, ``ValueError``,            ``--n-nominal -1``, ``"j2": "false"``,        2
-``TypeError``, ``DatasetError``)            a corrupt shard
-file system (``OSError``)                   a read-only folder, a full disk: names path   1
-solver (``cvxpy.SolverError``), other bug   a conic solver crash                          1
-``KeyboardInterrupt``                       Ctrl-C                                        130
-``SIGTERM``                                 ``kill``                                      143
-==========================================  ============================================  ====
+============================================  =====================================  ====
+failure                                       example                                exit
+============================================  =====================================  ====
+usage: argparse, ``ValueError`` (also         ``--n-nominal -1``, ``"j2": "false"``,   2
+``ArgumentTypeError``, ``DatasetError``)      an unwritable ``--out``, a bad shard
+file system: ``OSError``, ``DiskFullError``   a full disk mid-run (names the path)   1
+solver (``cvxpy.SolverError``), other bug     a conic solver crash                   1
+``KeyboardInterrupt``                         Ctrl-C                                 130
+``SIGTERM``                                   ``kill``                               143
+============================================  =====================================  ====
 
 ``SCPFORMER_DEBUG=1`` re-raises instead, to show the traceback.
 """
@@ -68,7 +68,7 @@ def status_and_message(err: BaseException) -> tuple[int, str]:
         return status, f"{what}; {err}" if str(err) else what
     if isinstance(err, DiskFullError):
         return FAILURE, str(err)
-    if isinstance(err, ValueError | TypeError):
+    if isinstance(err, ValueError):  # argument checks raise ValueError or ArgumentTypeError
         return USAGE, str(err)
     if isinstance(err, OSError):
         return FAILURE, describe_os_error(err)
