@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from scpformer import __version__
-from scpformer.cli import data, pdg6dof, rendezvous, robust_rendezvous
+from scpformer.cli import bench_art, data, pdg6dof, rendezvous, robust_rendezvous
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -26,6 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     rendezvous.add_bench_parser(bench_families)
     robust_rendezvous.add_solve_parser(solve_families)
     robust_rendezvous.add_bench_parser(bench_families)
+    bench_art.add_bench_parser(bench_families)
     data.add_generate_parser(commands)
     data.add_dataset_parser(commands)
     return parser
