@@ -17,7 +17,8 @@ only the new tokens, the prefix is never recomputed::
     cache = model.start(batch_size, target=None)
     for i in range(N):
         u = model.predict_action(cache, rtg, ctg, x)  # feeds [g] R C x, returns u_hat(t_i)
-        x_hat = model.predict_state(cache, u)  # feeds u, returns x_hat(t_{i+1})
+        x_hat = model.predict_state(cache, u)  # feeds u, returns x_hat(t_{i+1}) (Alg. 1)
+        # or model.feed_action(cache, u): u rides with the next step's tokens (Alg. 2)
 
 Sizes: ``paper`` (Table 4) 6 layers, 6 heads, 384 dimensions, 10.7 M parameters; ``small``
 3 layers, 3 heads, 96 dimensions, 0.35 M parameters (chosen by measuring, see ART_PRESETS).
@@ -26,6 +27,7 @@ Sizes: ``paper`` (Table 4) 6 layers, 6 heads, 384 dimensions, 10.7 M parameters;
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -187,7 +189,6 @@ class ART(TokenSequenceModel):
                 nn.init.normal_(p, mean=0.0, std=residual_std(config.n_layer))
 
         self._act = activation_fn(config.activation)
-        self._packs: dict[tuple[int, int], tuple[int, Tensor]] = {}  # oneDNN weight copies
 
     def _weights(self, block: Block, batch_size: int) -> tuple[Tensor | None, ...]:
         """A block's 12 tensors in :meth:`_feed`'s order; linear weights packed for oneDNN
@@ -197,12 +198,11 @@ class ART(TokenSequenceModel):
             return tensors
         out = list(tensors)
         for i in (2, 4, 8, 10):  # qkv, attention proj, fc, mlp proj weights
-            weight = tensors[i]
-            key = (id(weight), batch_size)
-            version, pack = self._packs.get(key, (-1, None))
-            if version != weight._version:
-                pack = torch.ops.mkldnn._reorder_linear_weight(weight.detach(), 4 * batch_size)
-                self._packs[key] = (weight._version, pack)
+            packs = _packs_of(tensors[i])
+            version, pack = packs.get(batch_size, (-1, None))
+            if version != tensors[i]._version:
+                pack = torch.ops.mkldnn._reorder_linear_weight(tensors[i].detach(), 4 * batch_size)
+                packs[batch_size] = (tensors[i]._version, pack)
             out[i] = pack
         return tuple(out)
 
@@ -281,6 +281,20 @@ def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
         block.mlp.proj,
     )
     return tuple(t for layer in layers for t in (layer.weight, layer.bias))
+
+
+# oneDNN copies of generation weights: id(weight) -> {batch size: (weight version, pack)};
+# kept outside the modules (state dicts, pickles and copies of a model never carry them) and
+# dropped when the weight is freed.
+_PACKS: dict[int, dict[int, tuple[int, Tensor]]] = {}
+
+
+def _packs_of(weight: Tensor) -> dict[int, tuple[int, Tensor]]:
+    key = id(weight)
+    if key not in _PACKS:
+        _PACKS[key] = {}
+        weakref.finalize(weight, _PACKS.pop, key, None)
+    return _PACKS[key]
 
 
 def use_onednn(n_embd: int, batch_size: int) -> bool:
