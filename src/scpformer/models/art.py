@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -171,7 +172,7 @@ class ArtCache(StepCache):
     kv: list[Tensor]  # n_layer x (2, B, h, L_max, d)
     kv_flat: list[tuple[Tensor, Tensor]]  # views of kv[l]: keys, values (B h, L_max, d)
     weights: list[tuple[Tensor | None, ...]]  # per block: the 12 tensors _feed reads
-    packed: bool  # linear weights prepacked for oneDNN (see use_onednn)
+    linear: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # x W^T + b with weights[l]
     mask: Tensor  # (L_max, L_max) additive causal mask
     length: int = 0  # tokens fed through the blocks
 
@@ -190,20 +191,23 @@ class ART(TokenSequenceModel):
 
         self._act = activation_fn(config.activation)
 
-    def _weights(self, block: Block, batch_size: int) -> tuple[Tensor | None, ...]:
+    def _weights(self, block: Block, batch_size: int, dtype: torch.dtype) -> tuple:
         """A block's 12 tensors in :meth:`_feed`'s order; linear weights packed for oneDNN
-        when ``batch_size`` > 0 (repacked only when a weight changed since)."""
+        when ``batch_size`` > 0, in ``dtype`` (repacked only when a weight changed since)."""
         tensors = _block_weights(block)
         if not batch_size:
             return tensors
         out = list(tensors)
         for i in (2, 4, 8, 10):  # qkv, attention proj, fc, mlp proj weights
             packs = _packs_of(tensors[i])
-            version, pack = packs.get(batch_size, (-1, None))
+            version, pack = packs.get((batch_size, dtype), (-1, None))
             if version != tensors[i]._version:
-                pack = torch.ops.mkldnn._reorder_linear_weight(tensors[i].detach(), 4 * batch_size)
-                packs[batch_size] = (tensors[i]._version, pack)
+                weight = tensors[i].detach().to(dtype)
+                pack = torch.ops.mkldnn._reorder_linear_weight(weight, 4 * batch_size)
+                packs[batch_size, dtype] = (tensors[i]._version, pack)
             out[i] = pack
+            if tensors[i + 1] is not None:
+                out[i + 1] = tensors[i + 1].detach().to(dtype)
         return tuple(out)
 
     def _core(self, tokens: Tensor) -> Tensor:  # (B, L, C)
@@ -211,20 +215,28 @@ class ART(TokenSequenceModel):
             tokens = block(tokens)
         return self.ln_f(tokens)  # (B, L, C)
 
-    def _empty_cache(self, batch_size: int, max_steps: int, target: Tensor | None) -> ArtCache:
+    def _empty_cache(
+        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+    ) -> ArtCache:
         cfg = self.config
         length = max_steps * self.codec.tokens_per_step
         param = self.ln_f.weight
         d = cfg.n_embd // cfg.n_head
-        packed = use_onednn(cfg.n_embd, batch_size)
-        weights = [self._weights(block, batch_size if packed else 0) for block in self.blocks]
+        if bf16 and not onednn_available():
+            raise ValueError("bf16 generation needs oneDNN (torch.backends.mkldnn)")
+        packed = bf16 or (onednn_available() and (cfg.n_embd >= 256 or batch_size >= 8))
+        dtype = torch.bfloat16 if bf16 else param.dtype
+        weights = [self._weights(b, batch_size if packed else 0, dtype) for b in self.blocks]
+        linear = functional.linear
+        if packed:
+            linear = packed_linear_bf16 if bf16 else packed_linear
         kv = [param.new_zeros(2, batch_size, cfg.n_head, length, d) for _ in self.blocks]
         flat = [(k.view(-1, length, d), v.view(-1, length, d)) for k, v in kv]
         return ArtCache(
             kv=kv,
             kv_flat=flat,
             weights=weights,
-            packed=packed,
+            linear=linear,
             mask=param.new_full((length, length), float("-inf")).triu(1),  # (L, L)
             target=target,
             batch_size=batch_size,
@@ -249,7 +261,7 @@ class ART(TokenSequenceModel):
         scale = d**-0.5
         mask = cache.mask[start:end, :end]  # (n, end)
         eps, last = self.ln_f.eps, len(cache.weights) - 1
-        linear = packed_linear if cache.packed else functional.linear
+        linear = cache.linear
         for layer, (w, kv, (keys, values)) in enumerate(
             zip(cache.weights, cache.kv, cache.kv_flat, strict=True)
         ):
@@ -297,19 +309,22 @@ def _packs_of(weight: Tensor) -> dict[int, tuple[int, Tensor]]:
     return _PACKS[key]
 
 
-def use_onednn(n_embd: int, batch_size: int) -> bool:
-    """Whether generation runs its linear layers on oneDNN with prepacked weights.
+def onednn_available() -> bool:
+    """Whether generation can run its linear layers on oneDNN with prepacked weights.
 
-    Measured on this project's AMD EPYC (one thread, cached 100-step rollouts, CPU time): the
-    packed oneDNN product is ~1.6x faster than the default (MKL) for the paper size at batch
-    1 and ~1.2x for the small size at batch 64, but slower for 128-wide layers at batch 1.
+    It does so for wide layers or batches (``n_embd >= 256 or batch >= 8``): measured on
+    this project's AMD EPYC (one thread, cached 100-step rollouts, CPU time), the packed
+    oneDNN product is ~1.6x faster than the default (MKL) for the paper size at batch 1 and
+    ~1.2x at batch 64 of a 128-wide model, but slower for 128-wide layers at batch 1.
     """
-    available = torch.backends.mkldnn.is_available() and hasattr(
-        torch.ops.mkldnn, "_linear_pointwise"
-    )
-    return available and (n_embd >= 256 or batch_size >= 8)
+    return torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
 
 
 def packed_linear(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
     """``x W^T + b`` with ``W`` prepacked by ``torch.ops.mkldnn._reorder_linear_weight``."""
     return torch.ops.mkldnn._linear_pointwise(x, weight, bias, "none", [], "")
+
+
+def packed_linear_bf16(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
+    """:func:`packed_linear` with bfloat16 weights; ``x`` and the result stay float32."""
+    return torch.ops.mkldnn._linear_pointwise(x.bfloat16(), weight, bias, "none", [], "").float()
