@@ -222,9 +222,10 @@ class ART(TokenSequenceModel):
         length = max_steps * self.codec.tokens_per_step
         param = self.ln_f.weight
         d = cfg.n_embd // cfg.n_head
-        if bf16 and not onednn_available():
-            raise ValueError("bf16 generation needs oneDNN (torch.backends.mkldnn)")
-        packed = bf16 or (onednn_available() and (cfg.n_embd >= 256 or batch_size >= 8))
+        onednn = param.device.type == "cpu" and onednn_available()
+        if bf16 and not onednn:
+            raise ValueError("bf16 generation needs oneDNN on the CPU (torch.backends.mkldnn)")
+        packed = bf16 or (onednn and (cfg.n_embd >= 256 or batch_size >= 8))
         dtype = torch.bfloat16 if bf16 else param.dtype
         weights = [self._weights(b, batch_size if packed else 0, dtype) for b in self.blocks]
         linear = functional.linear
