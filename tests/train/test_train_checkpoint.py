@@ -39,7 +39,7 @@ def _save(path, normalization, *, kind="art", config=None, **changes):
         seed=7,
         metrics={"best_val_loss": 0.25, "epoch": 3},
         n_steps=8,
-        extra={"rng": {"numpy": np.random.get_state(legacy=False)}},
+        extra={"rng": {"numpy": np.random.get_state(legacy=False)}},  # noqa: NPY002
     )
     save_checkpoint(path, **(fields | changes))
     return model
@@ -139,9 +139,7 @@ def test_a_checkpoint_of_another_format_version_is_refused(tmp_path, normalizati
         _load(tmp_path)
 
 
-def test_a_failed_write_leaves_the_previous_checkpoint_intact(
-    tmp_path, normalization, monkeypatch
-):
+def test_a_failed_write_leaves_the_previous_checkpoint_intact(tmp_path, normalization, monkeypatch):
     _save(tmp_path, normalization, seed=1)
     before = (tmp_path / "checkpoint.pt").read_bytes()
 

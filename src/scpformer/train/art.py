@@ -254,9 +254,7 @@ def train_sequence_model(
         distributed.stop(world)
 
 
-def _previous_run(
-    out: Path, kind: str, frame: str | None, resume: bool
-) -> dict[str, Any] | None:
+def _previous_run(out: Path, kind: str, frame: str | None, resume: bool) -> dict[str, Any] | None:
     """The checkpoint payload to resume from (None for a new run)."""
     exists = (out / CHECKPOINT_NAME).is_file()
     if exists and not resume:
