@@ -69,6 +69,12 @@ def test_round_trip_restores_weights_configuration_normalization_and_identity(
     assert key.dtype == np.uint32 and len(key) == 624
 
 
+def test_a_new_run_folder_gets_its_checkpoint_file(tmp_path, normalization):
+    _save(tmp_path / "run", normalization)
+    assert (tmp_path / "run" / "checkpoint.pt").is_file()
+    assert _load(tmp_path / "run").path == tmp_path / "run" / "checkpoint.pt"
+
+
 def test_checkpoint_loads_with_weights_only(tmp_path, normalization):
     _save(tmp_path, normalization)
     payload = torch.load(tmp_path / "checkpoint.pt", weights_only=True)

@@ -75,9 +75,10 @@ def manifest_digest(folder: Path | str) -> str:
 
 
 def checkpoint_path(path: Path | str) -> Path:
-    """The checkpoint file of a run folder, or ``path`` itself when it is a file."""
+    """The checkpoint file of a run folder (an existing folder, or a path without a suffix),
+    or ``path`` itself (a file such as ``RUN/best.pt``)."""
     path = Path(path)
-    return path / CHECKPOINT_NAME if path.is_dir() else path
+    return path / CHECKPOINT_NAME if path.is_dir() or not path.suffix else path
 
 
 def save_checkpoint(
