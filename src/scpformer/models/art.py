@@ -99,7 +99,7 @@ ART_PRESETS: dict[str, ArtConfig] = {
     # 4 x 128 cost 1.3-1.8x more per epoch (624 / 862 s vs 492 s) and reach 53-68 instead of
     # 90 trajectories/s at batch 64, whose key-value reads are memory-bound (their volume
     # scales with layers x width); 2 x 128 is as fast but shallower. 3 layers x 96 dims
-    # (0.35 M parameters) keeps an epoch at ~8 CPU-minutes.
+    # (0.35 M parameters) keeps an epoch at ~8 CPU-minutes (the paper size: ~66).
     # small: no dropout on the attention weights. With it, PyTorch's CPU attention falls back
     # from the fused kernel to the math path and one training step takes 2.2x as long
     # (11 s vs 5 s for 32 sequences on this machine under load); dropout on the embeddings
