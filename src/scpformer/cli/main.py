@@ -1,4 +1,5 @@
-"""The ``scpformer`` command: ``solve`` and ``bench`` per family, ``generate``, ``dataset``."""
+"""The ``scpformer`` command: ``solve`` and ``bench`` per family, ``generate``, ``dataset``,
+``train``."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import argparse
 import sys
 
 from scpformer import __version__
-from scpformer.cli import data, pdg6dof, rendezvous, robust_rendezvous
+from scpformer.cli import bench_art, data, pdg6dof, rendezvous, robust_rendezvous, train
 from scpformer.cli.errors import OneLineParser, run_command
 
 
@@ -27,8 +28,10 @@ def build_parser() -> argparse.ArgumentParser:
     rendezvous.add_bench_parser(bench_families)
     robust_rendezvous.add_solve_parser(solve_families)
     robust_rendezvous.add_bench_parser(bench_families)
+    bench_art.add_bench_parser(bench_families)
     data.add_generate_parser(commands)
     data.add_dataset_parser(commands)
+    train.add_train_parser(commands)
     return parser
 
 

@@ -1,0 +1,55 @@
+"""Check the ART generation targets of issue 12 on this machine (one thread).
+
+100-step cached rollouts with the rendezvous dynamics in the loop (as ``scpformer bench
+art``), random weights: ``small`` at batch 1 <= 30 ms, ``paper`` at batch 1 <= 0.3 s,
+``small`` at batch 64 >= 100 trajectories/s. Prints median wall and CPU times and PASS/FAIL
+per target (judged on wall time); exit status 1 on a miss. Timings depend on the machine's
+load: run it on an otherwise idle machine.
+
+Usage: PYTHONPATH=src python benchmarks/art_targets.py [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import torch
+
+from scpformer.cli import bench_art
+
+STEPS = 100
+TARGETS = (  # preset, batch, what, limit
+    ("small", 1, "ms", 30.0),
+    ("paper", 1, "ms", 300.0),
+    ("small", 64, "traj/s", 100.0),
+)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    failed = False
+    for preset, batch, unit, limit in TARGETS:
+        bench_args = argparse.Namespace(
+            model=None, preset=preset, target=False, steps=STEPS, seed=0
+        )
+        timing = bench_art.time_mode(
+            bench_art.load_setup(bench_args), "cached", batch, args.repeats
+        )
+        if unit == "ms":
+            value, ok = 1e3 * timing.wall_s, 1e3 * timing.wall_s <= limit
+            text = f"{value:.1f} ms (cpu {1e3 * timing.cpu_s:.1f} ms) <= {limit:.0f} ms"
+        else:
+            value, ok = timing.per_second, timing.per_second >= limit
+            text = f"{value:.1f} traj/s (cpu {batch / timing.cpu_s:.1f}) >= {limit:.0f}"
+        failed |= not ok
+        print(f"{'PASS' if ok else 'FAIL'}  {preset} batch {batch}: {text}", flush=True)
+    print(f"median of {args.repeats} runs, 1 thread, {STEPS} steps")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,322 @@
+"""``scpformer bench art``: ART generation speed, with and without the key-value cache.
+
+Rolls out Algorithm 2 of the ART paper (dynamics in the loop) for a whole horizon: at every
+step the model predicts the control from the [target,] R, C, x tokens, the exact linear ROE
+dynamics of a sampled ISS rendezvous instance (``linear_model(instance)``, Eq. 10) give the
+next state, and R and C are updated (Eq. 20 and the keep-out check of Eq. 21). Side by side:
+
+* ``cached``: one call per step through the preallocated key-value cache (the control token
+  of step i rides with the tokens of step i+1, :meth:`feed_action`);
+* ``cached, 2 calls``: the control token fed alone (:meth:`predict_state`, as Algorithm 1
+  needs for its state prediction);
+* ``cached, bf16`` (with ``--bf16``): as ``cached``, multiplying by bfloat16 copies of the
+  weights (``model.start(..., bf16=True)``);
+* ``no cache``: the full teacher-forcing forward over the whole prefix at every step.
+
+Times are the median over ``--repeats`` runs after one untimed run, on ``--threads`` threads;
+``wall`` is elapsed time, ``cpu`` this process's CPU time (less sensitive to other load on a
+shared machine). torch is imported when the command runs, not when the CLI starts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+MODES = ("cached", "cached, 2 calls", "cached, bf16", "no cache")
+R_T1 = -0.2  # R(t_1) [m/s] of the random-weight runs: a typical -J_CVX of Table 1 instances
+
+
+def add_bench_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "art",
+        help="time ART trajectory generation (dynamics in the loop), cached vs uncached",
+        description="Generate ART trajectories with the rendezvous dynamics in the loop "
+        "(Algorithm 2) and time them: batch 1 with the key-value cache, and without it (full "
+        "forward at every step), and the batched throughput with the cache. Random weights of "
+        "a preset unless --model gives a trained run.",
+    )
+    parser.add_argument(
+        "--preset", choices=("small", "paper"), default="small", help="model size (small)"
+    )
+    parser.add_argument("--model", type=Path, help="trained run folder or checkpoint.pt")
+    parser.add_argument("--batch", type=int, default=64, help="batch of the throughput run (64)")
+    parser.add_argument("--steps", type=int, default=100, help="time steps N (100)")
+    parser.add_argument("--repeats", type=int, default=5, help="timed runs per mode (5)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (1)")
+    parser.add_argument("--seed", type=int, default=0, help="instance and weight seed (0)")
+    parser.add_argument(
+        "--target", action="store_true", help="random weights with the target token (robust ART)"
+    )
+    parser.add_argument(
+        "--skip-uncached", action="store_true", help="skip the (slow) run without the cache"
+    )
+    parser.add_argument(
+        "--bf16", action="store_true", help="also time generation with bfloat16 weights"
+    )
+    parser.set_defaults(handler=run_bench)
+
+
+# ======================================================================================
+# the rollout
+# ======================================================================================
+@dataclass(frozen=True)
+class Dynamics:
+    """Exact linear ROE dynamics of one rendezvous instance (Eq. 10), as float64 tensors."""
+
+    x0: Any  # (6,) initial ROE [m]
+    Phi: Any  # (N, 6, 6) STMs
+    B: Any  # (N, 6, 3) control input matrices [s]
+    Psi: Any  # (N+1, 6, 6) ROE -> RTN
+    E_koz: Any  # (3, 3) keep-out ellipsoid: inside when |dr E_koz| < 1 (Eq. 21)
+    n_waypoint: int  # N_wp: the keep-out constraint applies at nodes 0..N_wp
+
+
+def rendezvous_dynamics(steps: int, seed: int) -> Dynamics:
+    """The linear model of an instance sampled from Table 1 with N = ``steps``."""
+    import torch
+
+    from scpformer.problems.rendezvous.instance import sample_instances
+    from scpformer.problems.rendezvous.problem import linear_model
+    from scpformer.problems.rendezvous.scenario import RendezvousScenario
+
+    scenario = RendezvousScenario(n_nodes=steps)
+    instance = sample_instances(np.random.default_rng(seed), 1, scenario=scenario)[0]
+    model = linear_model(instance)
+    as_tensor = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
+    return Dynamics(
+        x0=as_tensor(instance.roe0_m),
+        Phi=as_tensor(model.Phi),
+        B=as_tensor(model.B),
+        Psi=as_tensor(model.Psi),
+        E_koz=as_tensor(scenario.E_koz),
+        n_waypoint=scenario.n_waypoint,
+    )
+
+
+class CachedPolicy:
+    """Controls from the key-value cache; ``two_calls`` feeds each control token alone."""
+
+    def __init__(
+        self, model, batch: int, steps: int, target, two_calls: bool, bf16: bool = False
+    ) -> None:
+        self.model, self.two_calls = model, two_calls
+        self.cache = model.start(batch, target, max_steps=steps, bf16=bf16)
+
+    def act(self, k: int, rtg, ctg, state):
+        return self.model.predict_action(self.cache, rtg, ctg, state)
+
+    def observe(self, k: int, action) -> None:
+        if self.two_calls:
+            self.model.predict_state(self.cache, action)
+        else:
+            self.model.feed_action(self.cache, action)
+
+
+class UncachedPolicy:
+    """Controls from a full forward over the whole prefix at every step (no cache)."""
+
+    def __init__(self, model, batch: int, steps: int, target) -> None:
+        import torch
+
+        self.model = model
+        width = {"rtg": 1, "ctg": 1, "state": model.codec.state_dim}
+        width["action"] = model.codec.action_dim
+        self.buffers = {key: torch.zeros(batch, steps, w) for key, w in width.items()}
+        self.target = target
+
+    def act(self, k: int, rtg, ctg, state):
+        import torch
+
+        for key, value in (("rtg", rtg), ("ctg", ctg), ("state", state)):
+            self.buffers[key][:, k] = value
+        prefix = {key: value[:, : k + 1] for key, value in self.buffers.items()}
+        if self.target is not None:
+            prefix["target"] = self.target
+        with torch.no_grad():
+            predictions, _ = self.model(prefix)
+        return predictions["action"][:, k]
+
+    def observe(self, k: int, action) -> None:
+        self.buffers["action"][:, k] = action
+
+
+def rollout(policy, dynamics: Dynamics, normalization, frame: str, batch: int, steps: int):
+    """Algorithm 2: controls (B, N, 3) [m/s] and states (B, N+1, 6) ROE [m]."""
+    import torch
+
+    x = dynamics.x0.expand(batch, 6).clone()  # (B, 6) ROE [m]
+    rtg = torch.full((batch, 1), R_T1, dtype=torch.float64)  # R(t_1) [m/s]
+    ctg = torch.zeros(batch, 1, dtype=torch.float64)  # C(t_1)
+    states, actions = [x], []
+    for k in range(steps):
+        rtn = x @ dynamics.Psi[k].T  # (B, 6)
+        observed = rtn if frame == "rtn" else x
+        u_norm = policy.act(
+            k,
+            normalization.encode("rtg", rtg).float(),
+            normalization.encode("ctg", ctg).float(),
+            normalization.encode("state", observed, step=k).float(),
+        )  # (B, 3)
+        policy.observe(k, u_norm)
+        u = normalization.decode("action", u_norm.double(), step=k)  # (B, 3) [m/s]
+        rtg = rtg - u.norm(dim=1, keepdim=True)  # Eq. 20
+        if k <= dynamics.n_waypoint:  # Eq. 21: keep-out violation at node k
+            inside = (rtn[:, :3] @ dynamics.E_koz).norm(dim=1, keepdim=True) < 1.0
+            ctg = ctg - inside.double()
+        x = (x + u @ dynamics.B[k].T) @ dynamics.Phi[k].T  # Eq. 10
+        states.append(x)
+        actions.append(u)
+    return torch.stack(actions, 1), torch.stack(states, 1)
+
+
+def unit_normalization(steps: int, state_dim: int, action_dim: int):
+    """Statistics of the random-weight runs: zero means, typical Table 1 magnitudes."""
+    from scpformer.models.normalization import ArtNormalization
+
+    return ArtNormalization(
+        state_mean=np.zeros((steps + 1, state_dim)),
+        state_std=np.full((steps + 1, state_dim), 100.0),  # [m]
+        action_mean=np.zeros((steps, action_dim)),
+        action_std=np.full((steps, action_dim), 0.01),  # [m/s]
+        rtg_scale=0.2,
+        ctg_scale=10.0,
+    )
+
+
+# ======================================================================================
+# timing
+# ======================================================================================
+@dataclass(frozen=True)
+class Timing:
+    mode: str
+    batch: int
+    wall_s: float  # median elapsed time of one rollout
+    cpu_s: float  # median process CPU time of one rollout
+    repeats: int
+
+    @property
+    def per_second(self) -> float:
+        """Trajectories per second (wall)."""
+        return self.batch / self.wall_s
+
+
+def time_runs(run: Callable[[], Any], repeats: int) -> tuple[float, float]:
+    """Median (wall, cpu) seconds of ``repeats`` calls after one untimed call."""
+    run()
+    walls, cpus = [], []
+    for _ in range(repeats):
+        wall, cpu = time.perf_counter(), time.process_time()
+        run()
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
+    return statistics.median(walls), statistics.median(cpus)
+
+
+def time_mode(setup: dict[str, Any], mode: str, batch: int, repeats: int) -> Timing:
+    model, steps = setup["model"], setup["steps"]
+    target = setup["target"]
+    target = None if target is None else target.expand(batch, -1)
+
+    def run():
+        if mode == "no cache":
+            policy = UncachedPolicy(model, batch, steps, target)
+        else:
+            two_calls, bf16 = mode == "cached, 2 calls", mode == "cached, bf16"
+            policy = CachedPolicy(model, batch, steps, target, two_calls, bf16)
+        rollout(policy, setup["dynamics"], setup["normalization"], setup["frame"], batch, steps)
+
+    wall, cpu = time_runs(run, repeats)
+    return Timing(mode, batch, wall, cpu, repeats)
+
+
+def load_setup(args: argparse.Namespace) -> dict[str, Any]:
+    """Model, normalization, frame and dynamics of the bench."""
+    import torch
+
+    torch.manual_seed(args.seed)
+    if args.model is not None:
+        from scpformer.train.checkpoint import load_checkpoint
+
+        checkpoint = load_checkpoint(args.model)
+        model, frame = checkpoint.model, checkpoint.frame
+        normalization = checkpoint.normalization
+        label = f"{args.model} ({checkpoint.kind}, {checkpoint.family}, {frame})"
+    else:
+        from scpformer.models import build_model, preset
+
+        config = preset("art", args.preset, target_dim=6 if args.target else 0)
+        model, frame, normalization = build_model("art", config), "rtn", None
+        label = f"ART {args.preset} preset, random weights"
+    model.eval()
+    codec = model.codec
+    if args.steps > codec.context:
+        raise ValueError(f"--steps {args.steps} exceeds the model's context {codec.context}")
+    if normalization is None:
+        normalization = unit_normalization(args.steps, codec.state_dim, codec.action_dim)
+    target = torch.zeros(1, codec.target_dim) if codec.target_dim else None
+    return {
+        "model": model,
+        "label": label,
+        "frame": frame,
+        "normalization": normalization,
+        "target": target,  # normalized target state 0 (the training mean) when it has one
+        "steps": args.steps,
+        "dynamics": rendezvous_dynamics(args.steps, args.seed),
+    }
+
+
+def check_args(args: argparse.Namespace) -> None:
+    for name in ("batch", "repeats", "threads"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name} must be at least 1, got {getattr(args, name)}")
+    if args.steps < 11:
+        raise ValueError(
+            f"--steps must be at least 11 (the waypoint is 10 before), got {args.steps}"
+        )
+    if args.model is not None and args.target:
+        raise ValueError("--target applies to random weights; a trained --model has its own")
+
+
+def report(setup: dict[str, Any], timings: list[Timing], threads: int) -> list[str]:
+    model = setup["model"]
+    lines = [
+        f"{setup['label']}: {model.num_parameters() / 1e6:.2f} M parameters, "
+        f"{setup['steps']} steps, dynamics in the loop (rendezvous linear model), "
+        f"{threads} thread(s), median of {timings[0].repeats} runs",
+        f"{'mode':<17} {'batch':>5} {'wall ms':>9} {'cpu ms':>9} {'traj/s':>8}",
+    ]
+    for t in timings:
+        lines.append(
+            f"{t.mode:<17} {t.batch:>5} {1e3 * t.wall_s:>9.1f} {1e3 * t.cpu_s:>9.1f} "
+            f"{t.per_second:>8.1f}"
+        )
+    return lines
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    check_args(args)
+    import torch
+
+    torch.set_num_threads(args.threads)
+    setup = load_setup(args)
+    plan = [("cached", 1), ("cached, 2 calls", 1)]
+    if not args.skip_uncached:
+        plan.append(("no cache", 1))
+    plan.append(("cached", args.batch))
+    if args.bf16:
+        plan[1:1] = [("cached, bf16", 1)]
+        plan.append(("cached, bf16", args.batch))
+    timings = []
+    for mode, batch in plan:
+        timings.append(time_mode(setup, mode, batch, args.repeats))
+        print(f"  {mode}, batch {batch}: {1e3 * timings[-1].wall_s:.1f} ms", flush=True)
+    print("\n".join(report(setup, timings, args.threads)))
+    return 0

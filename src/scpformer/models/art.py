@@ -1,0 +1,340 @@
+"""ART, the Autonomous Rendezvous Transformer (ART paper Sec. 3, Fig. 2; robust ART Sec. 3).
+
+A GPT over the token sequence of :mod:`scpformer.models.sequence`: per time step the
+(optional) target state, reward-to-go, constraint-to-go, state and control, each through its
+own linear encoder, plus a learned time-step embedding; pre-LayerNorm causal self-attention
+blocks on ``torch.nn.functional.scaled_dot_product_attention``; linear decoders that predict
+the control at the state token and the next state at the control token; the Eq. 8 loss with
+teacher forcing.
+
+Training (nanoGPT style)::
+
+    predictions, loss = model(batch)  # batch: rtg, ctg (B,T,1), state (B,T,6), action (B,T,3)
+
+Generation with a key-value cache (Algorithms 1-2), batched over instances; every call feeds
+only the new tokens, the prefix is never recomputed::
+
+    cache = model.start(batch_size, target=None)
+    for i in range(N):
+        u = model.predict_action(cache, rtg, ctg, x)  # feeds [g] R C x, returns u_hat(t_i)
+        x_hat = model.predict_state(cache, u)  # feeds u, returns x_hat(t_{i+1}) (Alg. 1)
+        # or model.feed_action(cache, u): u rides with the next step's tokens (Alg. 2)
+
+Sizes: ``paper`` (Table 4) 6 layers, 6 heads, 384 dimensions, 10.7 M parameters; ``small``
+3 layers, 3 heads, 96 dimensions, 0.35 M parameters (chosen by measuring, see ART_PRESETS).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import weakref
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+from torch.nn import functional
+
+from scpformer.models.sequence import (
+    ACTIVATIONS,
+    StepCache,
+    TokenSequenceModel,
+    activation_fn,
+    check_sizes,
+    init_weights,
+    residual_std,
+)
+
+# Table 4's optimization settings, read by the trainer (scpformer.train); not model sizes.
+TRAIN_DEFAULTS: dict[str, Any] = {
+    "learning_rate": 3e-5,  # Table 4
+    "grad_clip": 1.0,  # gradient norm clip (Table 4)
+    "grad_accumulation": 8,  # gradient accumulation iterations (Table 4)
+    "batch_size": 4,  # Table 4
+    "lr_decay": None,  # learning rate decay: none (Table 4)
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class ArtConfig:
+    """Sizes of ART; the defaults are Table 4 of the ART paper (Table 3 of robust ART)."""
+
+    n_layer: int = 6  # transformer blocks
+    n_head: int = 6  # attention heads per block
+    n_embd: int = 384  # embedding dimension C
+    context: int = 100  # context length K [time steps]
+    dropout: float = 0.1  # dropout probability on embeddings and residuals (training only)
+    attn_dropout: float | None = None  # on attention weights; None = ``dropout`` (Table 4)
+    activation: str = "relu"  # MLP non-linearity: relu (Table 4) or gelu
+    state_dim: int = 6  # x: RTN [m, m/s] or ROE [m]
+    action_dim: int = 3  # u: impulse dv in RTN [m/s]
+    target_dim: int = 0  # g: target state token (6 for robust ART's five modalities)
+    bias: bool = True  # biases in the linear layers and LayerNorms
+
+    def __post_init__(self) -> None:
+        check_sizes(self, n_head=(self.n_head, 1))
+        if self.n_embd % self.n_head:
+            raise ValueError(f"n_embd ({self.n_embd}) must be divisible by n_head ({self.n_head})")
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {ACTIVATIONS}, got {self.activation!r}")
+        if not isinstance(self.bias, bool):
+            raise TypeError(f"bias must be a bool, got {type(self.bias).__name__}")
+        attn = self.attn_dropout
+        if attn is not None and (not isinstance(attn, int | float) or not 0.0 <= attn < 1.0):
+            raise ValueError(f"attn_dropout must be None or in [0, 1), got {attn!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready fields (``ArtConfig(**config.to_dict())`` rebuilds it)."""
+        return dataclasses.asdict(self)
+
+
+ART_PRESETS: dict[str, ArtConfig] = {
+    # ART paper Table 4 (robust ART Table 3): 10.7 M parameters.
+    "paper": ArtConfig(),
+    # Sized by measuring on this project's shared 2-core AMD EPYC (benchmarks/art_presets.py:
+    # training epoch of 5000 random 100-step sequences at batch 32 on 2 threads; the 100-step
+    # cached rollout with the dynamics in the loop on 1 thread; CPU seconds of the process,
+    # the machine being loaded 5-6x). Decision Transformer's gym size (3 layers, 128 dims) and
+    # 4 x 128 cost 1.3-1.8x more per epoch (624 / 862 s vs 492 s) and reach 53-68 instead of
+    # 90 trajectories/s at batch 64, whose key-value reads are memory-bound (their volume
+    # scales with layers x width); 2 x 128 is as fast but shallower. 3 layers x 96 dims
+    # (0.35 M parameters) keeps an epoch at ~8 CPU-minutes (the paper size: ~66).
+    # small: no dropout on the attention weights. With it, PyTorch's CPU attention falls back
+    # from the fused kernel to the math path and one training step takes 2.2x as long
+    # (11 s vs 5 s for 32 sequences on this machine under load); dropout on the embeddings
+    # and residuals stays.
+    "small": ArtConfig(n_layer=3, n_head=3, n_embd=96, attn_dropout=0.0),
+}
+
+
+# ======================================================================================
+# the transformer
+# ======================================================================================
+class CausalSelfAttention(nn.Module):
+    """Multi-head causal self-attention with one fused query-key-value projection (Eq. 1)."""
+
+    def __init__(self, config: ArtConfig) -> None:
+        super().__init__()
+        attn = config.dropout if config.attn_dropout is None else config.attn_dropout
+        self.n_head, self.dropout = config.n_head, attn
+        self.qkv = nn.Linear(config.n_embd, 3 * config.n_embd, bias=config.bias)
+        self.proj = nn.Linear(config.n_embd, config.n_embd, bias=config.bias)
+        self.resid_drop = nn.Dropout(config.dropout)
+
+    def _heads(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        b, n, c = x.shape
+        qkv = self.qkv(x).view(b, n, 3, self.n_head, c // self.n_head)  # (B, n, 3, h, d)
+        return qkv.permute(2, 0, 3, 1, 4).unbind(0)  # 3 x (B, h, n, d)
+
+    def _merge(self, y: Tensor) -> Tensor:
+        b, _, n, _ = y.shape
+        return self.resid_drop(self.proj(y.transpose(1, 2).reshape(b, n, -1)))  # (B, n, C)
+
+    def forward(self, x: Tensor) -> Tensor:  # x: (B, L, C)
+        q, k, v = self._heads(x)  # (B, h, L, d)
+        p = self.dropout if self.training else 0.0
+        y = functional.scaled_dot_product_attention(
+            q, k, v, dropout_p=p, is_causal=True
+        )  # (B,h,L,d)
+        return self._merge(y)  # (B, L, C)
+
+
+class MLP(nn.Module):
+    """Position-wise feed-forward network, 4x wide (GPT)."""
+
+    def __init__(self, config: ArtConfig) -> None:
+        super().__init__()
+        self.fc = nn.Linear(config.n_embd, 4 * config.n_embd, bias=config.bias)
+        self.proj = nn.Linear(4 * config.n_embd, config.n_embd, bias=config.bias)
+        self.act = activation_fn(config.activation)
+        self.drop = nn.Dropout(config.dropout)
+
+    def forward(self, x: Tensor) -> Tensor:  # (B, L, C)
+        return self.drop(self.proj(self.act(self.fc(x))))  # (B, L, C)
+
+
+class Block(nn.Module):
+    """Pre-LayerNorm transformer block: ``x + attn(ln(x))``, then ``x + mlp(ln(x))``."""
+
+    def __init__(self, config: ArtConfig) -> None:
+        super().__init__()
+        self.ln_1 = nn.LayerNorm(config.n_embd, bias=config.bias)
+        self.attn = CausalSelfAttention(config)
+        self.ln_2 = nn.LayerNorm(config.n_embd, bias=config.bias)
+        self.mlp = MLP(config)
+
+    def forward(self, x: Tensor) -> Tensor:  # (B, L, C)
+        x = x + self.attn(self.ln_1(x))
+        return x + self.mlp(self.ln_2(x))  # (B, L, C)
+
+
+@dataclass(eq=False, kw_only=True)
+class ArtCache(StepCache):
+    """Key-value cache of a batch of generations, preallocated for ``max_steps`` steps.
+
+    ``kv[l]`` (2, B, h, L_max, d) holds block ``l``'s keys and values of the ``length``
+    tokens fed so far; ``mask`` (L_max, L_max) is the additive causal mask (0 or -inf),
+    sliced for calls that feed several tokens.
+    """
+
+    kv: list[Tensor]  # n_layer x (2, B, h, L_max, d)
+    kv_flat: list[tuple[Tensor, Tensor]]  # views of kv[l]: keys, values (B h, L_max, d)
+    weights: list[tuple[Tensor | None, ...]]  # per block: the 12 tensors _feed reads
+    linear: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # x W^T + b with weights[l]
+    mask: Tensor  # (L_max, L_max) additive causal mask
+    length: int = 0  # tokens fed through the blocks
+
+
+class ART(TokenSequenceModel):
+    """The Autonomous Rendezvous Transformer (see the module docstring)."""
+
+    def __init__(self, config: ArtConfig) -> None:
+        super().__init__(config, ArtConfig)
+        self.blocks = nn.ModuleList(Block(config) for _ in range(config.n_layer))
+        self.ln_f = nn.LayerNorm(config.n_embd, bias=config.bias)
+        self.apply(init_weights)
+        for name, p in self.named_parameters():
+            if name.endswith("proj.weight"):
+                nn.init.normal_(p, mean=0.0, std=residual_std(config.n_layer))
+
+        self._act = activation_fn(config.activation)
+
+    def _weights(self, block: Block, batch_size: int, dtype: torch.dtype) -> tuple:
+        """A block's 12 tensors in :meth:`_feed`'s order; linear weights packed for oneDNN
+        when ``batch_size`` > 0, in ``dtype`` (repacked only when a weight changed since)."""
+        tensors = _block_weights(block)
+        if not batch_size:
+            return tensors
+        out = list(tensors)
+        for i in (2, 4, 8, 10):  # qkv, attention proj, fc, mlp proj weights
+            packs = _packs_of(tensors[i])
+            version, pack = packs.get((batch_size, dtype), (-1, None))
+            if version != tensors[i]._version:
+                weight = tensors[i].detach().to(dtype)
+                pack = torch.ops.mkldnn._reorder_linear_weight(weight, 4 * batch_size)
+                packs[batch_size, dtype] = (tensors[i]._version, pack)
+            out[i] = pack
+            if tensors[i + 1] is not None:
+                out[i + 1] = tensors[i + 1].detach().to(dtype)
+        return tuple(out)
+
+    def _core(self, tokens: Tensor) -> Tensor:  # (B, L, C)
+        for block in self.blocks:
+            tokens = block(tokens)
+        return self.ln_f(tokens)  # (B, L, C)
+
+    def _empty_cache(
+        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+    ) -> ArtCache:
+        cfg = self.config
+        length = max_steps * self.codec.tokens_per_step
+        param = self.ln_f.weight
+        d = cfg.n_embd // cfg.n_head
+        onednn = param.device.type == "cpu" and onednn_available()
+        if bf16 and not onednn:
+            raise ValueError("bf16 generation needs oneDNN on the CPU (torch.backends.mkldnn)")
+        packed = bf16 or (onednn and (cfg.n_embd >= 256 or batch_size >= 8))
+        dtype = torch.bfloat16 if bf16 else param.dtype
+        weights = [self._weights(b, batch_size if packed else 0, dtype) for b in self.blocks]
+        linear = functional.linear
+        if packed:
+            linear = packed_linear_bf16 if bf16 else packed_linear
+        kv = [param.new_zeros(2, batch_size, cfg.n_head, length, d) for _ in self.blocks]
+        flat = [(k.view(-1, length, d), v.view(-1, length, d)) for k, v in kv]
+        return ArtCache(
+            kv=kv,
+            kv_flat=flat,
+            weights=weights,
+            linear=linear,
+            mask=param.new_full((length, length), float("-inf")).triu(1),  # (L, L)
+            target=target,
+            batch_size=batch_size,
+            max_steps=max_steps,
+        )
+
+    def _feed(self, cache: ArtCache, x: Tensor) -> Tensor:
+        """Run new tokens (B, n, C) through the blocks; the last one's output (B, C).
+
+        The eager inference path, cut to few operations per block: functional calls on the
+        weights gathered by :meth:`_empty_cache`, attention written out as
+        ``softmax(q K^T / sqrt(d) + mask) V`` over the cached keys with one ``baddbmm`` (for a
+        few query rows several times faster than ``scaled_dot_product_attention`` on the CPU),
+        and the last block computed for the last token only (the other tokens' outputs are
+        never read; their keys and values are).
+        """
+        b, n, c = x.shape
+        start = cache.length
+        end = start + n
+        h = self.config.n_head
+        d = c // h
+        scale = d**-0.5
+        mask = cache.mask[start:end, :end]  # (n, end)
+        eps, last = self.ln_f.eps, len(cache.weights) - 1
+        linear = cache.linear
+        for layer, (w, kv, (keys, values)) in enumerate(
+            zip(cache.weights, cache.kv, cache.kv_flat, strict=True)
+        ):
+            hid = torch.layer_norm(x, (c,), w[0], w[1], eps)
+            qkv = linear(hid, w[2], w[3]).view(b, n, 3, h, d)
+            kv[:, :, :, start:end] = qkv[:, :, 1:].permute(2, 0, 3, 1, 4)  # (2, B, h, n, d)
+            if layer == last:  # only the last token's output is read
+                qkv, x, mask = qkv[:, -1:], x[:, -1:], mask[-1:]
+            q = qkv[:, :, 0].transpose(1, 2).reshape(b * h, -1, d)  # (B h, n', d)
+            scores = torch.baddbmm(mask, q, keys[:, :end].transpose(1, 2), alpha=scale)
+            y = torch.bmm(torch.softmax(scores, dim=-1), values[:, :end])  # (B h, n', d)
+            y = y.view(b, h, -1, d).transpose(1, 2).reshape(b, -1, c)  # (B, n', C)
+            x = x + linear(y, w[4], w[5])
+            hid = torch.layer_norm(x, (c,), w[6], w[7], eps)
+            hid = self._act(linear(hid, w[8], w[9]))
+            x = x + linear(hid, w[10], w[11])  # (B, n', C)
+        cache.length = end
+        return torch.layer_norm(x[:, -1], (c,), self.ln_f.weight, self.ln_f.bias, eps)
+
+
+def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
+    """The tensors of one block in the order :meth:`ART._feed` reads them."""
+    layers = (
+        block.ln_1,
+        block.attn.qkv,
+        block.attn.proj,
+        block.ln_2,
+        block.mlp.fc,
+        block.mlp.proj,
+    )
+    return tuple(t for layer in layers for t in (layer.weight, layer.bias))
+
+
+# oneDNN copies of generation weights: id(weight) -> {batch size: (weight version, pack)};
+# kept outside the modules (state dicts, pickles and copies of a model never carry them) and
+# dropped when the weight is freed.
+_PACKS: dict[int, dict[int, tuple[int, Tensor]]] = {}
+
+
+def _packs_of(weight: Tensor) -> dict[int, tuple[int, Tensor]]:
+    key = id(weight)
+    if key not in _PACKS:
+        _PACKS[key] = {}
+        weakref.finalize(weight, _PACKS.pop, key, None)
+    return _PACKS[key]
+
+
+def onednn_available() -> bool:
+    """Whether generation can run its linear layers on oneDNN with prepacked weights.
+
+    It does so for wide layers or batches (``n_embd >= 256 or batch >= 8``): measured on
+    this project's AMD EPYC (one thread, cached 100-step rollouts, CPU time), the packed
+    oneDNN product is ~1.6x faster than the default (MKL) for the paper size at batch 1 and
+    ~1.2x at batch 64 of a 128-wide model, but slower for 128-wide layers at batch 1.
+    """
+    return torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
+
+
+def packed_linear(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
+    """``x W^T + b`` with ``W`` prepacked by ``torch.ops.mkldnn._reorder_linear_weight``."""
+    return torch.ops.mkldnn._linear_pointwise(x, weight, bias, "none", [], "")
+
+
+def packed_linear_bf16(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
+    """:func:`packed_linear` with bfloat16 weights; ``x`` and the result stay float32."""
+    return torch.ops.mkldnn._linear_pointwise(x.bfloat16(), weight, bias, "none", [], "").float()

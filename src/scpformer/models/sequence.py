@@ -1,0 +1,378 @@
+"""The token sequence every ART-style model reads, and the Eq. 8 loss they all train on.
+
+Notation (ART paper Sec. 3, robust ART paper Sec. 3)
+-----------------------------------------------------
+One time step ``t_i`` of a trajectory is a group of tokens, in this order::
+
+    [g]  R(t_i)  C(t_i)  x(t_i)  u(t_i)
+
+``g`` is the target state (the robust paper's fifth modality, present when
+``target_dim > 0``), ``R`` the reward-to-go (Eq. 4), ``C`` the constraint-to-go (Eq. 5),
+``x`` the state and ``u`` the control. Each modality has its own linear encoder to the
+embedding width ``C``; a learned embedding of the time step ``i`` is added to every token of
+the step. Two linear decoders read the sequence model's output: the control ``u(t_i)`` is
+predicted at the state token ``x(t_i)`` (Eq. 8, ``u_hat = ART(tau_<t_i, x(t_i))``) and the
+next state ``x(t_{i+1})`` at the control token ``u(t_i)`` (``x_hat = ART(tau_<t_{i+1})``).
+
+The transformer (:mod:`scpformer.models.art`) and the recurrent baselines
+(:mod:`scpformer.models.rnn`) share this module, so that the three differ only in the core
+that mixes the tokens.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+from torch.nn import functional
+
+ACTIVATIONS = ("relu", "gelu")
+
+
+def check_sizes(config: object, **extra: tuple[int, int]) -> None:
+    """Raise ``ValueError`` naming the field when a size of ``config`` is out of range.
+
+    Checks ``n_layer, n_embd, context, state_dim, action_dim`` (>= 1), ``target_dim`` (>= 0),
+    ``dropout`` in [0, 1), and every ``extra`` field ``name=(value, minimum)``.
+    """
+    limits = {
+        "n_layer": 1,
+        "n_embd": 1,
+        "context": 1,
+        "state_dim": 1,
+        "action_dim": 1,
+        "target_dim": 0,
+    }
+    checks = {name: (getattr(config, name), low) for name, low in limits.items()}
+    for name, (value, low) in {**checks, **extra}.items():
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+        if value < low:
+            raise ValueError(f"{name} must be at least {low}, got {value}")
+    dropout = config.dropout
+    if not isinstance(dropout, int | float) or not 0.0 <= dropout < 1.0:
+        raise ValueError(f"dropout must be in [0, 1), got {dropout!r}")
+
+
+class TokenCodec(nn.Module):
+    """Modality encoders, time-step embedding and the two decoders (ART paper, Fig. 2).
+
+    Parameters
+    ----------
+    n_embd
+        Embedding width ``C``.
+    context
+        Largest number of time steps (rows of the time-step embedding).
+    state_dim, action_dim, target_dim
+        Sizes of ``x``, ``u`` and the target ``g`` (0: no target token).
+    """
+
+    def __init__(
+        self, *, n_embd: int, context: int, state_dim: int, action_dim: int, target_dim: int
+    ) -> None:
+        super().__init__()
+        self.state_dim, self.action_dim, self.target_dim = state_dim, action_dim, target_dim
+        self.context = context
+        self.embed_time = nn.Embedding(context, n_embd)
+        self.embed_rtg = nn.Linear(1, n_embd)
+        self.embed_ctg = nn.Linear(1, n_embd)
+        self.embed_state = nn.Linear(state_dim, n_embd)
+        self.embed_action = nn.Linear(action_dim, n_embd)
+        self.embed_target = nn.Linear(target_dim, n_embd) if target_dim else None
+        self.predict_action = nn.Linear(n_embd, action_dim)  # read at the x token
+        self.predict_state = nn.Linear(n_embd, state_dim)  # read at the u token
+
+    @property
+    def tokens_per_step(self) -> int:
+        """4, or 5 with the target token."""
+        return 5 if self.target_dim else 4
+
+    @property
+    def state_slot(self) -> int:
+        """Position of the x token inside a step's group."""
+        return self.tokens_per_step - 2
+
+    def embed_sequence(self, batch: Mapping[str, Tensor]) -> Tensor:
+        """All tokens of ``batch`` interleaved step by step, (B, T k, C), ``k`` per step."""
+        state = batch["state"]  # (B, T, s)
+        b, t = state.shape[:2]
+        groups = [
+            self.embed_rtg(batch["rtg"]),  # (B, T, C)
+            self.embed_ctg(batch["ctg"]),  # (B, T, C)
+            self.embed_state(state),  # (B, T, C)
+            self.embed_action(batch["action"]),  # (B, T, C)
+        ]
+        if self.embed_target is not None:
+            groups.insert(0, self.embed_target(self.target_sequence(batch["target"], t)))
+        steps = torch.arange(t, device=state.device)
+        tokens = torch.stack(groups, dim=2) + self.embed_time(steps)[:, None]  # (B, T, k, C)
+        return tokens.reshape(b, t * self.tokens_per_step, -1)  # (B, T k, C)
+
+    @staticmethod
+    def target_sequence(target: Tensor, t: int) -> Tensor:
+        """The target as (B, T, g): a (B, g) target is repeated at every step."""
+        return target[:, None].expand(-1, t, -1) if target.dim() == 2 else target
+
+    def decode_sequence(self, hidden: Tensor) -> dict[str, Tensor]:
+        """Predictions from the core's output (B, T k, C) (see the module docstring)."""
+        b, length, c = hidden.shape
+        steps = hidden.reshape(b, length // self.tokens_per_step, self.tokens_per_step, c)
+        at_state = steps[:, :, self.state_slot]  # (B, T, C)
+        at_action = steps[:, :-1, self.state_slot + 1]  # (B, T-1, C)
+        return {
+            "action": self.predict_action(at_state),  # (B, T, a)
+            "state": self.predict_state(at_action),  # (B, T-1, s)
+        }
+
+    def check_batch(self, batch: Mapping[str, Tensor]) -> tuple[int, int]:
+        """(B, T) of a training batch; ``ValueError`` naming the key on a bad shape."""
+        if "state" not in batch:
+            raise ValueError("batch must hold 'state' (B, T, state_dim)")
+        state = batch["state"]
+        if state.dim() != 3:
+            wanted = f"(B, T, {self.state_dim})"
+            raise ValueError(f"batch['state'] must be {wanted}, got {_shape(state)}")
+        b, t = state.shape[:2]
+        if t > self.context:
+            raise ValueError(f"sequence of {t} steps is longer than the context {self.context}")
+        wanted = {
+            "rtg": (b, t, 1),
+            "ctg": (b, t, 1),
+            "state": (b, t, self.state_dim),
+            "action": (b, t, self.action_dim),
+        }
+        for key, shape in wanted.items():
+            if key not in batch:
+                raise ValueError(f"batch must hold {key!r} {shape}")
+            if tuple(batch[key].shape) != shape:
+                raise ValueError(f"batch[{key!r}] must be {shape}, got {_shape(batch[key])}")
+        self._check_target(batch.get("target"), b, t)
+        mask = batch.get("mask")
+        if mask is not None and (mask.dtype != torch.bool or tuple(mask.shape) != (b, t)):
+            raise ValueError(f"batch['mask'] must be bool ({b}, {t}), got {_shape(mask)}")
+        return b, t
+
+    def _check_target(self, target: Tensor | None, b: int, t: int) -> None:
+        if not self.target_dim:
+            if target is not None:
+                raise ValueError("batch holds 'target' but the model has target_dim = 0")
+            return
+        shapes = ((b, self.target_dim), (b, t, self.target_dim))
+        if target is None or tuple(target.shape) not in shapes:
+            got = "nothing" if target is None else _shape(target)
+            raise ValueError(f"batch['target'] must be {shapes[0]} or {shapes[1]}, got {got}")
+
+
+@dataclass(eq=False, kw_only=True)
+class StepCache:
+    """Where a batch of generations stands: step ``i``, and which token comes next.
+
+    Subclasses add the model's memory (keys and values for ART, hidden states for RNNs).
+    """
+
+    batch_size: int
+    max_steps: int  # time steps the generation may take
+    target: Tensor | None  # (B, 1, C) encoded target state g (None without one)
+    step: int = 0  # time step i of the next R, C, x tokens
+    awaiting_action: bool = False  # predict_action done, control token not given yet
+    pending: Tensor | None = None  # (B, 1, C) control token staged by feed_action
+
+
+class TokenSequenceModel(nn.Module):
+    """Training and generation interface shared by ART and the recurrent baselines.
+
+    The constructor checks the configuration's type and builds the :class:`TokenCodec`
+    (``self.codec``) and the embedding dropout (``self.drop``); subclasses implement
+    ``_core(tokens) -> (B, L, C)`` (the whole sequence, training), ``_empty_cache`` and
+    ``_feed(cache, tokens) -> (B, C)`` (new tokens only, generation).
+    """
+
+    def __init__(self, config: object, config_type: type) -> None:
+        super().__init__()
+        if not isinstance(config, config_type):
+            raise TypeError(
+                f"config must be an {config_type.__name__}, got {type(config).__name__}"
+            )
+        self.config = config
+        self.codec = TokenCodec(
+            n_embd=config.n_embd,
+            context=config.context,
+            state_dim=config.state_dim,
+            action_dim=config.action_dim,
+            target_dim=config.target_dim,
+        )
+        self.drop = nn.Dropout(config.dropout)
+
+    def num_parameters(self) -> int:
+        """Number of trainable parameters."""
+        return sum(p.numel() for p in self.parameters())
+
+    def forward(self, batch: Mapping[str, Tensor]) -> tuple[dict[str, Tensor], Tensor]:
+        """Teacher-forced predictions of every control and next state, and the Eq. 8 loss.
+
+        Parameters
+        ----------
+        batch
+            Normalized ``rtg``, ``ctg`` (B, T, 1), ``state`` (B, T, s), ``action`` (B, T, a);
+            ``target`` (B, g) or (B, T, g) when ``target_dim > 0``; optional ``mask`` (B, T)
+            bool of valid steps (padding at the end).
+
+        Returns
+        -------
+        predictions, loss
+            ``{"action": (B, T, a), "state": (B, T-1, s)}`` (``state[:, i]`` predicts
+            ``x(t_{i+1})``) and the scalar Eq. 8 loss.
+        """
+        self.codec.check_batch(batch)
+        hidden = self._core(self.drop(self.codec.embed_sequence(batch)))  # (B, T k, C)
+        predictions = self.codec.decode_sequence(hidden)
+        return predictions, eq8_loss(predictions, batch)
+
+    def _core(self, tokens: Tensor) -> Tensor:
+        raise NotImplementedError
+
+    def _empty_cache(
+        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+    ) -> StepCache:
+        raise NotImplementedError
+
+    def _feed(self, cache: StepCache, tokens: Tensor) -> Tensor:
+        raise NotImplementedError
+
+    # -- generation (Algorithms 1-2), batched, each call feeds only new tokens ---------------
+    @torch.no_grad()
+    def start(
+        self,
+        batch_size: int,
+        target: Tensor | None = None,
+        *,
+        max_steps: int | None = None,
+        bf16: bool = False,
+    ) -> StepCache:
+        """An empty cache for ``batch_size`` generations of at most ``max_steps`` steps.
+
+        ``target`` (B, g) is the normalized target state, required when ``target_dim > 0``.
+        ``max_steps`` defaults to the context length (fewer steps need less memory).
+        ``bf16`` multiplies by bfloat16 copies of the weights (ART on oneDNN only: about half
+        the weight traffic, relative error of the order of 1e-3).
+        """
+        context = self.codec.context
+        max_steps = context if max_steps is None else max_steps
+        if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
+            raise ValueError(f"batch_size must be a positive int, got {batch_size!r}")
+        if isinstance(max_steps, bool) or not isinstance(max_steps, int):
+            raise ValueError(f"max_steps must be an int in [1, {context}], got {max_steps!r}")
+        if not 1 <= max_steps <= context:
+            raise ValueError(f"max_steps must be in [1, {context}], got {max_steps}")
+        target = self._encode_target(target, batch_size)
+        return self._empty_cache(batch_size, max_steps, target, bool(bf16))
+
+    def _encode_target(self, target: Tensor | None, batch_size: int) -> Tensor | None:
+        g = self.codec.target_dim
+        if not g:
+            if target is not None:
+                raise ValueError("target given but the model has target_dim = 0")
+            return None
+        if target is None or tuple(target.shape) != (batch_size, g):
+            got = "nothing" if target is None else _shape(target)
+            raise ValueError(f"target must be ({batch_size}, {g}), got {got}")
+        return self.codec.embed_target(target)[:, None]  # (B, 1, C)
+
+    @torch.no_grad()
+    def predict_action(self, cache: StepCache, rtg: Tensor, ctg: Tensor, state: Tensor) -> Tensor:
+        """Feed step i's [g] R C x tokens in one call; return ``u_hat(t_i)`` (B, a).
+
+        ``rtg``, ``ctg`` (B, 1) and ``state`` (B, s) are normalized; ``cache`` is updated. A
+        control token staged by :meth:`feed_action` goes through in the same call.
+        """
+        codec, i = self.codec, cache.step
+        if cache.awaiting_action:
+            raise ValueError("predict_action called twice: give the control with predict_state")
+        if i >= cache.max_steps:
+            raise ValueError(f"the cache holds {cache.max_steps} steps; start a new one")
+        time = codec.embed_time.weight[i]  # (C,)
+        tokens = [codec.embed_rtg(rtg), codec.embed_ctg(ctg), codec.embed_state(state)]
+        new = torch.stack(tokens, dim=1) + time  # (B, 3, C)
+        parts = [cache.pending] if cache.pending is not None else []
+        if cache.target is not None:
+            parts.append(cache.target + time)  # (B, 1, C)
+        if parts:
+            new = torch.cat([*parts, new], dim=1)  # (B, n, C)
+        cache.pending, cache.awaiting_action = None, True
+        return codec.predict_action(self._feed(cache, new))  # (B, a)
+
+    @torch.no_grad()
+    def predict_state(self, cache: StepCache, action: Tensor) -> Tensor:
+        """Feed step i's control token ``u(t_i)`` (B, a); return ``x_hat(t_{i+1})`` (B, s)."""
+        self.feed_action(cache, action)
+        token, cache.pending = cache.pending, None
+        return self.codec.predict_state(self._feed(cache, token))  # (B, s)
+
+    @torch.no_grad()
+    def feed_action(self, cache: StepCache, action: Tensor) -> None:
+        """Stage step i's control token ``u(t_i)`` (B, a) without predicting the next state.
+
+        Algorithm 2 (dynamics in the loop) reads no ``x_hat``: the staged token goes through
+        the network with the next step's tokens, one pass per step instead of two, with the
+        same results as :meth:`predict_state`.
+        """
+        if not cache.awaiting_action:
+            raise ValueError("the control token must follow predict_action of the same step")
+        i = cache.step
+        token = self.codec.embed_action(action) + self.codec.embed_time.weight[i]  # (B, C)
+        cache.pending = token[:, None]  # (B, 1, C)
+        cache.awaiting_action, cache.step = False, i + 1
+
+
+def eq8_loss(predictions: Mapping[str, Tensor], batch: Mapping[str, Tensor]) -> Tensor:
+    """ART paper Eq. 8 with teacher forcing: squared error of the next states and controls.
+
+    ``L = mean |x(t_{i+1}) - x_hat(t_{i+1})|^2 + mean |u(t_i) - u_hat(t_i)|^2``, each a mean
+    over its elements (Eq. 8's sums, divided by their element counts so that the loss does
+    not scale with the batch or the horizon). With ``batch["mask"]`` (B, T) only valid steps
+    count: a control at a valid step, a next state when both steps are valid.
+    """
+    action_err = (predictions["action"] - batch["action"]) ** 2  # (B, T, a)
+    state_err = (predictions["state"] - batch["state"][:, 1:]) ** 2  # (B, T-1, s)
+    mask = batch.get("mask")
+    if mask is None:
+        return action_err.mean() + _mean_or_zero(state_err)
+    pair = mask[:, 1:] & mask[:, :-1]  # (B, T-1)
+    return _masked_mean(action_err, mask) + _masked_mean(state_err, pair)
+
+
+def _masked_mean(err: Tensor, mask: Tensor) -> Tensor:
+    weight = mask[..., None].to(err.dtype)  # (B, T, 1)
+    count = weight.sum() * err.shape[-1]
+    return (err * weight).sum() / count.clamp_min(1.0)
+
+
+def _mean_or_zero(err: Tensor) -> Tensor:
+    return err.mean() if err.numel() else err.sum()
+
+
+def activation_fn(name: str):
+    """The element-wise non-linearity named ``name`` (Table 4: ReLU)."""
+    return {"relu": functional.relu, "gelu": functional.gelu}[name]
+
+
+def init_weights(module: nn.Module, std: float = 0.02) -> None:
+    """GPT-2 initialization: N(0, 0.02) weights, zero biases (nanoGPT's ``_init_weights``)."""
+    if isinstance(module, nn.Linear):
+        nn.init.normal_(module.weight, mean=0.0, std=std)
+        if module.bias is not None:
+            nn.init.zeros_(module.bias)
+    elif isinstance(module, nn.Embedding):
+        nn.init.normal_(module.weight, mean=0.0, std=std)
+
+
+def residual_std(n_layer: int, std: float = 0.02) -> float:
+    """GPT-2's scaled init of the projections into the residual stream."""
+    return std / math.sqrt(2 * n_layer)
+
+
+def _shape(value: Tensor) -> tuple[int, ...]:
+    return tuple(value.shape)

@@ -1,0 +1,60 @@
+"""``scpformer bench art``: runs every mode on a short horizon; clear errors; torch stays lazy."""
+
+import subprocess
+import sys
+
+import pytest
+
+from scpformer.cli.main import main
+
+pytest.importorskip("torch")
+
+
+def test_bench_art_times_cached_and_uncached_generation(capsys):
+    argv = ["bench", "art", "--steps", "12", "--repeats", "1", "--batch", "3", "--target", "--bf16"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "ART small preset, random weights" in out and "median of 1 runs" in out
+    for mode in ("cached", "cached, 2 calls", "cached, bf16", "no cache"):
+        assert f"{mode:<17}     1" in out
+    assert "cached                3" in out and "cached, bf16          3" in out
+
+
+def test_rollout_with_and_without_the_cache_gives_the_same_controls():
+    import torch
+
+    from scpformer.cli import bench_art
+    from scpformer.models import build_model, preset
+
+    torch.manual_seed(0)
+    model = build_model("art", preset("art", "small", n_layer=2, n_embd=32, n_head=2)).eval()
+    dynamics = bench_art.rendezvous_dynamics(12, 0)
+    norm = bench_art.unit_normalization(12, 6, 3)
+    runs = []
+    for policy in (
+        bench_art.CachedPolicy(model, 2, 12, None, False),
+        bench_art.UncachedPolicy(model, 2, 12, None),
+    ):
+        runs.append(bench_art.rollout(policy, dynamics, norm, "rtn", 2, 12))
+    torch.testing.assert_close(runs[0][0], runs[1][0], rtol=1e-4, atol=1e-7)
+    torch.testing.assert_close(runs[0][1], runs[1][1], rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--batch", "0"], "--batch must be at least 1"),
+        (["--steps", "5"], "--steps must be at least 11"),
+        (["--steps", "101"], "exceeds the model's context 100"),
+    ],
+)
+def test_bad_bench_flags_end_with_one_line_error(capsys, flags, message):
+    assert main(["bench", "art", "--repeats", "1", *flags]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("scpformer: error:") and message in err and "\n" not in err
+
+
+def test_the_cli_starts_without_importing_torch():
+    code = "import sys, scpformer.cli.main; print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
