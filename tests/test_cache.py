@@ -38,3 +38,23 @@ def test_empty_cache_dir_disables_caching(tmp_path, monkeypatch):
     cached_pickle("thing", lambda: calls.append(1))
     cached_pickle("thing", lambda: calls.append(1))
     assert len(calls) == 2
+
+
+def test_a_cache_dir_that_is_a_file_is_a_miss_not_a_crash(tmp_path, monkeypatch):
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("mine")
+    monkeypatch.setenv("SCPFORMER_CACHE_DIR", str(blocker))
+    assert cached_pickle("thing", lambda: [1]) == [1]
+    assert cached_pickle("thing", lambda: [2]) == [2]
+    assert blocker.read_text() == "mine"
+
+
+def test_an_entry_that_unpickles_to_another_object_is_rebuilt(tmp_path, monkeypatch):
+    import pickle
+
+    monkeypatch.setenv("SCPFORMER_CACHE_DIR", str(tmp_path))
+    cached_pickle("thing", lambda: [1, 2])
+    (path,) = tmp_path.glob("thing-*.pkl")
+    path.write_bytes(pickle.dumps({"not": "a compiled subproblem"}))
+    assert cached_pickle("thing", lambda: [3]) == [3]
+    assert cached_pickle("thing", lambda: [4]) == [3]

@@ -4,18 +4,21 @@ Files live in ``$SCPFORMER_CACHE_DIR`` (default ``~/.cache/scpformer``); setting
 empty string disables the cache. A file's name carries a digest of the package version, the
 cvxpy version and the source of the module that builds the object, so any code change misses
 the cache instead of loading a stale object. Only files this module wrote are read (pickle),
-written atomically (temporary name, then rename); an unreadable file is rebuilt and replaced.
+written atomically (temporary name, then rename) inside an envelope ``(magic, key, object)``;
+an unreadable file, or one that unpickles to anything else, is a miss: rebuilt and replaced.
+A cache folder that cannot be used (a file, read-only) only costs rebuilding.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import pickle
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import cvxpy as cp
 
@@ -54,23 +57,55 @@ def cached_pickle(key: str, build: Callable[[], T], source: str | None = None) -
     folder = cache_dir()
     if folder is None:
         return build()
-    path = folder / f"{key}-{_digest(source)}.pkl"
+    path = folder / f"{key}-{_digest(source)}-{_MAGIC}.pkl"  # never read by older versions
+    found = _load(path, key)
+    if found is not _MISS:
+        return found
+    obj = build()
+    _store(folder, path, key, obj)
+    return obj
+
+
+_MISS = object()
+_MAGIC = "scpformer-cache-1"  # first item of every entry's envelope (magic, key, object)
+
+
+def _load(path: Path, key: str) -> Any:
+    """The cached object, or ``_MISS``: absent, unreadable, foreign or for another key.
+
+    A bad entry (truncated, written by something else, unpickling to another object) is
+    removed so that it is rebuilt once; a cache folder that is a file is simply a miss.
+    """
     try:
         with path.open("rb") as fh:
-            return pickle.load(fh)
+            envelope = pickle.load(fh)
     except FileNotFoundError:
-        pass
+        return _MISS
+    except NotADirectoryError:  # SCPFORMER_CACHE_DIR (or a parent) names a file
+        return _MISS
     except Exception:  # a corrupt or incompatible file: rebuild and replace it
+        _discard(path)
+        return _MISS
+    if not (isinstance(envelope, tuple) and len(envelope) == 3 and envelope[:2] == (_MAGIC, key)):
+        _discard(path)
+        return _MISS
+    return envelope[2]
+
+
+def _discard(path: Path) -> None:
+    with contextlib.suppress(OSError):
         path.unlink(missing_ok=True)
-    obj = build()
+
+
+def _store(folder: Path, path: Path, key: str, obj: Any) -> None:
+    """Write the entry atomically; any file-system failure only costs a later rebuild."""
     tmp: Path | None = None
     try:
         folder.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=folder, delete=False, suffix=".tmp") as fh:
             tmp = Path(fh.name)
-            pickle.dump(obj, fh, protocol=pickle.HIGHEST_PROTOCOL)
+            pickle.dump((_MAGIC, key, obj), fh, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(tmp, path)
-    except OSError:  # a read-only or full disk only costs the next process a rebuild
+    except OSError:  # a read-only or full disk, a cache folder that is a file
         if tmp is not None:
-            tmp.unlink(missing_ok=True)
-    return obj
+            _discard(tmp)

@@ -1,12 +1,119 @@
-"""File writing shared by the problem families' solution files."""
+"""File writing shared by the problem families' solution files, figures, CSVs and datasets.
+
+Outputs are checked before the work that produces them (:func:`check_output_file`,
+:func:`check_output_folder`), so that a solve is not lost to a path that cannot be written,
+and written through a temporary name and a rename, so that a failed write (full disk) leaves
+any earlier file at the path untouched.
+"""
 
 from __future__ import annotations
 
 import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+FIGURE_FORMATS = ("png", "pdf", "svg")  # --plot suffixes (matplotlib writes each natively)
+
+
+def _existing_ancestor(path: Path) -> Path:
+    """The nearest folder-or-file that exists among ``path``'s ancestors."""
+    parent = path.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    return parent
+
+
+def _check_can_create_in(folder: Path, what: str, path: Path) -> None:
+    """Raise ``ValueError`` unless a file can be created in ``folder`` (tried, then removed)."""
+    if not folder.is_dir():
+        raise ValueError(f"{what} {path}: {folder} is a file, not a folder")
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as err:
+        raise ValueError(f"{what} {path}: cannot write in {folder} ({err.strerror})") from None
+
+
+def check_output_file(path: str | Path, what: str, formats: tuple[str, ...] | None = None) -> Path:
+    """``path`` after checking that a file can be written there; nothing is created.
+
+    Parameters
+    ----------
+    path
+        The file to be written later (missing parent folders are created then).
+    what
+        How the user named it (e.g. ``--out``), for the message.
+    formats
+        Accepted suffixes without the dot (e.g. :data:`FIGURE_FORMATS`); ``None``: any.
+
+    Raises
+    ------
+    ValueError
+        Naming ``what`` and the path: an existing folder, a parent that is a file, a folder
+        without write permission (or on a read-only file system), an unknown suffix.
+    """
+    path = Path(path)
+    if formats is not None and path.suffix.lower().lstrip(".") not in formats:
+        shown = ", ".join(f".{f}" for f in formats)
+        raise ValueError(f"{what} {path}: unknown figure format {path.suffix!r}; use {shown}")
+    if path.is_dir():
+        raise ValueError(f"{what} {path} is a folder; give a file name")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ValueError(f"{what} {path}: the file is not writable")
+    parent = path.absolute().parent
+    _check_can_create_in(parent if parent.exists() else _existing_ancestor(path), what, path)
+    return path
+
+
+def check_output_folder(path: str | Path, what: str) -> Path:
+    """``path`` after checking that it is, or can become, a writable folder; nothing created.
+
+    Raises
+    ------
+    ValueError
+        Naming ``what`` and the path when it is a file, lies under a file, or cannot be
+        written.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{what} {path} is a file, not a folder")
+    folder = path if path.is_dir() else _existing_ancestor(path)
+    _check_can_create_in(folder, what, path)
+    return path
+
+
+def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary name, fsync and a rename.
+
+    Raises ``OSError`` (e.g. ``ENOSPC``) with the temporary file removed and any earlier file
+    at ``path`` untouched.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with _naming(path, tmp):
+        with tmp.open("wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    return path
+
+
+@contextmanager
+def _naming(path: Path, tmp: Path) -> Iterator[None]:
+    """Remove ``tmp`` on the way out; an ``OSError`` inside names ``path``, not ``tmp``."""
+    try:
+        yield
+    except OSError as err:
+        raise type(err)(err.errno, err.strerror or str(err), str(path)) from None
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def save_npz_atomic(path: str | Path, arrays: dict[str, Any]) -> Path:
@@ -18,9 +125,7 @@ def save_npz_atomic(path: str | Path, arrays: dict[str, Any]) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
-    try:
+    with _naming(path, tmp):
         np.savez(tmp, **arrays)
         os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return path

@@ -13,6 +13,41 @@ from typing import Any
 
 import numpy as np
 
+_REAL_KINDS = "iuf"  # numpy dtype kinds accepted as real numbers (not bool, complex, str)
+
+
+class ArgumentTypeError(TypeError, ValueError):
+    """A value of the wrong type; a ``TypeError`` that old ``except ValueError`` still catches."""
+
+
+def check_type(name: str, value: Any, cls: type | tuple[type, ...]) -> Any:
+    """Return ``value`` after checking it is an instance of ``cls``.
+
+    Raises
+    ------
+    ArgumentTypeError
+        Naming ``name``, the expected and the given type.
+    """
+    if not isinstance(value, cls):
+        names = " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
+        raise ArgumentTypeError(
+            f"{name} must be a {names}, got {type(value).__name__} {value!r:.60}"
+        )
+    return value
+
+
+def check_bool(name: str, value: Any) -> bool:
+    """Return ``value`` as a bool after checking it is one (``"false"`` is not).
+
+    Raises
+    ------
+    ArgumentTypeError
+        Naming ``name`` when ``value`` is not ``True``/``False`` (numpy bools included).
+    """
+    if not isinstance(value, bool | np.bool_):
+        raise ArgumentTypeError(f"{name} must be true or false, got {value!r}")
+    return bool(value)
+
 
 def check_finite(
     name: str,
@@ -21,18 +56,24 @@ def check_finite(
     shape: tuple[int, ...] | None = None,
     nonnegative: bool = False,
 ) -> np.ndarray:
-    """Return ``value`` as a float array after checking shape, finiteness and sign.
+    """Return ``value`` as a float array after checking type, shape, finiteness and sign.
 
     Raises
     ------
+    ArgumentTypeError
+        Naming ``name`` when the value is not real: a string, bool, complex number or None.
     ValueError
-        Naming ``name`` when the value is not numeric, has the wrong shape, holds NaN or
-        infinity, or is negative while ``nonnegative`` is set.
+        Naming ``name`` when the value has the wrong shape, holds NaN or infinity, or is
+        negative while ``nonnegative`` is set.
     """
     try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be numeric, got {value!r}") from None
+        raw = np.asarray(value)
+    except (TypeError, ValueError):  # ragged nesting
+        raw = np.asarray(None)
+    if raw.dtype.kind not in _REAL_KINDS:
+        what = "real, not complex" if raw.dtype.kind == "c" else "numeric"
+        raise ArgumentTypeError(f"{name} must be {what}, got {value!r:.80}")
+    array = raw.astype(float)
     if shape is not None and array.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
     if not np.all(np.isfinite(array)):
@@ -58,6 +99,23 @@ def check_in_range(name: str, value: Any, low: float, high: float) -> float:
     return number
 
 
+def check_trajectory(name: str, value: Any, like: Any) -> Any:
+    """Return ``value`` after checking it has ``like``'s type and finite ``x``, ``u``, ``p``
+    of ``like``'s shapes (a warm start checked against the default initial guess).
+
+    Raises
+    ------
+    ArgumentTypeError
+        When ``value`` is not of ``like``'s type (e.g. a list).
+    ValueError
+        Naming ``name.x``/``name.u``/``name.p`` on a wrong shape, NaN or infinity.
+    """
+    check_type(name, value, type(like))
+    for part in ("x", "u", "p"):
+        check_finite(f"{name}.{part}", getattr(value, part), shape=np.shape(getattr(like, part)))
+    return value
+
+
 def known_fields(cls: type, data: Any, what: str) -> dict[str, Any]:
     """``data`` as a dict after checking it is a mapping of ``cls``'s dataclass fields only.
 
@@ -78,5 +136,9 @@ def read_json(path: str | Path, what: str = "instance") -> Any:
         return json.loads(path.read_text())
     except FileNotFoundError:
         raise ValueError(f"{what} file not found: {path}") from None
+    except IsADirectoryError:
+        raise ValueError(f"{what} file {path} is a folder, not a JSON file") from None
+    except OSError as err:
+        raise ValueError(f"cannot read {what} file {path}: {err.strerror}") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise ValueError(f"malformed JSON in {path}: {err}") from None

@@ -11,13 +11,13 @@ pytest.importorskip("torch")
 
 
 def test_bench_art_times_cached_and_uncached_generation(capsys):
-    argv = ["bench", "art", "--steps", "12", "--repeats", "1", "--batch", "3", "--target"]
+    argv = ["bench", "art", "--steps", "12", "--repeats", "1", "--batch", "3", "--target", "--bf16"]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "ART small preset, random weights" in out and "median of 1 runs" in out
-    for row in ("cached                1", "cached, 2 calls       1", "no cache              1"):
-        assert row in out
-    assert "cached                3" in out
+    for mode in ("cached", "cached, 2 calls", "cached, bf16", "no cache"):
+        assert f"{mode:<17}     1" in out
+    assert "cached                3" in out and "cached, bf16          3" in out
 
 
 def test_rollout_with_and_without_the_cache_gives_the_same_controls():
@@ -31,10 +31,11 @@ def test_rollout_with_and_without_the_cache_gives_the_same_controls():
     dynamics = bench_art.rendezvous_dynamics(12, 0)
     norm = bench_art.unit_normalization(12, 6, 3)
     runs = []
-    for policy in (bench_art.CachedPolicy, bench_art.UncachedPolicy):
-        runs.append(
-            bench_art.rollout(policy(model, 2, 12, None, False), dynamics, norm, "rtn", 2, 12)
-        )
+    for policy in (
+        bench_art.CachedPolicy(model, 2, 12, None, False),
+        bench_art.UncachedPolicy(model, 2, 12, None),
+    ):
+        runs.append(bench_art.rollout(policy, dynamics, norm, "rtn", 2, 12))
     torch.testing.assert_close(runs[0][0], runs[1][0], rtol=1e-4, atol=1e-7)
     torch.testing.assert_close(runs[0][1], runs[1][1], rtol=1e-4, atol=1e-5)
 

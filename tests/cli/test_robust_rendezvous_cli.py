@@ -49,7 +49,7 @@ def test_solve_reads_an_instance_file(tmp_path, capsys):
         (["--delta", "1.5"], "delta must lie in the open interval (0, 1)"),
         (["--delta", "0"], "delta must lie in the open interval (0, 1)"),
         (["--instance", "/nonexistent/i.json"], "instance file not found"),
-        (["--monte-carlo", "-1"], "--monte-carlo must be >= 0"),
+        (["--monte-carlo", "-1"], "argument --monte-carlo: must be at least 0"),
         (["--scenario-n-safety", "0"], "scenario.n_safety"),
         (["--scvx-gamma", "1.5"], "gamma must lie in (0, 1)"),
     ],

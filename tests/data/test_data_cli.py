@@ -60,7 +60,7 @@ def test_generating_into_another_familys_or_seeds_folder_is_one_line_error(tmp_p
 @pytest.mark.parametrize(
     "argv, text",
     [
-        (["generate", "toy", "--n", "0", "--out", "X"], "n must be a positive integer"),
+        (["generate", "toy", "--n", "0", "--out", "X"], "argument --n: must be at least 1"),
         (["generate", "future", "--n", "2", "--out", "X"], "not available yet"),
         (["dataset", "info", "X"], "no dataset in"),
         (["dataset", "split", "X"], "no dataset in"),
@@ -78,7 +78,7 @@ def test_an_unwritable_folder_is_a_one_line_error(tmp_path, capsys, monkeypatch)
         raise PermissionError(13, "Permission denied", str(self))
 
     monkeypatch.setattr(Path, "mkdir", refuse)  # as for a read-only folder, even for root
-    assert generate_toy(tmp_path / "ds") == 2
+    assert generate_toy(tmp_path / "ds") == 1  # a file-system failure (exit 1) naming the path
     one_line_error(capsys, f"Permission denied: {tmp_path / 'ds'}")
 
 

@@ -213,3 +213,17 @@ def test_generation_with_prepacked_weights_follows_weight_updates():
         with torch.no_grad():
             for p in model.parameters():
                 p.mul_(1.5)  # in place, as an optimizer step: the packed copies must follow
+
+
+def test_bf16_generation_agrees_with_the_full_forward_to_bfloat16_accuracy():
+    model = tiny_model()
+    batch = random_batch(3, 8)
+    full = model(batch)[0]["action"]
+    cache = model.start(3, bf16=True)
+    actions = []
+    for i in range(8):
+        step = [batch[key][:, i] for key in ("rtg", "ctg", "state")]
+        actions.append(model.predict_action(cache, *step))
+        model.feed_action(cache, batch["action"][:, i])
+    error = (torch.stack(actions, 1) - full).norm() / full.norm()
+    assert 0 < error < 2e-2

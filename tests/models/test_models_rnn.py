@@ -44,6 +44,8 @@ def test_unknown_cells_and_sizes_are_errors():
         RnnConfig(n_embd=0)
     with pytest.raises(TypeError, match="RnnConfig"):
         SequenceRNN(object())
+    with pytest.raises(ValueError, match="ART only"):
+        tiny_rnn("gru").start(1, bf16=True)
 
 
 def test_presets_exist_for_both_sizes():

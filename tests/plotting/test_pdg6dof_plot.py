@@ -102,3 +102,13 @@ def test_plot_history(tmp_path):
         plot_history(
             [{"iteration": 1, "cost": 1.0, "trust_radius": 1.0, "virtual_control_norm": 1.0}]
         )
+
+
+@pytest.mark.parametrize(
+    "suffix, magic", [(".png", PNG_MAGIC), (".pdf", b"%PDF"), (".svg", b"<?xml")]
+)
+def test_the_figure_is_written_in_the_format_its_suffix_names(tmp_path, suffix, magic):
+    t, x, u = synthetic_trajectory()
+    out = tmp_path / f"traj{suffix}"
+    plot_trajectory(t, x, u, CONSTANTS, path=out)
+    assert out.read_bytes().startswith(magic)

@@ -8,10 +8,10 @@ import pytest
 
 pytest.importorskip("torch", reason="torch is not installed: training is untested")
 
-from train_standins import STANDIN_MODELS, ToyRendezvousFamily  # noqa: E402
+from train_standins import STANDIN_MODELS, ToyRendezvousFamily
 
-from scpformer.data.generate import GenerateConfig, generate  # noqa: E402
-from scpformer.data.splits import SplitConfig, make_splits  # noqa: E402
+from scpformer.data.generate import GenerateConfig, generate
+from scpformer.data.splits import SplitConfig, make_splits
 
 N_INSTANCES = 16
 

@@ -141,7 +141,7 @@ def test_two_epochs_equal_one_epoch_then_one_resumed_epoch(toy_rdv, tmp_path):
     constant = {"schedule": "constant", "warmup_steps": 3}  # the paper's: no decay
     _train(toy_rdv, tmp_path / "straight", 2, **constant)
     _train(toy_rdv, tmp_path / "split", 1, **constant)
-    resumed = _train(toy_rdv, tmp_path / "split", 2, resume=True)
+    resumed = _train(toy_rdv, tmp_path / "split", 2, resume=True, **constant)
     assert resumed.resumed_from == 1
     _assert_same_weights(tmp_path / "straight", tmp_path / "split")
 
@@ -154,6 +154,11 @@ def test_an_existing_run_is_not_overwritten_and_resumes_only_as_itself(toy_rdv, 
         _train(toy_rdv, tmp_path / "run", 2, kind="gru", resume=True)
     result = _train(toy_rdv, tmp_path / "new", 1, resume=True)  # nothing to resume: starts
     assert result.resumed_from == 0
+    with pytest.raises(ValueError, match="only epochs and device may change, not lr"):
+        _train(toy_rdv, tmp_path / "run", 2, resume=True, lr=0.5)
+    with pytest.raises(ValueError, match="used preset 'small', not 'paper'"):
+        train("art", data=toy_rdv, out=tmp_path / "run", preset="paper", resume=True,
+              models=STANDIN_MODELS)  # fmt: skip
 
 
 def test_resuming_on_other_data_or_other_splits_is_refused(

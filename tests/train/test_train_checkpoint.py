@@ -39,7 +39,7 @@ def _save(path, normalization, *, kind="art", config=None, **changes):
         seed=7,
         metrics={"best_val_loss": 0.25, "epoch": 3},
         n_steps=8,
-        extra={"rng": {"numpy": np.random.get_state(legacy=False)}},
+        extra={"rng": {"numpy": np.random.get_state(legacy=False)}},  # noqa: NPY002
     )
     save_checkpoint(path, **(fields | changes))
     return model
@@ -67,6 +67,12 @@ def test_round_trip_restores_weights_configuration_normalization_and_identity(
     assert loaded.metrics == {"best_val_loss": 0.25, "epoch": 3}
     key = loaded.extra["rng"]["numpy"]["state"]["key"]
     assert key.dtype == np.uint32 and len(key) == 624
+
+
+def test_a_new_run_folder_gets_its_checkpoint_file(tmp_path, normalization):
+    _save(tmp_path / "run", normalization)
+    assert (tmp_path / "run" / "checkpoint.pt").is_file()
+    assert _load(tmp_path / "run").path == tmp_path / "run" / "checkpoint.pt"
 
 
 def test_checkpoint_loads_with_weights_only(tmp_path, normalization):
@@ -139,9 +145,7 @@ def test_a_checkpoint_of_another_format_version_is_refused(tmp_path, normalizati
         _load(tmp_path)
 
 
-def test_a_failed_write_leaves_the_previous_checkpoint_intact(
-    tmp_path, normalization, monkeypatch
-):
+def test_a_failed_write_leaves_the_previous_checkpoint_intact(tmp_path, normalization, monkeypatch):
     _save(tmp_path, normalization, seed=1)
     before = (tmp_path / "checkpoint.pt").read_bytes()
 

@@ -1,5 +1,8 @@
 """``scpformer train art|gru|lstm`` on the command line: a run, a resume, one-line errors."""
 
+import subprocess
+import sys
+
 import pytest
 from train_standins import STANDIN_MODELS
 
@@ -59,3 +62,8 @@ def test_unknown_models_are_refused_by_the_parser(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["train", "gpt", "--data", "x", "--out", "y"])
     assert exit_.value.code == 2 and "invalid choice: 'gpt'" in capsys.readouterr().err
+
+
+def test_the_command_line_loads_without_torch():
+    code = "import sys, scpformer.cli.train; assert 'torch' not in sys.modules"
+    assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0

@@ -7,7 +7,7 @@ import pytest
 import torch
 from train_standins import TinyConfig, TinyModel
 
-from scpformer.train.config import TrainConfig, train_config
+from scpformer.train.config import TRAIN_PRESETS, TrainConfig, train_config
 from scpformer.train.loop import TensorData, fit, lr_factor
 from scpformer.train.metrics import METRIC_COLUMNS, plot_losses, write_metrics
 
@@ -40,7 +40,9 @@ def test_accumulated_micro_batches_take_the_step_of_one_large_batch():
     train, val = _data(32, 1), _data(8, 2)
     common = dict(epochs=2, lr=1e-2, grad_clip=0.0, warmup_steps=0, device="cpu")
     accumulated = _model()
-    fit(accumulated, train, val, TrainConfig(batch_size=4, accumulation=2, **common), progress=False)
+    fit(
+        accumulated, train, val, TrainConfig(batch_size=4, accumulation=2, **common), progress=False
+    )
     large = _model()
     fit(large, train, val, TrainConfig(batch_size=8, accumulation=1, **common), progress=False)
     for name, value in large.state_dict().items():
@@ -92,8 +94,9 @@ def test_presets_and_model_defaults_resolve_with_overrides_last():
     assert (small.lr, small.grad_clip, small.epochs) == (5e-4, 0.5, 2)
     assert train_config("small", model_defaults=defaults, lr=1e-2).lr == 1e-2
     table4 = {"learning_rate": 2e-5, "grad_accumulation": 4, "lr_decay": None}  # flat: paper
-    assert (train_config("paper", model_defaults=table4).lr, train_config("small", model_defaults=table4).lr) == (2e-5, 1e-3)  # fmt: skip
-    assert train_config("paper", model_defaults=table4).accumulation == 4
+    paper = train_config("paper", model_defaults=table4)
+    assert (paper.lr, paper.accumulation, paper.schedule) == (2e-5, 4, "constant")
+    assert train_config("small", model_defaults=table4).lr == TRAIN_PRESETS["small"].lr
     with pytest.raises(ValueError, match="preset must be one of"):
         train_config("huge")
     with pytest.raises(ValueError, match="batch_size must be a positive integer"):

@@ -9,6 +9,8 @@ next state, and R and C are updated (Eq. 20 and the keep-out check of Eq. 21). S
   of step i rides with the tokens of step i+1, :meth:`feed_action`);
 * ``cached, 2 calls``: the control token fed alone (:meth:`predict_state`, as Algorithm 1
   needs for its state prediction);
+* ``cached, bf16`` (with ``--bf16``): as ``cached``, multiplying by bfloat16 copies of the
+  weights (``model.start(..., bf16=True)``);
 * ``no cache``: the full teacher-forcing forward over the whole prefix at every step.
 
 Times are the median over ``--repeats`` runs after one untimed run, on ``--threads`` threads;
@@ -28,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-MODES = ("cached", "cached, 2 calls", "no cache")
+MODES = ("cached", "cached, 2 calls", "cached, bf16", "no cache")
 R_T1 = -0.2  # R(t_1) [m/s] of the random-weight runs: a typical -J_CVX of Table 1 instances
 
 
@@ -55,6 +57,9 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--skip-uncached", action="store_true", help="skip the (slow) run without the cache"
+    )
+    parser.add_argument(
+        "--bf16", action="store_true", help="also time generation with bfloat16 weights"
     )
     parser.set_defaults(handler=run_bench)
 
@@ -99,9 +104,11 @@ def rendezvous_dynamics(steps: int, seed: int) -> Dynamics:
 class CachedPolicy:
     """Controls from the key-value cache; ``two_calls`` feeds each control token alone."""
 
-    def __init__(self, model, batch: int, steps: int, target, two_calls: bool) -> None:
+    def __init__(
+        self, model, batch: int, steps: int, target, two_calls: bool, bf16: bool = False
+    ) -> None:
         self.model, self.two_calls = model, two_calls
-        self.cache = model.start(batch, target, max_steps=steps)
+        self.cache = model.start(batch, target, max_steps=steps, bf16=bf16)
 
     def act(self, k: int, rtg, ctg, state):
         return self.model.predict_action(self.cache, rtg, ctg, state)
@@ -116,7 +123,7 @@ class CachedPolicy:
 class UncachedPolicy:
     """Controls from a full forward over the whole prefix at every step (no cache)."""
 
-    def __init__(self, model, batch: int, steps: int, target, two_calls: bool = False) -> None:
+    def __init__(self, model, batch: int, steps: int, target) -> None:
         import torch
 
         self.model = model
@@ -217,10 +224,13 @@ def time_mode(setup: dict[str, Any], mode: str, batch: int, repeats: int) -> Tim
     model, steps = setup["model"], setup["steps"]
     target = setup["target"]
     target = None if target is None else target.expand(batch, -1)
-    policy_class = UncachedPolicy if mode == "no cache" else CachedPolicy
 
     def run():
-        policy = policy_class(model, batch, steps, target, two_calls=mode == "cached, 2 calls")
+        if mode == "no cache":
+            policy = UncachedPolicy(model, batch, steps, target)
+        else:
+            two_calls, bf16 = mode == "cached, 2 calls", mode == "cached, bf16"
+            policy = CachedPolicy(model, batch, steps, target, two_calls, bf16)
         rollout(policy, setup["dynamics"], setup["normalization"], setup["frame"], batch, steps)
 
     wall, cpu = time_runs(run, repeats)
@@ -301,6 +311,9 @@ def run_bench(args: argparse.Namespace) -> int:
     if not args.skip_uncached:
         plan.append(("no cache", 1))
     plan.append(("cached", args.batch))
+    if args.bf16:
+        plan[1:1] = [("cached, bf16", 1)]
+        plan.append(("cached, bf16", args.batch))
     timings = []
     for mode, batch in plan:
         timings.append(time_mode(setup, mode, batch, args.repeats))

@@ -9,16 +9,17 @@ where a family that lands registers them with :func:`register_family_arguments`.
 from __future__ import annotations
 
 import argparse
-import functools
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from tqdm import tqdm
 
+from scpformer.cli.argtypes import count, positive
+from scpformer.cli.errors import OneLineParser, Terminated, run_command
 from scpformer.data.errors import DatasetError
+from scpformer.data.executors import check_ray_address
 from scpformer.data.family import (
     ERROR,
     TIMEOUT,
@@ -29,9 +30,8 @@ from scpformer.data.family import (
     get_family_spec,
 )
 from scpformer.data.generate import GenerateConfig, GenerationReport, Progress, generate
-from scpformer.data.storage import Manifest, read_manifest, verify_dataset
-
-Handler = Callable[[argparse.Namespace], int]
+from scpformer.data.storage import Manifest, read_manifest, shard_damage, verify_dataset
+from scpformer.files import check_output_folder
 
 
 @dataclass(frozen=True)
@@ -173,20 +173,6 @@ register_family_arguments(
 )
 
 
-def _clear_errors(handler: Handler) -> Handler:
-    """Turn operating-system errors (permissions, missing paths) into one-line errors."""
-
-    @functools.wraps(handler)
-    def wrapped(args: argparse.Namespace) -> int:
-        try:
-            return handler(args)
-        except OSError as err:
-            where = f": {err.filename}" if err.filename else ""
-            raise DatasetError(f"{err.strerror or err}{where}") from None
-
-    return wrapped
-
-
 # -- generate ----------------------------------------------------------------------------------
 def add_generate_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``generate FAMILY`` with one sub-command per known family."""
@@ -212,18 +198,18 @@ def add_generate_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def _add_common_generate_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("generation")
-    group.add_argument("--n", type=int, required=True, help="number of instances to solve")
+    group.add_argument("--n", type=positive, required=True, help="number of instances to solve")
     group.add_argument("--out", type=Path, required=True, help="dataset folder")
-    group.add_argument("--seed", type=int, default=0, help="root seed of the dataset (0)")
+    group.add_argument("--seed", type=count, default=0, help="root seed of the dataset (0)")
     group.add_argument(
-        "--workers", type=int, help="worker processes or Ray actors (default: every CPU)"
+        "--workers", type=positive, help="worker processes or Ray actors (default: every CPU)"
     )
     group.add_argument(
         "--ray",
         metavar="ADDRESS",
         help="run on the Ray cluster at ADDRESS ('auto', 'ray://host:port'; 'local' starts one)",
     )
-    group.add_argument("--shard-size", type=int, default=64, help="instances per shard (64)")
+    group.add_argument("--shard-size", type=positive, default=64, help="instances per shard (64)")
     group.add_argument(
         "--time-limit",
         type=float,
@@ -268,10 +254,12 @@ class _ProgressBar:
             self.bar.close()
 
 
-@_clear_errors
 def run_generate(args: argparse.Namespace) -> int:
     """Handler of ``generate FAMILY``."""
     name = args.family_name
+    check_output_folder(args.out, "--out")
+    if args.ray:
+        check_ray_address(args.ray)
     if name in FAMILY_ARGUMENTS:
         get_family_spec(name)  # a clear error if the family has not landed
         family = FAMILY_ARGUMENTS[name].build(args)
@@ -289,6 +277,8 @@ def run_generate(args: argparse.Namespace) -> int:
     bar = _ProgressBar(name, disable=args.quiet)
     try:
         report = generate(family, config, on_progress=bar, on_notice=bar.write)
+    except (KeyboardInterrupt, Terminated) as stop:
+        raise type(stop)("finished shards are kept: re-run the same command to resume") from None
     finally:
         bar.close()
     print("\n".join(report_lines(report)))
@@ -328,12 +318,15 @@ def add_dataset_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``dataset info|verify|augment|split``."""
     parser = subparsers.add_parser("dataset", help="inspect, check, augment and split datasets")
     commands = parser.add_subparsers(dest="dataset_command", required=True, metavar="COMMAND")
-    info = commands.add_parser("info", help="summarize a dataset")
-    info.add_argument("dir", type=Path, metavar="DIR")
-    info.set_defaults(handler=run_info)
-    verify = commands.add_parser("verify", help="check checksums, fields and shapes")
-    verify.add_argument("dir", type=Path, metavar="DIR")
-    verify.set_defaults(handler=run_verify)
+    folder_commands = (
+        ("info", "summarize a dataset", run_info),
+        ("verify", "check checksums, fields and shapes", run_verify),
+        ("repair", "rebuild a deleted manifest.json from the headers the shards carry", run_repair),
+    )
+    for name, summary, handler in folder_commands:
+        sub = commands.add_parser(name, help=summary, description=summary)
+        sub.add_argument("dir", type=Path, metavar="DIR")
+        sub.set_defaults(handler=handler)
     _add_augment_parser(commands)
     _add_split_parser(commands)
 
@@ -360,7 +353,7 @@ def _add_augment_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--all-statuses", action="store_true", help="rotate failed samples too (default: drop)"
     )
-    parser.add_argument("--workers", type=int, default=1, help="processes (1)")
+    parser.add_argument("--workers", type=positive, default=1, help="processes (1)")
     parser.set_defaults(handler=run_augment)
 
 
@@ -380,11 +373,10 @@ def _add_split_parser(commands: argparse._SubParsersAction) -> None:
         metavar=("TRAIN", "VALIDATION", "TEST"),
         help="shares of the groups (0.8 0 0.2)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the group permutation (0)")
+    parser.add_argument("--seed", type=count, default=0, help="seed of the group permutation (0)")
     parser.set_defaults(handler=run_split)
 
 
-@_clear_errors
 def run_info(args: argparse.Namespace) -> int:
     """Handler of ``dataset info DIR``."""
     print("\n".join(info_lines(args.dir, read_manifest(args.dir))))
@@ -399,7 +391,13 @@ def info_lines(folder: Path, manifest: Manifest) -> list[str]:
     kind = manifest.kind
     if manifest.transform is not None:
         kind += f" by {manifest.transform['name']} from {manifest.source['path']}"
+    damaged = [d for d in (shard_damage(folder, s) for s in manifest.shards) if d is not None]
     state = "complete" if manifest.complete else "incomplete: re-run generate to finish"
+    if damaged:
+        state = (
+            f"incomplete: {len(damaged)} listed shard(s) missing or damaged ({damaged[0]}); "
+            "re-run generate to redo them"
+        )
     size = sum(s.bytes for s in manifest.shards) / 1e6
     rows = [
         ("dataset", str(folder)),
@@ -422,7 +420,6 @@ def info_lines(folder: Path, manifest: Manifest) -> list[str]:
     return [f"{k:<{width}}  {v}" for k, v in rows]
 
 
-@_clear_errors
 def run_verify(args: argparse.Namespace) -> int:
     """Handler of ``dataset verify DIR``: exit 0 when clean, 1 with one line per problem."""
     from scpformer.data.splits import check_splits
@@ -442,22 +439,37 @@ def run_verify(args: argparse.Namespace) -> int:
     return 0
 
 
-@_clear_errors
+def run_repair(args: argparse.Namespace) -> int:
+    """Handler of ``dataset repair DIR``."""
+    from scpformer.data.generate import rebuild_manifest
+
+    manifest = rebuild_manifest(args.dir, lambda text: print(f"scpformer: {text}", file=sys.stderr))
+    counts = manifest.counts()
+    print(
+        f"rebuilt {args.dir}/manifest.json: {counts['shards']} of {counts['planned_shards']} "
+        f"shard(s), {counts['samples']} samples"
+    )
+    return 0
+
+
 def run_augment(args: argparse.Namespace) -> int:
     """Handler of ``dataset augment SRC --out DST``."""
     from scpformer.data.augment import RotationAugmentation, augment_dataset
 
+    check_output_folder(args.out, "--out")
     transform = RotationAugmentation(
         angles_deg=tuple(args.angles),
         converged_only=not args.all_statuses,
         verify=not args.no_verify,
     )
-    with tqdm(desc="augment", unit="shard", file=sys.stderr, dynamic_ncols=True) as bar:
+    bars: list[tqdm] = []  # made at the first shard: an early error stays one line
 
-        def on_shard(done: int, total: int) -> None:
-            bar.total = total
-            bar.update(done - bar.n)
+    def on_shard(done: int, total: int) -> None:
+        if not bars:
+            bars.append(tqdm(desc="augment", unit="shard", file=sys.stderr, total=total))
+        bars[0].update(done - bars[0].n)
 
+    try:
         manifest = augment_dataset(
             args.source,
             args.out,
@@ -466,12 +478,14 @@ def run_augment(args: argparse.Namespace) -> int:
             on_shard=on_shard,
             on_notice=lambda text: tqdm.write(f"scpformer: {text}", file=sys.stderr),
         )
+    finally:
+        for bar in bars:
+            bar.close()
     print(f"wrote {args.out}: {manifest.counts()['samples']} samples")
     print(_solved_line(manifest))
     return 0
 
 
-@_clear_errors
 def run_split(args: argparse.Namespace) -> int:
     """Handler of ``dataset split DIR``."""
     from scpformer.data.splits import SplitConfig, make_splits
@@ -485,7 +499,7 @@ def run_split(args: argparse.Namespace) -> int:
 # -- standalone entry point --------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     """A parser with only ``generate`` and ``dataset`` (what ``scpformer`` adds them to)."""
-    parser = argparse.ArgumentParser(prog="scpformer", description="scpformer datasets")
+    parser = OneLineParser(prog="scpformer", description="scpformer datasets")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_generate_parser(commands)
     add_dataset_parser(commands)
@@ -493,16 +507,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``generate`` or ``dataset``; bad input ends with one ``error:`` line and status 2."""
-    args: Any = build_parser().parse_args(argv)
-    try:
-        return args.handler(args)
-    except ValueError as err:
-        print(f"scpformer: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("scpformer: interrupted; finished shards are kept", file=sys.stderr)
-        return 130
+    """Run ``generate`` or ``dataset``; every failure ends with one ``error:`` line."""
+    return run_command(build_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import inspect
 import re
 import typing
@@ -17,6 +18,7 @@ from typing import Any
 _COMMENT = re.compile(r"^\s*(\w+)\s*:[^#]*#\s*(.+)$")
 
 
+@functools.cache  # reading the source is most of the time of building the parser
 def field_comments(cls: type) -> dict[str, str]:
     """Map field name -> end-of-line comment in the class source."""
     try:

@@ -7,6 +7,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from scpformer.cli.argtypes import count, positive
 from scpformer.experiments import EXPERIMENTS, RunOptions, run_experiment
 
 
@@ -31,15 +32,15 @@ def add_experiment_parser(commands: argparse._SubParsersAction) -> None:
         help="training run folder or checkpoint (repeat for several models)",
     )
     run.add_argument("--data", type=Path, metavar="DIR", help="dataset folder (split)")
-    run.add_argument("--n", type=int, help="test instances (default: the experiment's)")
-    run.add_argument("--workers", type=int, help="local worker processes (default: every CPU)")
+    run.add_argument("--n", type=positive, help="test instances (default: the experiment's)")
+    run.add_argument("--workers", type=positive, help="local worker processes (default: every CPU)")
     run.add_argument(
         "--ray",
         metavar="ADDRESS",
         help="run on a Ray cluster ('local' starts one) instead of local processes",
     )
     run.add_argument("--out", type=Path, help="output folder (default: docs/results/NAME)")
-    run.add_argument("--seed", type=int, default=0, help="seed of the instance selection (0)")
+    run.add_argument("--seed", type=count, default=0, help="seed of the instance selection (0)")
     run.set_defaults(handler=run_run)
 
 

@@ -1,5 +1,5 @@
 """The ``scpformer`` command: ``solve`` and ``bench`` per family, ``generate``, ``dataset``,
-``train``."""
+``train``, ``experiment``."""
 
 from __future__ import annotations
 
@@ -16,10 +16,11 @@ from scpformer.cli import (
     robust_rendezvous,
     train,
 )
+from scpformer.cli.errors import OneLineParser, run_command
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="scpformer",
         description="Sequential convex programming for spacecraft trajectories.",
     )
@@ -44,17 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; bad input ends with a one-line ``error:`` message and exit status 2."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return args.handler(args)
-    except ValueError as err:
-        print(f"scpformer: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("scpformer: interrupted", file=sys.stderr)
-        return 130
+    """Entry point; every failure ends with one ``scpformer: error:`` line (see cli.errors)."""
+    return run_command(build_parser(), argv)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import time
 from pathlib import Path
@@ -11,7 +10,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from scpformer.cli.argtypes import count
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
+from scpformer.cli.outputs import check_solve_outputs, write_csv
+from scpformer.files import check_output_file
 from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.problems.pdg6dof.instance import (
     PDGInstance,
@@ -61,7 +63,9 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
         "gamma_gs_deg, theta_max_deg[, constants]); default: the nominal instance",
     )
     parser.add_argument("--out", type=Path, help="write the solution to this .npz file")
-    parser.add_argument("--plot", type=Path, help="write a trajectory figure to this .png file")
+    parser.add_argument(
+        "--plot", type=Path, help="write a trajectory figure to this .png, .pdf or .svg file"
+    )
     add_config_arguments(parser)
     parser.set_defaults(handler=run_solve)
 
@@ -100,9 +104,16 @@ def print_summary(solution: Solution, instance: PDGInstance) -> None:
         print(f"{key:<{width}}  {value}")
 
 
+def history_plot_path(plot: Path) -> Path:
+    """Where the SCvx history figure goes next to ``--plot`` (same format)."""
+    return plot.with_name(f"{plot.stem}_history{plot.suffix}")
+
+
 def run_solve(args: argparse.Namespace) -> int:
     instance = instance_from_args(args)
     config = config_from_args(args)
+    history = history_plot_path(args.plot) if args.plot else None
+    check_solve_outputs(args.out, args.plot, history)
     solution = solve(instance, config)
     print_summary(solution, instance)
     if solution.trajectory is not None:
@@ -122,9 +133,8 @@ def run_solve(args: argparse.Namespace) -> int:
                 constants_record(instance),
                 path=args.plot,
             )
-            history_path = args.plot.with_name(args.plot.stem + "_history.png")
-            plot_history([rec.summary() for rec in solution.history], path=history_path)
-            print(f"wrote {args.plot} and {history_path}")
+            plot_history([rec.summary() for rec in solution.history], path=history)
+            print(f"wrote {args.plot} and {history}")
     return 0 if solution.converged else 1
 
 
@@ -136,9 +146,9 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "from Table 2; report wall time, iterations, converged rate and the share of time "
         "inside the conic solver.",
     )
-    parser.add_argument("--n-nominal", type=int, default=20, help="nominal instances (20)")
-    parser.add_argument("--n-table2", type=int, default=10, help="Table 2 instances (10)")
-    parser.add_argument("--seed", type=int, default=0, help="sampling seed (0)")
+    parser.add_argument("--n-nominal", type=count, default=20, help="nominal instances (20)")
+    parser.add_argument("--n-table2", type=count, default=10, help="Table 2 instances (10)")
+    parser.add_argument("--seed", type=count, default=0, help="sampling seed (0)")
     parser.add_argument(
         "--csv",
         type=Path,
@@ -222,7 +232,10 @@ def per_instance_lines(rows: list[dict[str, object]]) -> list[str]:
 
 
 def run_bench(args: argparse.Namespace) -> int:
+    if args.n_nominal + args.n_table2 == 0:
+        raise ValueError("--n-nominal and --n-table2 are both 0: nothing to benchmark")
     config = config_from_args(args)
+    check_output_file(args.csv, "--csv")
     rng = np.random.default_rng(args.seed)
     sets = [
         ("nominal", sample_instances(rng, args.n_nominal, SampleRanges.nominal())),
@@ -241,11 +254,7 @@ def run_bench(args: argparse.Namespace) -> int:
                 rows.append(_bench_row(name, index, solution, time.perf_counter() - t0))
                 bar.set_postfix(status=solution.status.value, it=solution.iterations)
                 bar.update()
-    args.csv.parent.mkdir(parents=True, exist_ok=True)
-    with args.csv.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=BENCH_FIELDS)
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(args.csv, BENCH_FIELDS, rows)
     print("\n".join(per_instance_lines(rows)))
     print("\n".join(summarize(rows)))
     print(f"wrote {args.csv}")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import math
 import time
@@ -13,13 +12,16 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from scpformer.cli.argtypes import count, positive
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
+from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.cli.warmstart import (
     add_warmstart_arguments,
     art_provider,
     comparison_rows,
     warmstart_line,
 )
+from scpformer.files import check_output_file
 from scpformer.problems.rendezvous.instance import RendezvousInstance, sample_instances
 from scpformer.problems.rendezvous.problem import (
     PROBLEMS,
@@ -99,7 +101,7 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
         "--instance", type=Path, help="instance JSON (roe0_m, horizon_orbits[, target, scenario])"
     )
     source.add_argument(
-        "--seed", type=int, help="sample the instance from Table 1's last column with this seed"
+        "--seed", type=count, help="sample the instance from Table 1's last column with this seed"
     )
     parser.add_argument(
         "--roe0",
@@ -110,7 +112,9 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--horizon-orbits", type=float, help="OCP horizon [orbits]")
     parser.add_argument("--out", type=Path, help="write the solution to this .npz file")
-    parser.add_argument("--plot", type=Path, help="write Figs. 7-8 style plots to this .png")
+    parser.add_argument(
+        "--plot", type=Path, help="write Figs. 7-8 style plots to this .png, .pdf or .svg"
+    )
     parser.add_argument(
         "--no-verify", action="store_true", help="skip the nonlinear replay of the impulses"
     )
@@ -154,12 +158,13 @@ def summary_rows(solution: Solution, instance: RendezvousInstance) -> list[tuple
     ver = solution.verification
     if ver is not None:
         te = ver.terminal_error
-        rows += [
-            ("verified (replay)", "yes" if ver.passed else f"no ({ver.message})"),
-            ("terminal miss", f"{te['position_m']:.3f} m, {1e3 * te['velocity_m_s']:.3f} mm/s"),
-            ("  RTN position", f"({te['r_m']:.3f}, {te['t_m']:.3f}, {te['n_m']:.3f}) m"),
-            ("max linear-vs-truth gap", f"{ver.max_defect:.3f} m"),
-        ]
+        rows.append(("verified (replay)", "yes" if ver.passed else f"no ({ver.message})"))
+        if te:  # empty when the replay itself failed (the message says why)
+            rows += [
+                ("terminal miss", f"{te['position_m']:.3f} m, {1e3 * te['velocity_m_s']:.3f} mm/s"),
+                ("  RTN position", f"({te['r_m']:.3f}, {te['t_m']:.3f}, {te['n_m']:.3f}) m"),
+                ("max linear-vs-truth gap", f"{ver.max_defect:.3f} m"),
+            ]
         rows += [(f"node {k}", f"{v:.3g}") for k, v in ver.node_violations.items()]
     if solution.timing is not None:
         tm = solution.timing
@@ -182,6 +187,7 @@ def print_rows(rows: list[tuple[str, str]]) -> None:
 def run_solve(args: argparse.Namespace) -> int:
     instance = instance_from_args(args)
     config = config_from_args(args)
+    check_solve_outputs(args.out, args.plot)
     verify = not args.no_verify
     if args.problem != "scp" and args.warmstart == "art":
         raise ValueError("--warmstart art applies to --problem scp only")
@@ -242,8 +248,8 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "iterations, failure rate, the share of time inside the conic solver and C_CVX(t_1), "
         "the constraint-to-go of the convex solution. Wall times exclude the verification.",
     )
-    parser.add_argument("--n", type=int, default=20, help="number of instances (20)")
-    parser.add_argument("--seed", type=int, default=0, help="sampling seed (0)")
+    parser.add_argument("--n", type=positive, default=20, help="number of instances (20)")
+    parser.add_argument("--seed", type=count, default=0, help="sampling seed (0)")
     parser.add_argument(
         "--warmstart", choices=WARMSTARTS, default="convex", help="warm start of Problem 3 (convex)"
     )
@@ -317,7 +323,7 @@ def bench_row(
                 f"{name}_cost": sol.cost,
             }
         )
-    ver = p3.verification
+    ver, nan = p3.verification, float("nan")
     row.update(
         p3_status=p3.status.value,
         p3_iterations=p3.iterations,
@@ -325,10 +331,10 @@ def bench_row(
         p3_solver_s=p3.timing.solver,
         p3_ws_plus_scp_s=_wall(p3) + _wall(warm),
         p3_cost=p3.cost,
-        p3_terminal_miss_m=ver.terminal_error["position_m"] if ver else float("nan"),
-        p3_terminal_miss_m_s=ver.terminal_error["velocity_m_s"] if ver else float("nan"),
-        p3_max_gap_m=ver.max_defect if ver else float("nan"),
-        p3_keep_out=ver.node_violations["keep_out"] if ver else float("nan"),
+        p3_terminal_miss_m=ver.terminal_error.get("position_m", nan) if ver else nan,
+        p3_terminal_miss_m_s=ver.terminal_error.get("velocity_m_s", nan) if ver else nan,
+        p3_max_gap_m=ver.max_defect if ver else nan,
+        p3_keep_out=ver.node_violations.get("keep_out", nan) if ver else nan,
         verification_s=sum(s.timing.verification for s in (p1, p2, p3)),
     )
     return row
@@ -378,9 +384,8 @@ def _warm_up(config: RendezvousSolverConfig, instance: RendezvousInstance) -> fl
 
 
 def run_bench(args: argparse.Namespace) -> int:
-    if args.n < 1:
-        raise ValueError(f"--n must be at least 1, got {args.n}")
     config = config_from_args(args)
+    check_output_file(args.csv, "--csv")
     scenario, target = scenario_from_args(args)
     instances = sample_instances(
         np.random.default_rng(args.seed), args.n, scenario=scenario, target=target
@@ -399,11 +404,7 @@ def run_bench(args: argparse.Namespace) -> int:
             rows.append(bench_row(index, instance, p1, p2, p3, warm))
             bar.set_postfix(status=p3.status.value, it=p3.iterations)
             bar.update()
-    args.csv.parent.mkdir(parents=True, exist_ok=True)
-    with args.csv.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=BENCH_FIELDS)
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(args.csv, BENCH_FIELDS, rows)
     print("\n".join(summarize(rows)))
     print(f"wrote {args.csv}")
     return 0

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import math
 import re
@@ -14,7 +13,9 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from scpformer.cli.argtypes import count, positive
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
+from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.cli.rendezvous import print_rows
 from scpformer.cli.warmstart import (
     add_warmstart_arguments,
@@ -22,6 +23,7 @@ from scpformer.cli.warmstart import (
     comparison_rows,
     warmstart_line,
 )
+from scpformer.files import check_output_file
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.robust_rendezvous.instance import RobustInstance, sample_instances
 from scpformer.problems.robust_rendezvous.problem import (
@@ -98,14 +100,16 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     )
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--instance", type=Path, help="instance JSON (x0_rtn, waypoint, ...)")
-    source.add_argument("--seed", type=int, help="sample the instance (Table 1) with this seed")
+    source.add_argument("--seed", type=count, help="sample the instance (Table 1) with this seed")
     parser.add_argument("--out", type=Path, help="write the solution to this .npz file")
-    parser.add_argument("--plot", type=Path, help="write Figs. 7-8 style plots to this .png")
     parser.add_argument(
-        "--monte-carlo", type=int, default=0, metavar="N",
+        "--plot", type=Path, help="write Figs. 7-8 style plots to this .png, .pdf or .svg"
+    )
+    parser.add_argument(
+        "--monte-carlo", type=count, default=0, metavar="N",
         help="Monte Carlo draws per node through the two-body + J2 propagator (0: skip)",
     )  # fmt: skip
-    parser.add_argument("--mc-seed", type=int, default=0, help="Monte Carlo seed (0)")
+    parser.add_argument("--mc-seed", type=count, default=0, help="Monte Carlo seed (0)")
     add_config_arguments(parser)
     parser.set_defaults(handler=run_solve)
 
@@ -156,8 +160,7 @@ def summary_rows(solution: Solution) -> list[tuple[str, str]]:
 def run_solve(args: argparse.Namespace) -> int:
     instance = instance_from_args(args)
     config = config_from_args(args)
-    if args.monte_carlo < 0:
-        raise ValueError(f"--monte-carlo must be >= 0, got {args.monte_carlo}")
+    check_solve_outputs(args.out, args.plot)
     provider = art_provider(args, "robust-rendezvous", config=config, mode=args.mode)
     warmstart: Any = args.warmstart
     if provider is not None:  # PS-ART: the guess first, then SCvx* always runs
@@ -210,8 +213,8 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "wall time (median, p95), iterations, infeasibility rate (not converged) and the share "
         "of time in the conic solver. Wall times exclude the final verification.",
     )
-    parser.add_argument("--n", type=int, default=20, help="number of instances (20)")
-    parser.add_argument("--seed", type=int, default=0, help="sampling seed (0)")
+    parser.add_argument("--n", type=positive, default=20, help="number of instances (20)")
+    parser.add_argument("--seed", type=count, default=0, help="sampling seed (0)")
     parser.add_argument(
         "--csv", type=Path, default=Path("bench_robust_rendezvous.csv"),
         help="per-instance CSV (bench_robust_rendezvous.csv)",
@@ -276,9 +279,8 @@ def summarize(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def run_bench(args: argparse.Namespace) -> int:
-    if args.n < 1:
-        raise ValueError(f"--n must be at least 1, got {args.n}")
     config = config_from_args(args)
+    check_output_file(args.csv, "--csv")
     instances = sample_instances(args.seed, args.n, **common_from_args(args, None))
     start = time.perf_counter()
     warm = solve_tpbvp(instances[0], config)  # compile or load the subproblems, untimed
@@ -297,11 +299,7 @@ def run_bench(args: argparse.Namespace) -> int:
             rows.append(bench_row(index, instance, cvx, runs))
             bar.set_postfix(det=runs["det"].status.value, cc=runs["cc"].status.value)
             bar.update()
-    args.csv.parent.mkdir(parents=True, exist_ok=True)
-    with args.csv.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=BENCH_FIELDS)
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(args.csv, BENCH_FIELDS, rows)
     print("\n".join(summarize(rows)))
     print(f"wrote {args.csv}")
     return 0

@@ -37,9 +37,9 @@ def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--preset",
         choices=tuple(TRAIN_PRESETS),
-        default="small",
+        default=None,
         help="model and training preset: 'paper' (Table 4) or 'small' (two CPU cores) "
-        "(default: small)",
+        "(default: small; a resumed run keeps its own)",
     )
     parser.add_argument(
         "--frame",
@@ -69,11 +69,8 @@ def run_train(args: argparse.Namespace) -> int:
         resume=args.resume,
         progress=not args.no_progress,
     )
-    import torch.distributed as dist
-
-    if dist.is_available() and dist.is_initialized() and dist.get_rank() != 0:
-        return 0
-    print(summary(result))
+    if result.world.is_main:
+        print(summary(result))
     return 0
 
 

@@ -176,6 +176,25 @@ def augment_dataset(
     transform = transform or RotationAugmentation()
     source, out = Path(source), Path(out)
     src = _source_manifest(source)
+    if workers < 1:
+        raise ValueError(f"workers must be a positive integer, got {workers}")
+    if out.exists() and not out.is_dir():
+        raise DatasetError(f"--out {out} is a file, not a folder")
+    for info in src.shards:  # every source shard passes its checksum before any is read
+        storage.require_intact(source, info)
+    with storage.locked_folder(out):
+        return _augment_locked(source, out, src, transform, workers, on_shard, on_notice)
+
+
+def _augment_locked(
+    source: Path,
+    out: Path,
+    src: Manifest,
+    transform: RotationAugmentation,
+    workers: int,
+    on_shard: Callable[[int, int], None] | None,
+    on_notice: Callable[[str], None] | None,
+) -> Manifest:
     manifest = _prepare(source, out, src, transform, on_notice or (lambda _: None))
     family = build(src.config)
     todo = [i for i, _ in enumerate(src.shards) if storage.shard_name(i) not in _files(manifest)]
@@ -236,7 +255,10 @@ def _prepare(
         if why is not None:
             raise DatasetError(f"{out} holds another dataset: it differs in {why}")
         wanted = old
-    elif any(not p.name.endswith(storage.TMP_SUFFIX) for p in out.iterdir()):
+    elif any(
+        not p.name.endswith(storage.TMP_SUFFIX) and p.name != storage.LOCK_NAME
+        for p in out.iterdir()
+    ):
         raise DatasetError(f"{out} is not empty and holds no dataset; choose an empty folder")
     manifest = repair(out, wanted, notice)
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
@@ -268,13 +290,7 @@ def _write(
     out: Path, manifest: Manifest, number: int, src_shard: storage.ShardInfo, records: list
 ) -> Manifest:
     columns = storage.stack_records(records, manifest.schema)
-    attrs = {
-        "family": manifest.family,
-        "seed": manifest.seed,
-        "format_version": storage.FORMAT_VERSION,
-        "package_version": __version__,
-        "transform": RotationAugmentation.name,
-    }
+    attrs = {**storage.shard_header(manifest), "transform": RotationAugmentation.name}
     info = storage.write_shard(
         out / storage.shard_name(number),
         columns,

@@ -2,7 +2,7 @@
 
 Every error a user can cause (a wrong folder, a corrupt shard, a full disk, a missing optional
 package) is a :class:`DatasetError`. It subclasses ``ValueError`` so that the ``scpformer``
-command prints it as one ``error:`` line (see :mod:`scpformer.cli.main`).
+command prints it as one ``error:`` line (see :mod:`scpformer.cli.errors`).
 """
 
 from __future__ import annotations

@@ -13,10 +13,12 @@ instance recorded as ``worker_crashed``. Neither stops the run.
 
 from __future__ import annotations
 
+import logging
 import multiprocessing as mp
 import multiprocessing.connection as mpc
 import os
 import signal
+import socket
 import time
 import traceback
 from collections import deque
@@ -101,7 +103,16 @@ class Executor(Protocol):
 
 # -- local process pool ----------------------------------------------------------------------
 def _worker_main(conn: mpc.Connection, family: DatasetFamily, seed: int) -> None:
+    """Serve instance indices until told to stop; a vanished parent ends it quietly."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the parent's handler (start method fork)
+    try:
+        _serve(conn, family, seed)
+    except (BrokenPipeError, ConnectionResetError, EOFError):
+        pass  # the parent stopped (SIGTERM, disk full): no traceback from every worker
+
+
+def _serve(conn: mpc.Connection, family: DatasetFamily, seed: int) -> None:
     try:
         family.warm_up()
     except Exception as err:
@@ -292,6 +303,38 @@ class _Actor:
     started: float = 0.0
 
 
+RAY_CONNECT_TIMEOUT = 3.0  # s to wait for a TCP connection to a Ray head before giving up
+
+
+def check_ray_address(address: str, timeout: float = RAY_CONNECT_TIMEOUT) -> None:
+    """Fail fast when a ``host:port`` or ``ray://host:port`` address does not answer.
+
+    ``ray.init`` itself retries for ~20 s and logs many lines first; ``local`` and ``auto``
+    are left to it.
+
+    Raises
+    ------
+    DatasetError
+        Naming the address, when it is malformed or nothing listens there.
+    """
+    if address in ("local", "auto"):
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise DatasetError(
+            f"--ray {address!r}: expected 'local', 'auto', 'host:port' or 'ray://host:port'"
+        )
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            pass
+    except OSError as err:
+        reason = err.strerror or type(err).__name__
+        raise DatasetError(
+            f"--ray {address!r}: no Ray cluster answers there ({reason} within {timeout:g} s); "
+            "start one with `ray start --head`, or use --ray local"
+        ) from None
+
+
 def connect_ray(address: str, workers: int | None) -> bool:
     """``ray.init`` for ``address`` ("local" starts a private local instance).
 
@@ -303,7 +346,12 @@ def connect_ray(address: str, workers: int | None) -> bool:
         raise DatasetError("--ray needs the ray package: pip install 'ray>=2.9'") from None
     if ray.is_initialized():
         return False
-    kwargs: dict[str, Any] = {"log_to_driver": False, "include_dashboard": False}
+    check_ray_address(address)
+    kwargs: dict[str, Any] = {
+        "log_to_driver": False,
+        "include_dashboard": False,
+        "logging_level": logging.ERROR,
+    }
     if address == "local":
         kwargs["num_cpus"] = workers or os.cpu_count()
     try:

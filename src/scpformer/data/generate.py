@@ -143,6 +143,22 @@ def generate(
         if on_notice is not None:
             on_notice(text)
 
+    if config.out.exists() and not config.out.is_dir():
+        raise DatasetError(f"--out {config.out} is a file, not a folder")
+    if config.out.is_dir():  # refuse another dataset's folder before adding a lock file to it
+        _check_contents(config.out, new_manifest(family, config), lambda _: None)
+    with storage.locked_folder(config.out):
+        return _generate_locked(family, config, on_progress, notice, notices, start)
+
+
+def _generate_locked(
+    family: DatasetFamily,
+    config: GenerateConfig,
+    on_progress: ProgressCallback | None,
+    notice: NoticeCallback,
+    notices: list[str],
+    start: float,
+) -> GenerationReport:
     manifest = prepare_folder(family, config, notice)
     resumed = manifest.counts()["samples"]
     finished = {s.file for s in manifest.shards}
@@ -201,13 +217,7 @@ def prepare_folder(
         raise DatasetError(f"--out {folder} is a file, not a folder")
     folder.mkdir(parents=True, exist_ok=True)
     wanted = new_manifest(family, config)
-    manifest_path = folder / storage.MANIFEST_NAME
-    if manifest_path.exists():
-        manifest = _resumable(storage.read_manifest(folder), wanted, folder, notice)
-    else:
-        _require_empty(folder)
-        manifest = wanted
-    manifest = repair(folder, manifest, notice)
+    manifest = repair(folder, _check_contents(folder, wanted, notice), notice)
     run = {
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "backend": "ray" if config.ray_address else "local",
@@ -219,6 +229,14 @@ def prepare_folder(
     manifest = dataclasses.replace(manifest, runs=(*manifest.runs, run))
     storage.write_manifest(folder, manifest)
     return manifest
+
+
+def _check_contents(folder: Path, wanted: Manifest, notice: NoticeCallback) -> Manifest:
+    """The manifest to resume (``wanted`` when new); refuses a folder of anything else."""
+    if (folder / storage.MANIFEST_NAME).exists():
+        return _resumable(storage.read_manifest(folder), wanted, folder, notice)
+    _require_empty(folder, wanted)
+    return wanted
 
 
 def _resumable(old: Manifest, wanted: Manifest, folder: Path, notice: NoticeCallback) -> Manifest:
@@ -236,13 +254,38 @@ def _resumable(old: Manifest, wanted: Manifest, folder: Path, notice: NoticeCall
     return old
 
 
-def _require_empty(folder: Path) -> None:
-    others = [p.name for p in folder.iterdir() if not p.name.endswith(storage.TMP_SUFFIX)]
+def _require_empty(folder: Path, wanted: Manifest) -> None:
+    """Refuse a folder without manifest unless it holds nothing or only this dataset's shards."""
+    skipped = (storage.LOCK_NAME,)
+    others = [
+        p
+        for p in folder.iterdir()
+        if not p.name.endswith(storage.TMP_SUFFIX) and p.name not in skipped
+    ]
+    shards = [p for p in others if p.match(storage.SHARD_GLOB)]
+    foreign = [p for p in shards if _shard_identity(p) != storage.identity_digest(wanted)]
+    if shards and not foreign and len(shards) == len(others):
+        return  # the manifest was lost: repair() adopts the shards whose metadata matches
+    if foreign:
+        raise DatasetError(
+            f"{folder} has no {storage.MANIFEST_NAME} and holds shards of another dataset "
+            f"(e.g. {foreign[0].name}); rebuild its manifest with `scpformer dataset repair "
+            f"{folder}` or choose another --out folder"
+        )
     if others:
         raise DatasetError(
             f"{folder} is not empty and holds no dataset ({storage.MANIFEST_NAME} missing; "
-            f"found {', '.join(sorted(others)[:3])}); choose an empty or new --out folder"
+            f"found {', '.join(sorted(p.name for p in others)[:3])}); choose an empty or new "
+            "--out folder"
         )
+
+
+def _shard_identity(path: Path) -> str | None:
+    """The ``config_sha256`` a shard file carries (``None`` if unreadable or absent)."""
+    try:
+        return storage.shard_attrs(path).get("config_sha256")
+    except DatasetError:
+        return None
 
 
 def repair(folder: Path, manifest: Manifest, notice: NoticeCallback) -> Manifest:
@@ -251,8 +294,9 @@ def repair(folder: Path, manifest: Manifest, notice: NoticeCallback) -> Manifest
     for path in temps:
         path.unlink(missing_ok=True)
         notice(f"removed {path.name}, left half-written by an interrupted run")
+    identity = storage.identity_digest(manifest)
     for info in manifest.shards:
-        problems = storage.check_shard(folder, info, manifest.schema)
+        problems = storage.check_shard(folder, info, manifest.schema, identity)
         if problems:
             (folder / info.file).unlink(missing_ok=True)
             manifest = manifest.without_shard(info.file)
@@ -268,14 +312,57 @@ def repair(folder: Path, manifest: Manifest, notice: NoticeCallback) -> Manifest
     return manifest
 
 
+def rebuild_manifest(folder: Path, notice: NoticeCallback) -> Manifest:
+    """Rebuild a deleted ``folder/manifest.json`` from the headers its shards carry.
+
+    Shards whose identity digest, range and checksums match are listed; others are left in
+    place and named through ``notice``.
+
+    Raises
+    ------
+    DatasetError
+        When the folder still has a manifest, holds no shard, or no shard carries a header.
+    """
+    folder = Path(folder)
+    if (folder / storage.MANIFEST_NAME).exists():
+        raise DatasetError(
+            f"{folder} has a {storage.MANIFEST_NAME}; nothing to rebuild (check it with "
+            f"`scpformer dataset verify {folder}`)"
+        )
+    paths = sorted(folder.glob(storage.SHARD_GLOB)) if folder.is_dir() else []
+    if not paths:
+        raise DatasetError(f"no shard files in {folder}: nothing to rebuild a manifest from")
+    manifest = _first_header(paths)
+    with storage.locked_folder(folder):
+        planned = {storage.shard_name(i): r for i, r in enumerate(manifest.planned_ranges())}
+        for path in paths:
+            info = _adoptable(path, manifest, planned.get(path.name))
+            if info is None:
+                notice(f"{path.name}: damaged or of another dataset; left out and in place")
+            else:
+                manifest = manifest.with_shard(info)
+        storage.write_manifest(folder, manifest)
+    return manifest
+
+
+def _first_header(paths: list[Path]) -> Manifest:
+    reasons = []
+    for path in paths:
+        try:
+            return storage.manifest_from_header(storage.shard_attrs(path))
+        except DatasetError as err:
+            reasons.append(f"{path.name}: {err}")
+    raise DatasetError(f"no shard carries a readable dataset header ({reasons[0]})")
+
+
 def _adoptable(path: Path, manifest: Manifest, planned: tuple[int, int] | None) -> ShardInfo | None:
     """The manifest entry of an intact finished shard that the manifest missed, else None."""
     if planned is None:
         return None
     try:
         attrs = storage.shard_attrs(path)
-        if (attrs.get("family"), attrs.get("seed")) != (manifest.family, manifest.seed):
-            return None
+        if attrs.get("config_sha256") != storage.identity_digest(manifest):
+            return None  # made with other settings, or by a version without the digest
         if (attrs.get("start"), attrs.get("stop")) != tuple(planned):
             return None
         columns = storage.read_columns(path, manifest.schema)
@@ -373,12 +460,7 @@ class _Run:
     def _write(self, name: str, start: int, stop: int, results: dict[int, TaskResult]) -> None:
         records = [self._record(results[i]) for i in range(start, stop)]
         columns = storage.stack_records(records, self.schema)
-        attrs = {
-            "family": self.manifest.family,
-            "seed": self.manifest.seed,
-            "format_version": storage.FORMAT_VERSION,
-            "package_version": __version__,
-        }
+        attrs = storage.shard_header(self.manifest)
         info = storage.write_shard(
             self.config.out / name, columns, self.schema, start=start, stop=stop, attrs=attrs
         )

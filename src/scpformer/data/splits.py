@@ -117,7 +117,9 @@ def training_stats(samples: ShardedSamples, train: np.ndarray) -> dict[str, Stat
         rows = np.flatnonzero(chosen[lo:hi])
         if rows.size == 0:
             continue
-        columns = storage.read_columns(samples.folder / info.file, manifest.schema, names)
+        columns = storage.read_columns(
+            storage.require_intact(samples.folder, info), manifest.schema, names
+        )
         for name in names:
             acc[name].add(columns[name][rows].astype(float))
     return {name: acc[name].stats() for name in names}

@@ -5,25 +5,32 @@ A dataset is a folder::
     DIR/manifest.json        family, full resolved config, seed, versions, schema, shard list,
                              counts and checksums (rewritten atomically after every shard)
     DIR/shard-00000.h5       samples [start, stop): one HDF5 dataset per field, shape
-                             (count, *field.shape); attributes repeat the shard's identity
+                             (count, *field.shape); attributes repeat the shard's identity:
+                             ``config_sha256`` (digest of the resolved configuration) and
+                             ``dataset`` (the manifest without shards, to rebuild a lost one)
     DIR/splits.h5            (optional) grouped splits and training-set statistics
+    DIR/.lock                held (flock) by the one process writing the folder
 
 Every file is written under a temporary name (``*.tmp``), flushed to disk and renamed, so a
 killed process leaves either a whole file or a temporary one that the next run deletes. A
 shard's ``sha256`` covers its bytes; its ``content_sha256`` covers the values of the
 deterministic fields only (timings excluded), so two runs with the same seed have equal content
-digests whatever the worker count or backend.
+digests whatever the worker count or backend. Every reader checks a shard's sha256 before its
+first use in a process (:func:`require_intact`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import hashlib
+import io
 import json
 import math
 import os
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,11 +40,13 @@ import numpy as np
 
 from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full
 from scpformer.data.family import Field
+from scpformer.files import write_bytes_atomic
 
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 TMP_SUFFIX = ".tmp"
 SHARD_GLOB = "shard-*.h5"
+LOCK_NAME = ".lock"
 _CHUNK_BYTES = 1 << 16  # target HDF5 chunk size of compressed fields
 _COMPRESS_MIN = 16  # compress fields with at least this many elements per sample
 
@@ -205,6 +214,77 @@ def _first_difference(a: Any, b: Any, path: str = "config") -> str:
     return f"{path}: {a!r} there, {b!r} here"
 
 
+def identity_digest(manifest: Manifest) -> str:
+    """sha256 of :meth:`Manifest.identity` (the resolved configuration included).
+
+    Every shard carries it (attribute ``config_sha256``): a shard made with other solver
+    settings is never adopted by a resume, and ``dataset verify`` reports it.
+    """
+    text = json.dumps(manifest.identity(), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+_HEADER_DROPPED = ("shards", "runs", "counts", "complete")
+
+
+def shard_header(manifest: Manifest) -> dict[str, Any]:
+    """The attributes every shard of ``manifest`` carries: its identity and how to rebuild it.
+
+    ``dataset`` is the manifest without shards and runs (JSON), from which
+    ``dataset repair`` rebuilds a deleted ``manifest.json``.
+    """
+    header = {k: v for k, v in manifest.to_dict().items() if k not in _HEADER_DROPPED}
+    return {
+        "family": manifest.family,
+        "seed": manifest.seed,
+        "format_version": FORMAT_VERSION,
+        "package_version": manifest.package_version,
+        "config_sha256": identity_digest(manifest),
+        "dataset": json.dumps(header),
+    }
+
+
+def manifest_from_header(attrs: Mapping[str, Any]) -> Manifest:
+    """The shard-less manifest a shard's attributes describe (see :func:`shard_header`).
+
+    Raises
+    ------
+    DatasetError
+        When the shard predates headers or its header is unreadable.
+    """
+    if "dataset" not in attrs:
+        raise DatasetError("the shard carries no dataset header (written by an older version)")
+    try:
+        return Manifest.from_dict(json.loads(attrs["dataset"]))
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+        raise DatasetError(f"the shard's dataset header is unreadable ({err})") from None
+
+
+@contextmanager
+def locked_folder(folder: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``folder/.lock`` while writing a dataset into ``folder``.
+
+    Raises
+    ------
+    DatasetError
+        When another process holds it (two runs writing one folder).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    with (folder / LOCK_NAME).open("a") as fh:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise DatasetError(
+                f"{folder} is being written by another scpformer run (it holds "
+                f"{folder / LOCK_NAME}); wait for it to finish or choose another folder"
+            ) from None
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
 # -- atomic files ----------------------------------------------------------------------------
 def _fsync_dir(folder: Path) -> None:
     try:
@@ -226,16 +306,10 @@ def _fsync_file(path: Path) -> None:
 
 def atomic_write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file, fsync and rename."""
-    tmp = path.with_name(path.name + TMP_SUFFIX)
     try:
-        with tmp.open("w") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        write_bytes_atomic(path, text.encode())
         _fsync_dir(path.parent)
     except OSError as err:
-        tmp.unlink(missing_ok=True)
         if is_disk_full(err):
             raise DiskFullError(
                 f"disk full while writing {path}; finished shards are kept: free space and "
@@ -259,7 +333,10 @@ def read_manifest(folder: Path) -> Manifest:
     """
     path = Path(folder) / MANIFEST_NAME
     if not path.is_file():
-        raise DatasetError(f"no dataset in {folder} ({MANIFEST_NAME} not found)")
+        hint = ""
+        if Path(folder).is_dir() and any(Path(folder).glob(SHARD_GLOB)):
+            hint = f"; its shards remain: rebuild it with `scpformer dataset repair {folder}`"
+        raise DatasetError(f"no dataset in {folder} ({MANIFEST_NAME} not found{hint})")
     try:
         return Manifest.from_dict(json.loads(path.read_text()))
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
@@ -283,6 +360,48 @@ def file_sha256(path: Path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+_INTACT: dict[tuple[str, int, int], str] = {}  # (path, size, mtime_ns) -> verified sha256
+
+
+def shard_damage(folder: Path, info: ShardInfo) -> str | None:
+    """Why shard ``info`` is missing or damaged (size, sha256), or ``None`` when intact.
+
+    The sha256 of a file version (path, size, mtime) is computed once per process.
+    """
+    path = Path(folder) / info.file
+    try:
+        stat = path.stat()
+    except OSError:
+        return f"{info.file}: missing"
+    if stat.st_size != info.bytes:
+        return (
+            f"{info.file}: truncated or altered ({stat.st_size} bytes, manifest says {info.bytes})"
+        )
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    if _INTACT.get(key) != info.sha256:
+        if file_sha256(path) != info.sha256:
+            return f"{info.file}: corrupt (sha256 differs from the manifest)"
+        _INTACT[key] = info.sha256
+    return None
+
+
+def require_intact(folder: Path, info: ShardInfo) -> Path:
+    """The path of shard ``info`` after :func:`shard_damage` found it intact.
+
+    Raises
+    ------
+    DatasetError
+        Naming the shard, when it is missing or fails its checksum.
+    """
+    damage = shard_damage(folder, info)
+    if damage is not None:
+        raise DatasetError(
+            f"{Path(folder) / info.file}: {damage.split(': ', 1)[1]}; nothing was read from it "
+            f"(see `scpformer dataset verify {folder}`; re-running generate redoes the shard)"
+        )
+    return Path(folder) / info.file
 
 
 # -- shards ----------------------------------------------------------------------------------
@@ -345,27 +464,28 @@ def write_shard(
 ) -> ShardInfo:
     """Write one shard atomically and return its manifest entry.
 
+    The file is built in memory and written with one plain write, fsync and rename.
+
     Raises
     ------
     DiskFullError
         When the disk fills up; the temporary file is removed, earlier shards are untouched.
     """
     path = Path(path)
-    tmp = path.with_name(path.name + TMP_SUFFIX)
     count = len(columns[schema[0].name])
     content = content_digest(columns, schema)
+    buffer = io.BytesIO()  # built in memory: a full disk fails one plain write, not HDF5
+    with h5py.File(buffer, "w") as h5:
+        for key, value in {**attrs, "start": start, "stop": stop, "count": count}.items():
+            h5.attrs[key] = value
+        h5.attrs["content_sha256"] = content
+        for f in schema:
+            _create(h5, f, columns[f.name])
+    data = buffer.getvalue()
     try:
-        with h5py.File(tmp, "w") as h5:
-            for key, value in {**attrs, "start": start, "stop": stop, "count": count}.items():
-                h5.attrs[key] = value
-            h5.attrs["content_sha256"] = content
-            for f in schema:
-                _create(h5, f, columns[f.name])
-        _fsync_file(tmp)
-        os.replace(tmp, path)
+        write_bytes_atomic(path, data)
         _fsync_dir(path.parent)
-    except (OSError, RuntimeError) as err:
-        tmp.unlink(missing_ok=True)
+    except OSError as err:
         if is_disk_full(err):
             raise DiskFullError(
                 f"disk full while writing {path.name} in {path.parent}; finished shards are "
@@ -378,9 +498,9 @@ def write_shard(
         start=start,
         stop=stop,
         count=count,
-        sha256=file_sha256(path),
+        sha256=hashlib.sha256(data).hexdigest(),
         content_sha256=content,
-        bytes=path.stat().st_size,
+        bytes=len(data),
         status_counts=dict(sorted(statuses.items())),
     )
 
@@ -421,23 +541,28 @@ def shard_attrs(path: Path) -> dict[str, Any]:
         raise DatasetError(f"{path} is corrupt or truncated ({_short(err)})") from None
 
 
-def check_shard(folder: Path, info: ShardInfo, schema: Sequence[Field]) -> list[str]:
-    """Problems of one listed shard: missing, size, checksum, fields, shapes, content digest."""
+def check_shard(
+    folder: Path, info: ShardInfo, schema: Sequence[Field], identity: str | None = None
+) -> list[str]:
+    """Problems of one listed shard: missing, size, checksum, fields, shapes, content digest.
+
+    With ``identity`` (:func:`identity_digest` of the manifest), a shard whose own
+    ``config_sha256`` differs (made with other settings) is a problem too.
+    """
     path = Path(folder) / info.file
-    if not path.is_file():
-        return [f"{info.file}: missing"]
-    size = path.stat().st_size
-    if size != info.bytes:
-        return [f"{info.file}: truncated or altered ({size} bytes, manifest says {info.bytes})"]
-    if file_sha256(path) != info.sha256:
-        return [f"{info.file}: corrupt (sha256 differs from the manifest)"]
+    damage = shard_damage(folder, info)
+    if damage is not None:
+        return [damage]
     try:
         with h5py.File(path, "r") as h5:
             problems = [p for f in schema for p in _check_field(h5, f, info)]
+            made_with = h5.attrs.get("config_sha256")
     except (OSError, RuntimeError) as err:
         return [f"{info.file}: unreadable ({_short(err)})"]
     if problems:
         return problems
+    if identity is not None and made_with is not None and str(made_with) != identity:
+        return [f"{info.file}: made with another configuration than the manifest's"]
     columns = read_columns(path, schema)
     if content_digest(columns, schema) != info.content_sha256:
         return [f"{info.file}: content digest differs from the manifest"]
@@ -475,7 +600,10 @@ def verify_dataset(folder: Path) -> list[str]:
     """
     folder = Path(folder)
     manifest = read_manifest(folder)
-    problems = [p for info in manifest.shards for p in check_shard(folder, info, manifest.schema)]
+    identity = identity_digest(manifest)
+    problems = [
+        p for info in manifest.shards for p in check_shard(folder, info, manifest.schema, identity)
+    ]
     temps, unlisted = stray_files(folder, manifest)
     problems += [f"{p.name}: leftover temporary file of an interrupted run" for p in temps]
     problems += [f"{p.name}: shard file not listed in the manifest" for p in unlisted]
@@ -523,8 +651,9 @@ class ShardedSamples:
             self._handles, self._pid = {}, os.getpid()
         if shard not in self._handles:
             info = self.manifest.shards[shard]
+            path = require_intact(self.folder, info)
             try:
-                self._handles[shard] = h5py.File(self.folder / info.file, "r")
+                self._handles[shard] = h5py.File(path, "r")
             except OSError as err:
                 raise DatasetError(
                     f"{self.folder / info.file} is corrupt or truncated ({_short(err)}); "

@@ -17,7 +17,8 @@ only the new tokens, the prefix is never recomputed::
     cache = model.start(batch_size, target=None)
     for i in range(N):
         u = model.predict_action(cache, rtg, ctg, x)  # feeds [g] R C x, returns u_hat(t_i)
-        x_hat = model.predict_state(cache, u)  # feeds u, returns x_hat(t_{i+1})
+        x_hat = model.predict_state(cache, u)  # feeds u, returns x_hat(t_{i+1}) (Alg. 1)
+        # or model.feed_action(cache, u): u rides with the next step's tokens (Alg. 2)
 
 Sizes: ``paper`` (Table 4) 6 layers, 6 heads, 384 dimensions, 10.7 M parameters; ``small``
 3 layers, 3 heads, 96 dimensions, 0.35 M parameters (chosen by measuring, see ART_PRESETS).
@@ -26,6 +27,8 @@ Sizes: ``paper`` (Table 4) 6 layers, 6 heads, 384 dimensions, 10.7 M parameters;
 from __future__ import annotations
 
 import dataclasses
+import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,7 +64,8 @@ class ArtConfig:
     n_head: int = 6  # attention heads per block
     n_embd: int = 384  # embedding dimension C
     context: int = 100  # context length K [time steps]
-    dropout: float = 0.1  # dropout probability (training only)
+    dropout: float = 0.1  # dropout probability on embeddings and residuals (training only)
+    attn_dropout: float | None = None  # on attention weights; None = ``dropout`` (Table 4)
     activation: str = "relu"  # MLP non-linearity: relu (Table 4) or gelu
     state_dim: int = 6  # x: RTN [m, m/s] or ROE [m]
     action_dim: int = 3  # u: impulse dv in RTN [m/s]
@@ -76,6 +80,9 @@ class ArtConfig:
             raise ValueError(f"activation must be one of {ACTIVATIONS}, got {self.activation!r}")
         if not isinstance(self.bias, bool):
             raise TypeError(f"bias must be a bool, got {type(self.bias).__name__}")
+        attn = self.attn_dropout
+        if attn is not None and (not isinstance(attn, int | float) or not 0.0 <= attn < 1.0):
+            raise ValueError(f"attn_dropout must be None or in [0, 1), got {attn!r}")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready fields (``ArtConfig(**config.to_dict())`` rebuilds it)."""
@@ -92,8 +99,12 @@ ART_PRESETS: dict[str, ArtConfig] = {
     # 4 x 128 cost 1.3-1.8x more per epoch (624 / 862 s vs 492 s) and reach 53-68 instead of
     # 90 trajectories/s at batch 64, whose key-value reads are memory-bound (their volume
     # scales with layers x width); 2 x 128 is as fast but shallower. 3 layers x 96 dims
-    # (0.35 M parameters) keeps an epoch at ~8 CPU-minutes.
-    "small": ArtConfig(n_layer=3, n_head=3, n_embd=96),
+    # (0.35 M parameters) keeps an epoch at ~8 CPU-minutes (the paper size: ~66).
+    # small: no dropout on the attention weights. With it, PyTorch's CPU attention falls back
+    # from the fused kernel to the math path and one training step takes 2.2x as long
+    # (11 s vs 5 s for 32 sequences on this machine under load); dropout on the embeddings
+    # and residuals stays.
+    "small": ArtConfig(n_layer=3, n_head=3, n_embd=96, attn_dropout=0.0),
 }
 
 
@@ -105,7 +116,8 @@ class CausalSelfAttention(nn.Module):
 
     def __init__(self, config: ArtConfig) -> None:
         super().__init__()
-        self.n_head, self.dropout = config.n_head, config.dropout
+        attn = config.dropout if config.attn_dropout is None else config.attn_dropout
+        self.n_head, self.dropout = config.n_head, attn
         self.qkv = nn.Linear(config.n_embd, 3 * config.n_embd, bias=config.bias)
         self.proj = nn.Linear(config.n_embd, config.n_embd, bias=config.bias)
         self.resid_drop = nn.Dropout(config.dropout)
@@ -169,7 +181,7 @@ class ArtCache(StepCache):
     kv: list[Tensor]  # n_layer x (2, B, h, L_max, d)
     kv_flat: list[tuple[Tensor, Tensor]]  # views of kv[l]: keys, values (B h, L_max, d)
     weights: list[tuple[Tensor | None, ...]]  # per block: the 12 tensors _feed reads
-    packed: bool  # linear weights prepacked for oneDNN (see use_onednn)
+    linear: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # x W^T + b with weights[l]
     mask: Tensor  # (L_max, L_max) additive causal mask
     length: int = 0  # tokens fed through the blocks
 
@@ -187,23 +199,24 @@ class ART(TokenSequenceModel):
                 nn.init.normal_(p, mean=0.0, std=residual_std(config.n_layer))
 
         self._act = activation_fn(config.activation)
-        self._packs: dict[tuple[int, int], tuple[int, Tensor]] = {}  # oneDNN weight copies
 
-    def _weights(self, block: Block, batch_size: int) -> tuple[Tensor | None, ...]:
+    def _weights(self, block: Block, batch_size: int, dtype: torch.dtype) -> tuple:
         """A block's 12 tensors in :meth:`_feed`'s order; linear weights packed for oneDNN
-        when ``batch_size`` > 0 (repacked only when a weight changed since)."""
+        when ``batch_size`` > 0, in ``dtype`` (repacked only when a weight changed since)."""
         tensors = _block_weights(block)
         if not batch_size:
             return tensors
         out = list(tensors)
         for i in (2, 4, 8, 10):  # qkv, attention proj, fc, mlp proj weights
-            weight = tensors[i]
-            key = (id(weight), batch_size)
-            version, pack = self._packs.get(key, (-1, None))
-            if version != weight._version:
-                pack = torch.ops.mkldnn._reorder_linear_weight(weight.detach(), 4 * batch_size)
-                self._packs[key] = (weight._version, pack)
+            packs = _packs_of(tensors[i])
+            version, pack = packs.get((batch_size, dtype), (-1, None))
+            if version != tensors[i]._version:
+                weight = tensors[i].detach().to(dtype)
+                pack = torch.ops.mkldnn._reorder_linear_weight(weight, 4 * batch_size)
+                packs[batch_size, dtype] = (tensors[i]._version, pack)
             out[i] = pack
+            if tensors[i + 1] is not None:
+                out[i + 1] = tensors[i + 1].detach().to(dtype)
         return tuple(out)
 
     def _core(self, tokens: Tensor) -> Tensor:  # (B, L, C)
@@ -211,20 +224,29 @@ class ART(TokenSequenceModel):
             tokens = block(tokens)
         return self.ln_f(tokens)  # (B, L, C)
 
-    def _empty_cache(self, batch_size: int, max_steps: int, target: Tensor | None) -> ArtCache:
+    def _empty_cache(
+        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+    ) -> ArtCache:
         cfg = self.config
         length = max_steps * self.codec.tokens_per_step
         param = self.ln_f.weight
         d = cfg.n_embd // cfg.n_head
-        packed = use_onednn(cfg.n_embd, batch_size)
-        weights = [self._weights(block, batch_size if packed else 0) for block in self.blocks]
+        onednn = param.device.type == "cpu" and onednn_available()
+        if bf16 and not onednn:
+            raise ValueError("bf16 generation needs oneDNN on the CPU (torch.backends.mkldnn)")
+        packed = bf16 or (onednn and (cfg.n_embd >= 256 or batch_size >= 8))
+        dtype = torch.bfloat16 if bf16 else param.dtype
+        weights = [self._weights(b, batch_size if packed else 0, dtype) for b in self.blocks]
+        linear = functional.linear
+        if packed:
+            linear = packed_linear_bf16 if bf16 else packed_linear
         kv = [param.new_zeros(2, batch_size, cfg.n_head, length, d) for _ in self.blocks]
         flat = [(k.view(-1, length, d), v.view(-1, length, d)) for k, v in kv]
         return ArtCache(
             kv=kv,
             kv_flat=flat,
             weights=weights,
-            packed=packed,
+            linear=linear,
             mask=param.new_full((length, length), float("-inf")).triu(1),  # (L, L)
             target=target,
             batch_size=batch_size,
@@ -249,7 +271,7 @@ class ART(TokenSequenceModel):
         scale = d**-0.5
         mask = cache.mask[start:end, :end]  # (n, end)
         eps, last = self.ln_f.eps, len(cache.weights) - 1
-        linear = packed_linear if cache.packed else functional.linear
+        linear = cache.linear
         for layer, (w, kv, (keys, values)) in enumerate(
             zip(cache.weights, cache.kv, cache.kv_flat, strict=True)
         ):
@@ -283,19 +305,36 @@ def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
     return tuple(t for layer in layers for t in (layer.weight, layer.bias))
 
 
-def use_onednn(n_embd: int, batch_size: int) -> bool:
-    """Whether generation runs its linear layers on oneDNN with prepacked weights.
+# oneDNN copies of generation weights: id(weight) -> {batch size: (weight version, pack)};
+# kept outside the modules (state dicts, pickles and copies of a model never carry them) and
+# dropped when the weight is freed.
+_PACKS: dict[int, dict[int, tuple[int, Tensor]]] = {}
 
-    Measured on this project's AMD EPYC (one thread, cached 100-step rollouts, CPU time): the
-    packed oneDNN product is ~1.6x faster than the default (MKL) for the paper size at batch
-    1 and ~1.2x for the small size at batch 64, but slower for 128-wide layers at batch 1.
+
+def _packs_of(weight: Tensor) -> dict[int, tuple[int, Tensor]]:
+    key = id(weight)
+    if key not in _PACKS:
+        _PACKS[key] = {}
+        weakref.finalize(weight, _PACKS.pop, key, None)
+    return _PACKS[key]
+
+
+def onednn_available() -> bool:
+    """Whether generation can run its linear layers on oneDNN with prepacked weights.
+
+    It does so for wide layers or batches (``n_embd >= 256 or batch >= 8``): measured on
+    this project's AMD EPYC (one thread, cached 100-step rollouts, CPU time), the packed
+    oneDNN product is ~1.6x faster than the default (MKL) for the paper size at batch 1 and
+    ~1.2x at batch 64 of a 128-wide model, but slower for 128-wide layers at batch 1.
     """
-    available = torch.backends.mkldnn.is_available() and hasattr(
-        torch.ops.mkldnn, "_linear_pointwise"
-    )
-    return available and (n_embd >= 256 or batch_size >= 8)
+    return torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
 
 
 def packed_linear(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
     """``x W^T + b`` with ``W`` prepacked by ``torch.ops.mkldnn._reorder_linear_weight``."""
     return torch.ops.mkldnn._linear_pointwise(x, weight, bias, "none", [], "")
+
+
+def packed_linear_bf16(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
+    """:func:`packed_linear` with bfloat16 weights; ``x`` and the result stay float32."""
+    return torch.ops.mkldnn._linear_pointwise(x.bfloat16(), weight, bias, "none", [], "").float()

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from os import PathLike
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -94,7 +95,8 @@ def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained"
 
 def _save(fig: Figure, path: str | PathLike[str] | None) -> None:
     if path is not None:
-        fig.savefig(path, dpi=_DPI, format="png")
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=_DPI)  # format from the suffix
 
 
 def _bound(ax, value: float, label: str | None) -> None:
@@ -238,7 +240,7 @@ def plot_trajectory(
         Must contain ``T_min``, ``T_max``, ``delta_max_deg``, ``theta_max_deg``,
         ``omega_max_deg``, ``m_dry`` and ``gamma_gs_deg``.
     path : path-like, optional
-        If given, the figure is saved there as a PNG (dpi 120).
+        If given, the figure is saved there in the format its suffix names (dpi 120).
     title : str, optional
         Figure title.
 
@@ -378,7 +380,7 @@ def plot_history(
         One mapping per iteration with keys ``iteration``, ``cost``, ``penalty``,
         ``trust_radius`` and ``virtual_control_norm``; ``None`` values are skipped.
     path : path-like, optional
-        If given, the figure is saved there as a PNG (dpi 120).
+        If given, the figure is saved there in the format its suffix names (dpi 120).
 
     Returns
     -------

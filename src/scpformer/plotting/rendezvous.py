@@ -208,7 +208,7 @@ def plot_trajectory(
     constants : mapping
         The keys of :data:`REQUIRED_CONSTANTS` (the ``constants`` record of the .npz file).
     path : path-like, optional
-        If given, the figure is saved there as a PNG (dpi 120).
+        If given, the figure is saved there in the format its suffix names (dpi 120).
     title : str, optional
         Figure title.
     reference : mapping, optional
@@ -254,5 +254,5 @@ def plot_trajectory(
     cost = 1e3 * np.linalg.norm(dv, axis=1).sum()
     fig.suptitle(title or f"ISS rendezvous: N = {t.size - 1}, cost {cost:.1f} mm/s", fontsize=13)
     if path is not None:
-        fig.savefig(path, dpi=_DPI, format="png")
+        fig.savefig(path, dpi=_DPI)  # format from the suffix
     return fig

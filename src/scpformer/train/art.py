@@ -21,6 +21,7 @@ What is specific to ART-style training lives here; the loop is :func:`scpformer.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -186,6 +187,7 @@ class RunResult:
     model_config: dict[str, Any]
     train_config: TrainConfig
     resumed_from: int  # epochs finished before this launch (0 for a new run)
+    world: distributed.World  # this process's place in a torchrun launch
 
 
 def train_sequence_model(
@@ -193,7 +195,7 @@ def train_sequence_model(
     *,
     data: Path | str,
     out: Path | str,
-    preset: str = "small",
+    preset: str | None = None,
     frame: str | None = None,
     overrides: dict[str, Any] | None = None,
     resume: bool = False,
@@ -209,7 +211,8 @@ def train_sequence_model(
     data, out
         Dataset folder (split with ``scpformer dataset split``) and run folder.
     preset
-        Model and training preset (``small`` or ``paper``).
+        Model and training preset (``small`` or ``paper``; default ``small``; a resumed run
+        keeps its own).
     frame
         ``rtn`` or ``roe`` (default ``rtn``; a resumed run keeps its own).
     overrides
@@ -238,13 +241,9 @@ def train_sequence_model(
     overrides = dict(overrides or {})
     previous = _previous_run(out, kind, frame, resume)
     if previous is not None:
-        frame = previous["frame"]
-        preset = previous["extra"]["preset"]
-        stored = previous["extra"]["train_config"]
-        kept = {k: overrides[k] for k in ("epochs", "device") if overrides.get(k) is not None}
-        config = TrainConfig.from_dict({**stored, **kept})
+        frame, preset, config = _resumed_settings(previous, preset, overrides)
     else:
-        frame = frame or "rtn"
+        frame, preset = frame or "rtn", preset or "small"
         config = train_config(preset, model_defaults=api.TRAIN_DEFAULTS, **overrides)
     world, device = distributed.start(config.device)
     try:
@@ -254,9 +253,7 @@ def train_sequence_model(
         distributed.stop(world)
 
 
-def _previous_run(
-    out: Path, kind: str, frame: str | None, resume: bool
-) -> dict[str, Any] | None:
+def _previous_run(out: Path, kind: str, frame: str | None, resume: bool) -> dict[str, Any] | None:
     """The checkpoint payload to resume from (None for a new run)."""
     exists = (out / CHECKPOINT_NAME).is_file()
     if exists and not resume:
@@ -268,6 +265,28 @@ def _previous_run(
     payload = read_checkpoint(out, kind=kind, frame=frame)
     payload["extra"] = from_plain(payload["extra"])
     return payload
+
+
+def _resumed_settings(
+    previous: dict[str, Any], preset: str | None, overrides: dict[str, Any]
+) -> tuple[str, str, TrainConfig]:
+    """(frame, preset, config) of a resumed run: the stored ones, new epochs and device only."""
+    stored_preset = previous["extra"]["preset"]
+    if preset is not None and preset != stored_preset:
+        raise ValueError(f"the run to resume used preset {stored_preset!r}, not {preset!r}")
+    stored = TrainConfig.from_dict(previous["extra"]["train_config"])
+    changed = sorted(
+        k
+        for k, v in overrides.items()
+        if v is not None and k not in ("epochs", "device") and v != getattr(stored, k)
+    )
+    if changed:
+        raise ValueError(
+            f"a resumed run keeps its training settings; only epochs and device may change, "
+            f"not {', '.join(changed)}"
+        )
+    kept = {k: overrides[k] for k in ("epochs", "device") if overrides.get(k) is not None}
+    return previous["frame"], stored_preset, dataclasses.replace(stored, **kept)
 
 
 def _run(
@@ -370,6 +389,7 @@ def _run(
         model_config=model_config.to_dict(),
         train_config=config,
         resumed_from=0 if previous is None else int(previous["extra"]["fit"]["epoch"]),
+        world=world,
     )
 
 

@@ -75,9 +75,10 @@ def manifest_digest(folder: Path | str) -> str:
 
 
 def checkpoint_path(path: Path | str) -> Path:
-    """The checkpoint file of a run folder, or ``path`` itself when it is a file."""
+    """The checkpoint file of a run folder (an existing folder, or a path without a suffix),
+    or ``path`` itself (a file such as ``RUN/best.pt``)."""
     path = Path(path)
-    return path / CHECKPOINT_NAME if path.is_dir() else path
+    return path / CHECKPOINT_NAME if path.is_dir() or not path.suffix else path
 
 
 def save_checkpoint(
@@ -146,11 +147,11 @@ def read_checkpoint(
         raise CheckpointError(f"no checkpoint at {path}")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as err:  # noqa: BLE001 -- any failure to unpickle means unreadable
-        reason = str(err).strip().splitlines()[0][:160] if str(err).strip() else type(err).__name__
+    except Exception as err:  # any failure to unpickle means unreadable
+        text = str(err).strip()
+        reason = text.splitlines()[0][:160] if text else type(err).__name__
         raise CheckpointError(
-            f"{path} is not a readable scpformer checkpoint (truncated or another format: "
-            f"{reason})"
+            f"{path} is not a readable scpformer checkpoint (truncated or another format: {reason})"
         ) from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise CheckpointError(f"{path} is not an scpformer checkpoint")
@@ -196,7 +197,8 @@ def load_checkpoint(
     ------
     CheckpointError
         One line saying why: missing, truncated or not a checkpoint, another format version,
-        another family, frame, kind or sequence length, or weights that do not fit the stored configuration.
+        another family, frame, kind or sequence length, or weights that do not fit the stored
+        configuration.
     """
     payload = read_checkpoint(path, family=family, frame=frame, kind=kind, n_steps=n_steps)
     path = checkpoint_path(path)
@@ -205,12 +207,16 @@ def load_checkpoint(
         config = api.config_from_dict(payload["kind"], from_plain(payload["config"]))
         model = api.build_model(payload["kind"], config)
     except (KeyError, TypeError, ValueError) as err:
-        raise CheckpointError(f"{path}: its model configuration is not valid here ({err})") from None
+        raise CheckpointError(
+            f"{path}: its model configuration is not valid here ({err})"
+        ) from None
     try:
         model.load_state_dict(payload["state_dict"], strict=True)
     except RuntimeError as err:
         detail = " ".join(str(err).split())[:200]
-        raise CheckpointError(f"{path}: weights do not fit the model configuration ({detail})")
+        raise CheckpointError(
+            f"{path}: weights do not fit the model configuration ({detail})"
+        ) from None
     normalization = payload["normalization"]
     if normalization is not None:
         normalization = api.ArtNormalization.from_dict(from_plain(normalization))

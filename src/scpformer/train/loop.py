@@ -1,12 +1,13 @@
 """One training loop for every model whose forward is ``model(batch) -> (pred, loss)``.
 
-The data are in memory (:class:`TensorData`): a batch is an index into tensors already
-normalized and on the device, so an epoch spends almost nothing loading. Each epoch:
+The data are in memory (:class:`TensorData`): tensors already normalized and on the device,
+so an epoch spends almost nothing loading (one gather per epoch). Each epoch:
 
 1. the training indices of this process come from a ``DistributedSampler`` (a world of one
    outside ``torchrun``), shuffled by a generator seeded with (seed, epoch) -- the batch order
    is a function of the seed and the epoch alone, which makes ``--resume`` exact;
-2. micro-batches of ``batch_size`` are grouped by ``accumulation``; the loss of a group is the
+2. the epoch's samples are gathered once in that order, and micro-batches of ``batch_size``
+   (contiguous slices of it) are grouped by ``accumulation``; the loss of a group is the
    sample-weighted mean of its micro-batches' losses, back-propagated (gradients synchronized
    by DDP on the group's last micro-batch only), clipped to ``grad_clip`` in global norm, and
    applied by AdamW; the learning rate follows :func:`lr_factor` per optimizer step;
@@ -129,9 +130,9 @@ def lr_factor(step: int, config: TrainConfig, total_steps: int) -> float:
 
 
 def seed_everything(seed: int) -> None:
-    """Seed python, numpy and torch (all devices)."""
+    """Seed python, numpy's legacy global generator (for code that uses it) and torch."""
     random.seed(seed)
-    np.random.seed(seed % 2**32)
+    np.random.seed(seed % 2**32)  # noqa: NPY002
     torch.manual_seed(seed)
 
 
@@ -139,7 +140,7 @@ def rng_state() -> dict[str, Any]:
     """The python, numpy and torch (CPU and CUDA) random states."""
     state = {
         "python": random.getstate(),
-        "numpy": np.random.get_state(legacy=False),
+        "numpy": np.random.get_state(legacy=False),  # noqa: NPY002
         "torch": torch.get_rng_state(),
     }
     if torch.cuda.is_available():
@@ -151,7 +152,7 @@ def set_rng_state(state: Mapping[str, Any]) -> None:
     """Inverse of :func:`rng_state`."""
     version, internal, gauss = state["python"]
     random.setstate((version, tuple(internal), gauss))
-    np.random.set_state(state["numpy"])
+    np.random.set_state(state["numpy"])  # noqa: NPY002
     torch.set_rng_state(state["torch"])
     if "cuda" in state and torch.cuda.is_available():
         torch.cuda.set_rng_state_all(state["cuda"])
@@ -281,8 +282,9 @@ def _train_epoch(
     start = time.perf_counter()
     shuffled = TensorData(data.batch(torch.tensor(indices, dtype=torch.int64, device=device)))
     loading_s = time.perf_counter() - start
-    bounds = [(a, min(a + config.batch_size, len(indices))) for a in range(0, len(indices), config.batch_size)]  # fmt: skip
-    groups = [bounds[i : i + config.accumulation] for i in range(0, len(bounds), config.accumulation)]  # fmt: skip
+    n, size, accumulation = len(indices), config.batch_size, config.accumulation
+    bounds = [(a, min(a + size, n)) for a in range(0, n, size)]  # micro-batches
+    groups = [bounds[i : i + accumulation] for i in range(0, len(bounds), accumulation)]
     loss_sum, count = 0.0, 0
     bar = tqdm(total=len(indices), desc=label, disable=not progress, leave=False, unit="seq",
                mininterval=1.0)  # fmt: skip
@@ -336,4 +338,3 @@ def evaluate(
         count += b - a
     loss_sum, count = all_sum([loss_sum, float(count)], world, device)
     return loss_sum / count, loading_s
-

@@ -18,6 +18,9 @@ from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.validation import check_finite, check_in_range, known_fields, read_json
 
 UNIT_QUATERNION_TOL = 1e-6
+#: Largest |r0|, |v0|, |omega0_deg| accepted (nondimensional units). Table 2 spans |r0| < 20;
+#: far beyond it the scaled subproblem loses all precision and ends as a solver failure.
+MAX_INITIAL_STATE_NORM = 1e4
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,6 +43,11 @@ class PDGInstance:
     def __post_init__(self) -> None:
         for name, size in (("r0", 3), ("v0", 3), ("q0", 4), ("omega0_deg", 3)):
             value = check_finite(name, getattr(self, name), shape=(size,))
+            if name != "q0" and np.linalg.norm(value) > MAX_INITIAL_STATE_NORM:
+                raise ValueError(
+                    f"{name}: norm {np.linalg.norm(value):.3g} exceeds {MAX_INITIAL_STATE_NORM:g}"
+                    " (nondimensional units of Table 1; Table 2 spans |r0| < 20)"
+                )
             object.__setattr__(self, name, tuple(float(v) for v in value))
         norm = float(np.linalg.norm(self.q0))
         if abs(norm - 1.0) > UNIT_QUATERNION_TOL:

@@ -24,6 +24,7 @@ from scpformer.scp.conic import SOLVED, start_cold
 from scpformer.scp.discretization import FOHDiscretization, foh_discretize
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Status, Trajectory, Verification
+from scpformer.validation import check_positive, check_trajectory, check_type
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -276,7 +277,9 @@ def solve(
         ``Status.INFEASIBLE_INSTANCE`` without solving when the initial state already violates
         a state constraint.
     """
-    config = config or PDGSolverConfig()
+    check_type("instance", instance, PDGInstance)
+    config = PDGSolverConfig() if config is None else check_type("config", config, PDGSolverConfig)
+    eta_init = None if eta_init is None else check_positive("eta_init", eta_init)
     violated = con.initial_state_violations(instance)
     if violated:
         return Solution(
@@ -288,9 +291,9 @@ def solve(
             message="initial state violates " + ", ".join(violated),
         )
     problem = PDGProblem(instance, config)
-    if guess is None:
-        guess = problem.initial_guess()
-    if isinstance(guess, Trajectory):
+    default = problem.initial_guess()
+    if guess is None or isinstance(guess, Trajectory | list | tuple | np.ndarray | dict):
+        guess = default if guess is None else check_trajectory("guess", guess, default)
         return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
     from scpformer.warmstart.base import as_provider
     from scpformer.warmstart.convex import StraightLineWarmStart
@@ -299,5 +302,6 @@ def solve(
     result = as_provider(guess, named).guess(instance)
     if result.trajectory is None:
         raise ValueError(f"guess: the warm start produced no trajectory ({result.record.reason})")
-    solution = solve_scvx(problem, result.trajectory, config.scvx, eta_init=eta_init)
+    checked = check_trajectory("guess", result.trajectory, default)
+    solution = solve_scvx(problem, checked, config.scvx, eta_init=eta_init)
     return replace(solution, extras={**solution.extras, "warmstart": result.record.to_dict()})

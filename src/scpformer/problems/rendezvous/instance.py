@@ -25,6 +25,9 @@ from scpformer.validation import check_finite, known_fields, read_json
 #: separation, Table 1), 50 m ahead; its Problem 2 solution crosses the keep-out zone.
 DEFAULT_ROE0_M = (0.0, 50.0, 0.0, 80.0, 0.0, 140.0)
 MAX_SAMPLE_ATTEMPTS = 1000
+#: Largest |a dalpha| / a accepted: the linear ROE model (and its replay) describe close
+#: proximity only; Table 1 separations are ~1e-5 of a.
+MAX_ROE_FRACTION = 1e-2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,6 +47,12 @@ class RendezvousInstance:
                 f"scenario must be a RendezvousScenario, got {type(self.scenario).__name__}"
             )
         roe0 = check_finite("roe0_m", self.roe0_m, shape=(6,))
+        limit = MAX_ROE_FRACTION * self.target.a_m
+        if np.max(np.abs(roe0)) > limit:
+            raise ValueError(
+                f"roe0_m: {np.max(np.abs(roe0)):.3g} m exceeds {limit:.3g} m "
+                f"({MAX_ROE_FRACTION:g} a): the linear ROE model holds for close proximity only"
+            )
         object.__setattr__(self, "roe0_m", tuple(float(v) for v in roe0))
         horizon = float(check_finite("horizon_orbits", self.horizon_orbits, shape=()))
         lo, hi = self.scenario.horizon_range_orbits

@@ -69,6 +69,7 @@ from scpformer.scp.solution import (
     Verification,
     verified_status,
 )
+from scpformer.validation import check_type
 
 ProblemKind = Literal["tpbvp", "convex", "scp"]
 PROBLEMS = ("tpbvp", "convex", "scp")
@@ -369,7 +370,7 @@ def verify_solution(
     m, kw, n = tol.samples_per_interval, sc.n_waypoint, sc.n_nodes
     try:
         truth = replay(instance, dv, tol)
-    except (RuntimeError, ValueError) as err:
+    except (ArithmeticError, RuntimeError, ValueError) as err:  # e.g. an escaping orbit
         return Verification(False, {}, math.inf, {}, {}, f"replay failed: {err}")
     nodes, dense = truth.rtn[::m], truth.rtn
     gap = nodes - model.rtn(x)
@@ -683,7 +684,8 @@ def solve(
         raise ValueError(f"problem must be one of {PROBLEMS}, got {problem!r}")
     if not isinstance(instance, RendezvousInstance):
         raise ValueError(f"instance must be a RendezvousInstance, got {type(instance).__name__}")
-    config = config or RendezvousSolverConfig()
+    config = RendezvousSolverConfig() if config is None else config
+    check_type("config", config, RendezvousSolverConfig)
     start = time.perf_counter()
     setup = _setup(instance, config)
     if problem != "scp":

@@ -32,7 +32,13 @@ import numpy as np
 
 from scpformer.dynamics.orbits import R_EARTH, OrbitalElements
 from scpformer.scp.conic import check_solver
-from scpformer.validation import check_finite, check_in_range, check_positive, known_fields
+from scpformer.validation import (
+    check_bool,
+    check_finite,
+    check_in_range,
+    check_positive,
+    known_fields,
+)
 
 STOP_TESTS = ("step", "radius")
 UNIT_AXIS_TOL = 1e-6
@@ -175,7 +181,7 @@ class RendezvousScenario:
                 f"scenario.horizon_range_orbits must satisfy 0 < low <= high, got ({lo}, {hi})"
             )
         object.__setattr__(self, "horizon_range_orbits", (lo, hi))
-        object.__setattr__(self, "j2", bool(self.j2))
+        object.__setattr__(self, "j2", check_bool("scenario.j2", self.j2))
         if self.koz_metric(self.waypoint_m) < 1.0:
             raise ValueError(
                 "scenario.waypoint_distance_m: the waypoint "
@@ -321,6 +327,10 @@ class VerificationTolerances:
                 "verification.samples_per_interval must be a positive integer, got "
                 f"{self.samples_per_interval!r}"
             )
+        consistent = check_bool(
+            "verification.consistent_initial_state", self.consistent_initial_state
+        )
+        object.__setattr__(self, "consistent_initial_state", consistent)
 
 
 @dataclass(frozen=True, kw_only=True)

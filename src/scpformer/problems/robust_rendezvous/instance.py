@@ -26,6 +26,7 @@ from scpformer.dynamics.uncertainty import (
     ProcessNoise,
     UncertaintyModel,
 )
+from scpformer.problems.rendezvous.instance import MAX_ROE_FRACTION
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.robust_rendezvous.scenario import (
     WAYPOINTS,
@@ -81,6 +82,12 @@ class RobustInstance:
                 got = type(getattr(self, name)).__name__
                 raise ValueError(f"{name} must be a {cls.__name__}, got {got}")
         x0 = check_finite("x0_rtn", self.x0_rtn, shape=(6,))
+        limit = MAX_ROE_FRACTION * self.target.a_m  # the same close-proximity bound
+        if np.max(np.abs(x0[:3])) > limit:
+            raise ValueError(
+                f"x0_rtn: position {np.max(np.abs(x0[:3])):.3g} m exceeds {limit:.3g} m "
+                f"({MAX_ROE_FRACTION:g} a): the linear ROE model holds for close proximity only"
+            )
         object.__setattr__(self, "x0_rtn", tuple(float(v) for v in x0))
         object.__setattr__(self, "waypoint", check_waypoint(self.waypoint))
         inside = np.linalg.norm(x0[:3] / np.asarray(self.scenario.ae_semi_axes_m))

@@ -52,6 +52,7 @@ from scpformer.scp.solution import (
     Trajectory,
     Verification,
 )
+from scpformer.validation import check_type
 
 STAGES = ("tpbvp", "collision_avoidance", "passive_safety")
 WARMSTARTS = ("three_stage", "tpbvp")
@@ -358,7 +359,8 @@ def solve(
     """
     if not isinstance(instance, RobustInstance):
         raise ValueError(f"instance must be a RobustInstance, got {type(instance).__name__}")
-    config = config or RobustSolverConfig()
+    config = RobustSolverConfig() if config is None else config
+    check_type("config", config, RobustSolverConfig)
     mode = check_mode(mode)
     if isinstance(warmstart, str) and warmstart not in WARMSTARTS:
         raise ValueError(f"warmstart must be one of {', '.join(WARMSTARTS)}, got {warmstart!r}")

@@ -30,7 +30,7 @@ import numpy as np
 from scpformer.dynamics.uncertainty import UncertaintyModel
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.scp.scvx_star import SCvxStarParameters
-from scpformer.validation import check_finite, check_positive, known_fields
+from scpformer.validation import check_bool, check_finite, check_positive, known_fields
 
 WAYPOINTS = ("+T", "-T", "+R", "-R")
 MODES = ("deterministic", "chance")
@@ -104,7 +104,7 @@ class RobustScenario:
         object.__setattr__(self, "t_safety_orbits", t_safe)
         for name in ("ae_semi_axes_m", "koz_semi_axes_m"):
             object.__setattr__(self, name, _axes(f"scenario.{name}", getattr(self, name)))
-        object.__setattr__(self, "j2", bool(self.j2))
+        object.__setattr__(self, "j2", check_bool("scenario.j2", self.j2))
         if self.waypoint_distance_m <= max(self.koz_semi_axes_m):
             raise ValueError(
                 f"scenario.waypoint_distance_m ({self.waypoint_distance_m} m) must exceed the "
@@ -162,7 +162,9 @@ class RobustVerification:
             object.__setattr__(
                 self, name, check_positive(f"verification.{name}", getattr(self, name))
             )
-        object.__setattr__(self, "truth_replay", bool(self.truth_replay))
+        object.__setattr__(
+            self, "truth_replay", check_bool("verification.truth_replay", self.truth_replay)
+        )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -182,7 +184,9 @@ class RobustSolverConfig:
             self, "u_trust_scale", check_positive("u_trust_scale", self.u_trust_scale)
         )
         object.__setattr__(self, "n_linearized", _int_field("n_linearized", self.n_linearized, 1))
-        object.__setattr__(self, "margin_gradient", bool(self.margin_gradient))
+        object.__setattr__(
+            self, "margin_gradient", check_bool("margin_gradient", self.margin_gradient)
+        )
 
 
 __all__ = [

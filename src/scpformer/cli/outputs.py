@@ -1,0 +1,36 @@
+"""Output files of the solve and bench commands: checked before solving, written atomically."""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from scpformer.files import FIGURE_FORMATS, check_output_file, write_bytes_atomic
+
+
+def check_solve_outputs(out: Path | None, plot: Path | None, *figures: Path | None) -> None:
+    """Refuse ``--out`` and ``--plot`` (and derived figure paths) that cannot be written.
+
+    Raises
+    ------
+    ValueError
+        Naming the flag and the path (see :func:`scpformer.files.check_output_file`).
+    """
+    if out is not None:
+        check_output_file(out, "--out")
+    if plot is not None:
+        for path in (plot, *figures):
+            if path is not None:
+                check_output_file(path, "--plot", FIGURE_FORMATS)
+
+
+def write_csv(path: Path, fields: Sequence[str], rows: Iterable[dict[str, Any]]) -> None:
+    """Write ``rows`` as CSV to ``path`` atomically (a failed write keeps any earlier file)."""
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(fields))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_bytes_atomic(path, text.getvalue().encode())
