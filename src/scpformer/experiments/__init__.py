@@ -75,7 +75,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces=f"{_ROBUST} Figs. 5-6",
             summary="PS-CVX/PS-ART, deterministic and chance-constrained, RTN and ROE models",
             module="scpformer.experiments.robust_studies",
-            default_n=40,
+            default_n=60,
             models="ART runs trained on RTN and on ROE states",
         ),
         Experiment(
@@ -83,7 +83,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces=f"{_ROBUST} Figs. 7-8",
             summary="the instance with the largest ART gain: warm starts, drift arcs, Eq. 15",
             module="scpformer.experiments.robust_studies",
-            default_n=40,
+            default_n=30,
             models="one ART run",
         ),
         Experiment(
@@ -91,7 +91,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces=f"{_ROBUST} Figs. 9-10",
             summary="E_R and E_C of the post hoc check and the SCP outcome with/without it",
             module="scpformer.experiments.robust_studies",
-            default_n=40,
+            default_n=60,
             models="one ART run",
         ),
     )
