@@ -127,6 +127,7 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     positions = select_test_instances(data, require_n(options), options.seed)
     settings = settings_dict(
         options,
+        study,
         experiment=NAME,
         n=int(positions.size),
         ctg_sweep=ctg_sweep,

@@ -173,6 +173,7 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
     positions = select_test_instances(data, require_n(options), options.seed)
     settings = settings_dict(
         options,
+        study,
         experiment=name,
         n=int(positions.size),
         kinds=list(kinds),

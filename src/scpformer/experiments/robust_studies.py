@@ -213,6 +213,7 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     positions = select_test_instances(study.data, require_n(options), options.seed)
     settings = settings_dict(
         options,
+        study,
         experiment=name,
         n=int(positions.size),
         frames=frames,

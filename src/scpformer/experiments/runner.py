@@ -34,7 +34,7 @@ from scpformer.data.errors import DatasetError
 from scpformer.data.executors import Executor, LocalPool, RayPool
 from scpformer.data.family import SampleResult
 from scpformer.data.splits import load_splits
-from scpformer.data.storage import ShardedSamples, read_manifest
+from scpformer.data.storage import ShardedSamples, file_sha256, read_manifest
 
 RESULTS_NAME = "results.csv"
 CONFIG_NAME = "config.json"
@@ -492,11 +492,23 @@ def model_command(run: Path) -> str:
     return " ".join(parts)
 
 
-def settings_dict(options: RunOptions, **extra: Any) -> dict[str, Any]:
-    """The resolved settings recorded in ``config.json`` and ``report.md``."""
+def settings_dict(options: RunOptions, study: Study | None = None, **extra: Any) -> dict[str, Any]:
+    """The resolved settings recorded in ``config.json`` and ``report.md``.
+
+    With ``study``: the dataset's solver configuration, each model's configuration and the
+    sha256 of each checkpoint file (a rerun with retrained models is refused, not mixed in).
+    """
     out = asdict(options)
     out["models"] = [str(m) for m in options.models]
     out["data"] = str(options.data) if options.data else None
     out["out"] = str(options.out)
+    if study is not None:
+        from scpformer.train.checkpoint import checkpoint_path
+
+        out["solver"] = study.manifest.config.get("solver")
+        out["model_configs"] = [
+            {"kind": c.kind, "frame": c.frame, **c.config.to_dict()} for c in study.checkpoints
+        ]
+        out["checkpoints_sha256"] = [file_sha256(checkpoint_path(m)) for m in study.models]
     out.update(extra)
     return out

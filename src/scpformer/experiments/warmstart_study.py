@@ -169,6 +169,7 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME, verify: boo
     positions = select_test_instances(study.data, require_n(options), options.seed)
     settings = settings_dict(
         options,
+        study,
         experiment=NAME,
         n=int(positions.size),
         verify=verify,
