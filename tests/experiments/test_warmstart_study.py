@@ -86,3 +86,28 @@ def test_a_model_of_another_family_is_a_one_line_error(tmp_path, tiny_data, caps
     ]
     assert main(argv) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_the_solves_run_on_ray_when_asked(tmp_path, tiny_data, tiny_runs):
+    pytest.importorskip("ray", reason="ray is not installed: the Ray backend is untested")
+    out = tmp_path / "ray"
+    argv = [
+        "experiment",
+        "run",
+        "art-warmstart",
+        "--model",
+        str(tiny_runs["art"]),
+        "--data",
+        str(tiny_data),
+        "--n",
+        "1",
+        "--workers",
+        "1",
+        "--ray",
+        "local",
+        "--out",
+        str(out),
+    ]
+    assert main(argv) == 0
+    (row,) = _rows(out / "results.csv")
+    assert row["status"] == "ok" and int(row["convex_iterations"]) >= 1

@@ -41,7 +41,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         Experiment(
             name="art-forecast-tpbvp",
             reproduces=f"{_ART} Table 2",
-            summary="ART/GRU/LSTM forecasts of Problem 1 (TPBVP) solutions",
+            summary="ART/GRU/LSTM forecasts of Problem 1 (TPBVP) solutions (needs a tpbvp twin)",
             module="scpformer.experiments.forecast_study",
             default_n=200,
             models="ART, GRU and LSTM runs trained on Problem 1 twins",
