@@ -9,8 +9,8 @@
 #
 # Environment (defaults in brackets): DATA [/work/data] dataset root, RUNS [$DATA/runs] model
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
-# instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] training epochs,
-# RAY [unset] Ray address for the solves.
+# instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] epochs of the
+# rendezvous models, ROBUST_EPOCHS [12] of the robust ones, RAY [unset] Ray address.
 set -euo pipefail
 
 DATA=${DATA:-/work/data}
@@ -62,19 +62,20 @@ if [ ! -f "$ROB/splits.h5" ]; then
     --workers "$WORKERS"
   run scpformer dataset split "$ROB" --fractions 0.8 0.1 0.1 --seed "$SEED"
 fi
-for frame in rtn roe; do
-  if [ -f "$RUNS/robust-art-$frame/checkpoint.pt" ]; then resume=--resume; else resume=; fi
-  # shellcheck disable=SC2086
-  run scpformer train art --data "$ROB" --out "$RUNS/robust-art-$frame" --preset small \
-    --frame "$frame" --seed "$SEED" $EPOCHS_FLAG $resume
-done
+# the RTN model as the lead trained it (12 epochs), and its ROE twin
+if [ -f "$RUNS/art-robust-small/checkpoint.pt" ]; then resume=--resume; else resume=; fi
+run scpformer train art --data "$ROB" --out "$RUNS/art-robust-small" --preset small \
+  --frame rtn --seed "$SEED" --epochs "${ROBUST_EPOCHS:-12}" $resume
+if [ -f "$RUNS/art-robust-roe-small/checkpoint.pt" ]; then resume=--resume; else resume=; fi
+run scpformer train art --data "$ROB" --out "$RUNS/art-robust-roe-small" --preset small \
+  --frame roe --seed "$SEED" --epochs "${ROBUST_EPOCHS:-12}" $resume
 # shellcheck disable=SC2086
-run scpformer experiment run robust-warmstart --model "$RUNS/robust-art-rtn" \
-  --model "$RUNS/robust-art-roe" --data "$ROB" --workers "$WORKERS" --seed "$SEED" $RAY_FLAG \
-  --out "$OUT/robust-warmstart"
+run scpformer experiment run robust-warmstart --model "$RUNS/art-robust-small" \
+  --model "$RUNS/art-robust-roe-small" --data "$ROB" --workers "$WORKERS" --seed "$SEED" \
+  $RAY_FLAG --out "$OUT/robust-warmstart"
 # the instance with the largest ART gain, and the post hoc check (RTN model, as the paper)
 for name in robust-trajectory robust-posthoc; do
   # shellcheck disable=SC2086
-  run scpformer experiment run "$name" --model "$RUNS/robust-art-rtn" --data "$ROB" \
+  run scpformer experiment run "$name" --model "$RUNS/art-robust-small" --data "$ROB" \
     --workers "$WORKERS" --seed "$SEED" $RAY_FLAG --out "$OUT/$name"
 done
