@@ -254,10 +254,14 @@ def _wants_correction(
     A step of length d leaves nonlinear defects O(d^2) that the L1 penalty charges at
     ``lambda`` while the linear model predicts none, so near a solution good steps get
     ``rho < rho_1`` and the trust region shrinks (the Maratos effect). The correction re-solves
-    the subproblem with the linearized dynamics shifted by the candidate's defects.
+    the subproblem with the linearized dynamics shifted by the candidate's defects; it is kept
+    when its ``J`` is lower, and the ratio then compares its ``Delta J`` with the first
+    solve's ``Delta L`` (Nocedal & Wright, Sec. 15.5).
     """
     if not params.second_order_correction or solves + 2 > params.iter_max or ev.penalty <= 0.0:
         return False
+    if cand.virtual_max > params.virtual_tol:
+        return False  # the subproblem itself is not dynamically feasible yet: nothing to correct
     delta_L = J_bar - cand.linear_cost
     return delta_L > 0.0 and (J_bar - J) < params.rho_1 * delta_L
 

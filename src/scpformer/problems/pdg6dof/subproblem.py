@@ -117,6 +117,7 @@ class PDGSubproblem:
         self.buffers = cp.Variable(n, nonneg=True, name="s")
         self.problem = self._build()
         self._instance: PDGInstance | None = None  # whose values the parameters hold
+        self._z_linear: np.ndarray | None = None  # affine term of the current linearization
 
     def _build(self) -> cp.Problem:
         X, U, sigma = self.X, self.U, self.sigma
