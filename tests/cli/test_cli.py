@@ -62,3 +62,16 @@ def test_bench_writes_a_csv_row_per_instance_and_a_summary(tmp_path, capsys):
     assert {"status", "iterations", "wall_s", "solver_s", "discretization_s"} <= set(rows[0])
     text = capsys.readouterr().out
     assert "med s" in text and "p95 s" in text
+
+
+def test_bench_summary_reports_median_and_max_propellant_gap():
+    from scpformer.cli.pdg6dof import summarize
+
+    rows = [
+        {"set": "nominal", "status": "converged", "iterations": it, "wall_s": 1.0,
+         "solver_s": 0.8, "discretization_s": 0.1, "verification_s": 0.05, "other_s": 0.05,
+         "gap": gap}
+        for it, gap in ((10, 0.001), (20, 0.002), (30, 0.006))
+    ]  # fmt: skip
+    text = "\n".join(summarize(rows))
+    assert "median 0.200%" in text and "max 0.600%" in text

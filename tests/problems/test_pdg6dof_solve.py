@@ -97,3 +97,42 @@ def test_a_solve_does_not_depend_on_what_the_process_solved_before(nominal):
     again = solve(PDGInstance())
     np.testing.assert_array_equal(again.trajectory.x, nominal.trajectory.x)
     np.testing.assert_array_equal(again.trajectory.u, nominal.trajectory.u)
+
+
+def test_default_solutions_are_within_half_a_percent_of_propellant_of_the_reference():
+    from scpformer.problems.pdg6dof.instance import SampleRanges, sample_instances
+    from scpformer.problems.pdg6dof.problem import (
+        PDGSolverConfig,
+        propellant_gap,
+        solve_reference,
+    )
+
+    instances = sample_instances(np.random.default_rng(0), 3, SampleRanges.nominal())
+    for instance in instances:
+        default = solve(instance)
+        assert default.status is Status.CONVERGED, default.message
+        reference = solve_reference(instance, PDGSolverConfig(), default)
+        assert reference.verification.passed
+        gap = propellant_gap(instance, default.cost, reference.cost)
+        assert gap < 5e-3, (gap, default.cost, reference.cost)
+
+
+def test_a_run_stopped_by_the_iteration_cap_says_so_and_returns_its_verified_iterate():
+    from scpformer.problems.pdg6dof.problem import PDGSolverConfig
+    from scpformer.scp.scvx import SCvxParameters
+
+    capped = solve(PDGInstance(), PDGSolverConfig(scvx=SCvxParameters(iter_max=12)))
+    assert capped.status is Status.MAX_ITERATIONS
+    accepted = [rec for rec in capped.history if rec.accepted]
+    assert capped.cost == pytest.approx(accepted[-1].cost)
+    assert capped.verification is not None
+
+
+def test_prox_weight_zero_solves_the_hard_box_subproblem_of_algorithm_1():
+    from scpformer.problems.pdg6dof.subproblem import compiled_subproblem
+
+    hard = compiled_subproblem(50, False, 0.0)
+    soft = compiled_subproblem(50, False, 0.01)
+    assert not hard.soft and soft.soft
+    assert hard.problem.objective.expr.is_affine()
+    assert not soft.problem.objective.expr.is_affine()

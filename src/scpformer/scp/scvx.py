@@ -220,7 +220,7 @@ def solve_scvx(
         )
         if not accepted:
             continue
-        stop = _stopping_test(params, history[-1], delta_J, delta_L, J_bar, eta_used)
+        stop = meets_stopping_test(params, history[-1], delta_J, delta_L, J_bar, eta_used)
         z_bar, ev_bar, J_bar = cand.trajectory, ev, J
         negligible = cand.virtual_max <= params.virtual_tol and ev.max_defect <= params.defect_tol
         if stop and ev.penalty <= params.feas_tol and negligible:
@@ -266,7 +266,7 @@ def _wants_correction(
     return delta_L > 0.0 and (J_bar - J) < params.rho_1 * delta_L
 
 
-def _stopping_test(
+def meets_stopping_test(
     params: SCvxParameters,
     record: IterationRecord,
     delta_J: float,
