@@ -7,10 +7,10 @@ centre of mass, 90 deg/s rate limit, 90 deg tilt limit, 20 deg glideslope, no ae
 final velocity of 10 m/s down and a fixed final attitude and rate. Its initial states are
 random: altitude 350-400 m, East/North offsets within +-200 m, descent rate 80-100 m/s,
 horizontal velocity -0.5..-0.2 times the offset (per axis), pitch and yaw within +-30 deg and
-pitch/yaw rates within +-20 deg/s. That file nondimensionalizes lengths by ``|r_0|`` and keeps
-seconds; so does this script (U_L = |r_0|, U_T = 1 s, and U_M = 10 t rather than the wet mass,
-because an instance file is checked against the default dry mass before the overrides apply),
-passing every constant as a ``--const-*`` override and the initial state in an instance file.
+pitch/yaw rates within +-20 deg/s. Units here: U_L = |r_0| (as that file), U_T = sqrt(U_L / g0)
+so that |g| = 1 as in Table 1 (that file keeps seconds), and U_M = 10 t rather than the wet
+mass, because an instance file is checked against the default dry mass before the overrides
+apply. Every constant is a ``--const-*`` override; the initial state is an instance file.
 
 Usage: python benchmarks/pdg6dof_embersarc.py [--draws 3] [--seed 0] [extra solve flags]
 Each draw is solved with ``--n-nodes 30 --fix-roll``; the script prints one line per draw and
@@ -52,32 +52,33 @@ def draw_initial_state(rng: np.random.Generator) -> dict[str, np.ndarray]:
 def solve_arguments(state: dict[str, np.ndarray], instance_path: Path) -> list[str]:
     """``scpformer solve pdg6dof`` arguments for one draw, nondimensionalized as EmbersArc."""
     length = float(np.linalg.norm(state["r"]))  # U_L
-    force = MASS_UNIT * length  # U_M U_L / U_T^2 with U_T = 1 s
+    unit_time = math.sqrt(length / G0)  # U_T: |g| = 1 U_L / U_T^2, as in Table 1
+    speed, force = length / unit_time, MASS_UNIT * length / unit_time**2
     instance = {
         "r0": (state["r"] / length).tolist(),
-        "v0": (state["v"] / length).tolist(),
+        "v0": (state["v"] / speed).tolist(),
         "q0": state["q"].tolist(),
-        "omega0_deg": state["omega_deg"].tolist(),
+        "omega0_deg": (state["omega_deg"] * unit_time).tolist(),
         "m0": M_WET / MASS_UNIT,
         "gamma_gs_deg": 20.0,
         "theta_max_deg": 90.0,
     }
     instance_path.write_text(json.dumps(instance))
     constants = {
-        "g-I": [-G0 / length, 0.0, 0.0],
+        "g-I": [-1.0, 0.0, 0.0],
         "J-B-diag": [j / (MASS_UNIT * length**2) for j in (1e5, 4e6, 4e6)],
         "r-T-B": [-14.0 / length, 0.0, 0.0],
         "rho-SA-CA": [0.0],
         "P-amb": [0.0],
-        "I-sp": [282.0],  # alpha = 1 / (I_sp |g|) = |r_0| / (282 g0), EmbersArc's alpha_m
-        "omega-max-deg": [90.0],
+        "I-sp": [282.0 / unit_time],  # alpha = 1 / (I_sp |g|): EmbersArc's 1 / (282 s g0)
+        "omega-max-deg": [90.0 * unit_time],
         "delta-max-deg": [7.0],
         "T-min": [0.3 * T_MAX / force],
         "T-max": [T_MAX / force],
         "m-dry": [M_DRY / MASS_UNIT],
-        "v-f": [-10.0 / length, 0.0, 0.0],
-        "tf-min": [1.0],
-        "tf-max": [60.0],
+        "v-f": [-10.0 / speed, 0.0, 0.0],
+        "tf-min": [1.0 / unit_time],
+        "tf-max": [60.0 / unit_time],
     }
     args = ["solve", "pdg6dof", "--instance", str(instance_path), "--n-nodes", "30", "--fix-roll"]
     for name, values in constants.items():
