@@ -66,7 +66,7 @@ def test_schema_starts_with_the_common_fields_and_has_unique_names():
     schema = full_schema(PDG6DoFFamily())
     assert schema[: len(COMMON_FIELDS)] == COMMON_FIELDS
     flags = next(f for f in schema if f.name == "tight_flags")
-    assert flags.shape == (20, 7 * 50)
+    assert flags.shape == (PDG6DoFFamily().config.solver.scvx.iter_max, 7 * 50)
 
 
 def test_field_coerces_values_and_rejects_wrong_shapes():

@@ -1,6 +1,8 @@
+import numpy as np
 import pytest
 
-from scpformer.scp.scvx import SCvxParameters, update_trust_radius
+from scpformer.scp.scvx import SCvxParameters, meets_stopping_test, update_trust_radius
+from scpformer.scp.solution import IterationRecord
 
 P = SCvxParameters()
 
@@ -18,9 +20,34 @@ def test_trust_radius_stays_within_bounds():
     assert update_trust_radius(P.eta_lb, -1.0, P)[0] == P.eta_lb
 
 
-def test_defaults_are_table_1():
-    assert (P.lambda_, P.rho_0, P.rho_1, P.rho_2) == (500.0, 0.0, 0.1, 0.7)
-    assert (P.eta_init, P.eta_lb, P.eta_ub, P.iter_max) == (2.0, 1e-3, 10.0, 20)
+def test_defaults_are_table_1_except_penalty_weight_and_iteration_cap():
+    # lambda 500 -> 10 and iter_max 20 -> 100: see the scvx module docstring
+    assert (P.lambda_, P.rho_0, P.rho_1, P.rho_2) == (10.0, 0.0, 0.1, 0.7)
+    assert (P.eta_init, P.eta_lb, P.eta_ub, P.iter_max) == (2.0, 1e-3, 10.0, 100)
+    assert (P.eps_abs, P.eps_rel, P.feas_tol) == (0.1, 1e-3, 0.5)
+
+
+def _record(step_norm: float) -> IterationRecord:
+    return IterationRecord(
+        iteration=1, accepted=True, cost=-2.0, penalty=0.0, J=-2.0, L=-2.0, rho=1.0,
+        trust_radius=1.0, virtual_control_norm=0.0, step_norm=step_norm,
+        tight_flags=np.zeros(0, dtype=bool), time_discretization=0.0, time_solver=0.0,
+        time_total=0.0,
+    )  # fmt: skip
+
+
+def test_small_predicted_decrease_is_stationary_only_with_room_to_move():
+    tiny = 0.5 * P.eps_opt * 2.0  # Delta L below eps_opt |J| with |J| = 2
+    assert meets_stopping_test(P, _record(0.0), tiny, tiny, -2.0, eta_used=P.eta_stationary)
+    assert not meets_stopping_test(P, _record(0.0), tiny, tiny, -2.0, eta_used=0.01)
+    assert not meets_stopping_test(P, _record(0.0), 0.0, 0.1, -2.0, eta_used=2.0)
+
+
+def test_a_small_step_under_a_throttled_trust_region_is_not_convergence():
+    # Table 1's step test would stop here; the stationarity test does not
+    table1 = SCvxParameters(stopping="table1")
+    assert meets_stopping_test(table1, _record(0.01), 1e-3, 0.05, -2.0, eta_used=0.01)
+    assert not meets_stopping_test(P, _record(0.01), 1e-3, 0.05, -2.0, eta_used=0.01)
 
 
 @pytest.mark.parametrize(
@@ -31,6 +58,8 @@ def test_defaults_are_table_1():
         ({"solver": "gurobi"}, "solver"),
         ({"lambda_": -1.0}, "lambda_"),
         ({"iter_max": 0}, "iter_max"),
+        ({"stopping": "step"}, "stopping"),
+        ({"eps_opt": 0.0}, "eps_opt"),
     ],
 )
 def test_bad_parameters_name_the_field(kwargs, field):

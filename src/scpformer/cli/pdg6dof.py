@@ -21,7 +21,12 @@ from scpformer.problems.pdg6dof.instance import (
     constants_from_dict,
     sample_instances,
 )
-from scpformer.problems.pdg6dof.problem import PDGSolverConfig, solve
+from scpformer.problems.pdg6dof.problem import (
+    PDGSolverConfig,
+    propellant_gap,
+    solve,
+    solve_reference,
+)
 from scpformer.scp.scvx import SCvxParameters
 from scpformer.scp.solution import Solution
 
@@ -150,6 +155,12 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--n-table2", type=count, default=10, help="Table 2 instances (10)")
     parser.add_argument("--seed", type=count, default=0, help="sampling seed (0)")
     parser.add_argument(
+        "--optimality",
+        action="store_true",
+        help="also continue every solve to full convergence (200 solves, stationarity "
+        "tolerance 1e-6; untimed) and report the propellant gap to it",
+    )
+    parser.add_argument(
         "--csv",
         type=Path,
         default=Path("bench_pdg6dof.csv"),
@@ -171,6 +182,9 @@ BENCH_FIELDS = (
     "other_s",
     "cost",
     "tf",
+    "reference_status",
+    "reference_cost",
+    "gap",
 )
 
 
@@ -188,7 +202,22 @@ def _bench_row(name: str, index: int, solution: Solution, wall: float) -> dict[s
         "other_s": tm.other if tm else 0.0,
         "cost": solution.cost,
         "tf": float(solution.trajectory.p[0]) if solution.trajectory is not None else np.nan,
+        "reference_status": "",
+        "reference_cost": np.nan,
+        "gap": np.nan,
     }
+
+
+def _add_reference(
+    row: dict[str, object], instance: PDGInstance, solution: Solution, config: PDGSolverConfig
+) -> None:
+    """The reference run's status, cost and the propellant gap of ``solution`` to it."""
+    if solution.trajectory is None:
+        return
+    reference = solve_reference(instance, config, solution)
+    row["reference_status"] = reference.status.value
+    row["reference_cost"] = reference.cost
+    row["gap"] = propellant_gap(instance, solution.cost, reference.cost)
 
 
 def summarize(rows: list[dict[str, object]]) -> list[str]:
@@ -207,12 +236,20 @@ def summarize(rows: list[dict[str, object]]) -> list[str]:
         }
         conv = np.mean([r["status"] == "converged" for r in sel])
         its = np.median([r["iterations"] for r in sel])
+        gaps = np.array([r["gap"] for r in sel], dtype=float)
+        gaps = gaps[np.isfinite(gaps)]
         lines.append(
             f"{name:<8} {len(sel):>3} {conv:>6.0%} {np.median(wall):>7.3f} {wall.mean():>7.3f} "
             f"{np.percentile(wall, 95):>7.3f} {its:>6.1f} {share['solver_s']:>7.0%} "
             f"{share['discretization_s']:>6.0%} {share['verification_s']:>6.0%} "
             f"{share['other_s']:>6.0%}"
         )
+        if gaps.size:
+            lines.append(
+                f"{'':<8} propellant gap to the reference: median {np.median(gaps):.3%}, "
+                f"max {gaps.max():.3%}; iterations p95 "
+                f"{np.percentile([r['iterations'] for r in sel], 95):.0f}"
+            )
     return lines
 
 
@@ -220,13 +257,13 @@ def per_instance_lines(rows: list[dict[str, object]]) -> list[str]:
     """One line per solve: set, index, status, iterations, wall time and its split."""
     lines = [
         f"{'set':<8} {'#':>3} {'status':<20} {'it':>3} {'wall s':>7} {'solver':>7} "
-        f"{'discr':>7} {'cost':>8} {'tf':>6}"
+        f"{'discr':>7} {'cost':>8} {'tf':>6} {'gap':>8}"
     ]
     for r in rows:
         lines.append(
             f"{r['set']:<8} {r['index']:>3} {r['status']:<20} {r['iterations']:>3} "
             f"{r['wall_s']:>7.3f} {r['solver_s']:>7.3f} {r['discretization_s']:>7.3f} "
-            f"{r['cost']:>8.4f} {r['tf']:>6.3f}"
+            f"{r['cost']:>8.4f} {r['tf']:>6.3f} {r['gap']:>8.3%}"
         )
     return lines
 
@@ -252,6 +289,8 @@ def run_bench(args: argparse.Namespace) -> int:
                 t0 = time.perf_counter()
                 solution = solve(instance, config)
                 rows.append(_bench_row(name, index, solution, time.perf_counter() - t0))
+                if args.optimality:
+                    _add_reference(rows[-1], instance, solution, config)
                 bar.set_postfix(status=solution.status.value, it=solution.iterations)
                 bar.update()
     write_csv(args.csv, BENCH_FIELDS, rows)

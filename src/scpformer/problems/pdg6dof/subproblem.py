@@ -9,13 +9,20 @@ iteration only writes numbers into parameters before calling the conic solver.
 
 Subproblem (Eq. 7 with Eqs. 10-11):
 
-    min   -m_N + lambda (|nu|_1 + sum s) [+ w_prox |z - z_bar|^2, see PDGSolverConfig]
+    min   -m_N + lambda (|nu|_1 + sum s) [+ |W (z - z_bar)|^2, soft trust region, see below]
     s.t.  X_{k+1} = A_k X_k + Bm_k U_k + Bp_k U_{k+1} + S_k sigma + z_k + nu_k       (10)
           T_min - d_k . U_k <= s_k,  d_k = U_bar_k / |U_bar_k|                       (11, 6a)
           convex rows of 5a-5d, 6a (upper), 6b at every node
           boundary conditions 3b-3i (terminal attitude: see TerminalAttitude note)
           tf_min <= sigma <= tf_max                                                   (3a)
           |X - X_bar|_inf, |U - U_bar|_inf, |sigma - sigma_bar| <= eta   (q_tr = inf, Table 1)
+
+With ``soft=True`` the objective also holds the penalized (soft) trust region of Reynolds,
+Szmuk et al.: ``sum_i w_i (z_i - z_bar_i)^2`` with one weight per variable group (position,
+velocity, quaternion, rate, mass, thrust, final time), all parameters, so that the SCvx loop
+sets them from the trust radius at every iteration (:meth:`PDGSubproblem.solve`). The state is
+declared as one variable per group so that each weighted ``sum_squares`` of a bare variable
+goes straight into the quadratic objective of the conic problem (no auxiliary rows).
 """
 
 from __future__ import annotations
@@ -49,17 +56,24 @@ class SubproblemSolution:
     message: str = ""
 
 
+STATE_GROUPS: tuple[tuple[str, int, int], ...] = (
+    ("r", 0, 3),
+    ("v", 3, 6),
+    ("q", 6, 10),
+    ("omega", 10, 13),
+    ("m", 13, 14),
+)
+
+
 class PDGSubproblem:
     """Parametric convex subproblem for ``n_nodes`` nodes; see the module docstring."""
 
-    def __init__(self, n_nodes: int, fix_roll: bool = False, prox_weight: float = 0.0) -> None:
+    def __init__(self, n_nodes: int, fix_roll: bool = False, soft: bool = False) -> None:
         if n_nodes < 3:
             raise ValueError(f"n_nodes must be at least 3, got {n_nodes}")
-        if not prox_weight >= 0.0:
-            raise ValueError(f"prox_weight must be nonnegative, got {prox_weight}")
         self.n_nodes = n_nodes
         self.fix_roll = fix_roll
-        self.prox_weight = float(prox_weight)
+        self.soft = bool(soft)
         n, k = n_nodes, n_nodes - 1
         P = cp.Parameter
         self.A = P((k, 14 * 14), name="A")  # row-major A_k per interval (batched_matvec)
@@ -87,13 +101,23 @@ class PDGSubproblem:
         self.cos_delta = P(nonneg=True, name="cos_delta_max")
         self.tf_bounds = P(2, name="tf_bounds")
 
-        self.X = cp.Variable((n, 14), name="X")
+        self.w_x = P(len(STATE_GROUPS), nonneg=True, name="w_x")  # soft weight per state group
+        self.w_u = P(nonneg=True, name="w_u")
+        self.w_sigma = P(nonneg=True, name="w_sigma")
+        self.wx_ref = P((n, 14), name="wx_ref")  # weight * x_ref (keeps the objective DPP)
+        self.wu_ref = P((n, 3), name="wu_ref")
+        self.wsigma_ref = P(name="wsigma_ref")
+        self.state_groups = [
+            cp.Variable((n, stop - start), name=f"X_{name}") for name, start, stop in STATE_GROUPS
+        ]
+        self.X = cp.hstack(self.state_groups)
         self.U = cp.Variable((n, 3), name="U")
         self.sigma = cp.Variable(name="sigma")
         self.nu = cp.Variable((k, 14), name="nu")
         self.buffers = cp.Variable(n, nonneg=True, name="s")
         self.problem = self._build()
         self._instance: PDGInstance | None = None  # whose values the parameters hold
+        self._z_linear: np.ndarray | None = None  # affine term of the current linearization
 
     def _build(self) -> cp.Problem:
         X, U, sigma = self.X, self.U, self.sigma
@@ -135,27 +159,28 @@ class PDGSubproblem:
         ]
         penalty = cp.sum(cp.abs(self.nu)) + cp.sum(self.buffers)
         cost = -X[-1, 13] + self.lambda_ * penalty
-        if self.prox_weight > 0.0:  # a constant, so that the product stays DPP
-            cost = cost + self.prox_weight * self._deviation_without_constant()
+        if self.soft:
+            cost = cost + self._deviation_without_constant()
         return cp.Problem(cp.Minimize(cost), constraints)
 
     def _deviation_without_constant(self) -> cp.Expression:
-        """``|X - X_bar|^2 + |U - U_bar|^2 + (sigma - sigma_bar)^2`` less its constant part.
+        """``sum_g w_g |z_g - z_bar_g|^2`` over the variable groups, less its constant part.
 
-        Expanded as ``|z|^2 - 2 <z_bar, z>``: cvxpy canonicalizes ``sum_squares`` of a bare
+        Expanded as ``w |z|^2 - 2 <w z_bar, z>``: cvxpy canonicalizes ``sum_squares`` of a bare
         variable straight into the quadratic objective, whereas ``sum_squares(z - z_bar)``
         gets an auxiliary variable and an equality row per entry (851 of each at N = 50, a
-        third of the conic problem). Same minimizer; the constant ``|z_bar|^2`` is left out
+        third of the conic problem). Same minimizer; the constant ``w |z_bar|^2`` is left out
         (the linearized cost ``L`` is computed from the solution, not from the objective).
         """
         X, U, sigma = self.X, self.U, self.sigma
+        quadratic = sum(self.w_x[i] * cp.sum_squares(v) for i, v in enumerate(self.state_groups))
         return (
-            cp.sum_squares(X)
-            + cp.sum_squares(U)
-            + cp.square(sigma)
-            - 2.0 * cp.sum(cp.multiply(self.x_ref, X))
-            - 2.0 * cp.sum(cp.multiply(self.u_ref, U))
-            - 2.0 * self.sigma_ref * sigma
+            quadratic
+            + self.w_u * cp.sum_squares(U)
+            + self.w_sigma * cp.square(sigma)
+            - 2.0 * cp.sum(cp.multiply(self.wx_ref, X))
+            - 2.0 * cp.sum(cp.multiply(self.wu_ref, U))
+            - 2.0 * self.wsigma_ref * sigma
         )
 
     def set_instance(self, instance: PDGInstance) -> None:
@@ -191,6 +216,7 @@ class PDGSubproblem:
         self.Bp.value = disc.Bp.reshape(k, -1)
         self.S.value = disc.S
         self.z.value = disc.z
+        self._z_linear = disc.z
         self.x_ref.value = x
         self.u_ref.value = u
         self.sigma_ref.value = sigma
@@ -198,12 +224,46 @@ class PDGSubproblem:
         safe = np.where(norms > 0.0, norms, 1.0)
         self.thrust_dir.value = np.where(norms > 0.0, u / safe, np.array([1.0, 0.0, 0.0]))
 
-    def solve(self, eta: float, lambda_: float, solver: str = "clarabel") -> SubproblemSolution:
-        """Solve with trust radius ``eta`` and penalty weight ``lambda_``; failures are statuses."""
-        self.eta_x.value = eta * self.scale_x
-        self.eta_u.value = eta * self.scale_u
-        self.eta_sigma.value = eta * self.scale_sigma
+    def shift_affine_term(self, defects: np.ndarray) -> None:
+        """Second-order correction: ``z_k <- z_k - d_k`` with the defects ``d`` (K, 14) of a
+        candidate, so that the linearized dynamics aim at the nonlinear flow there (the SOC
+        step of SQP, Nocedal & Wright Sec. 15.5); ``set_linearization`` undoes it."""
+        self.z.value = self._z_linear - defects
+
+    def _set_soft_weights(self, weight: float) -> None:
+        """Weights ``weight / scale_g^2`` of the soft trust region and their products with
+        the reference (the scales are constant within each group of :data:`STATE_GROUPS`)."""
+        w_cols = weight / self.scale_x**2
+        w_groups = w_cols[[start for _, start, _ in STATE_GROUPS]]
+        w_u, w_sigma = weight / self.scale_u[0] ** 2, weight / self.scale_sigma**2
+        self.w_x.value = w_groups
+        self.w_u.value = w_u
+        self.w_sigma.value = w_sigma
+        self.wx_ref.value = self.x_ref.value * w_cols
+        self.wu_ref.value = self.u_ref.value * w_u
+        self.wsigma_ref.value = self.sigma_ref.value * w_sigma
+
+    def solve(
+        self,
+        eta: float,
+        lambda_: float,
+        solver: str = "clarabel",
+        box: float | None = None,
+        soft_weight: float = 0.0,
+    ) -> SubproblemSolution:
+        """Solve with trust radius ``eta`` and penalty weight ``lambda_``; failures are statuses.
+
+        The hard trust region is the box of radius ``box`` (default ``eta``) in the units of
+        :func:`trust_region_scales`. A soft subproblem also adds
+        ``soft_weight sum_i ((z_i - z_bar_i) / scale_i)^2`` to the cost.
+        """
+        box = eta if box is None else box
+        self.eta_x.value = box * self.scale_x
+        self.eta_u.value = box * self.scale_u
+        self.eta_sigma.value = box * self.scale_sigma
         self.lambda_.value = lambda_
+        if self.soft:
+            self._set_soft_weights(soft_weight)
         call = solve_timed(self.problem, solver, reuse=True)
         if not call.solved or self.X.value is None:
             return _failed(call.status, call.wall_time, call.solver_time)
@@ -261,10 +321,19 @@ def _failed(status: str, wall: float, solve_time: float) -> SubproblemSolution:
     )
 
 
-@functools.lru_cache(maxsize=8)
 def compiled_subproblem(
     n_nodes: int, fix_roll: bool = False, prox_weight: float = 0.0, solver: str = "clarabel"
 ) -> PDGSubproblem:
+    """The process-wide subproblem of a configuration: soft trust region iff ``prox_weight > 0``.
+
+    ``prox_weight`` only selects the structure (its value is applied per solve), so every
+    positive weight shares one compiled problem.
+    """
+    return _compiled_subproblem(n_nodes, fix_roll, prox_weight > 0.0, solver)
+
+
+@functools.lru_cache(maxsize=8)
+def _compiled_subproblem(n_nodes: int, fix_roll: bool, soft: bool, solver: str) -> PDGSubproblem:
     """The process-wide subproblem per structure, canonicalized for ``solver``.
 
     cvxpy's parametric canonicalization of this problem takes about 7 s for Clarabel and
@@ -274,10 +343,10 @@ def compiled_subproblem(
     than once per process.
     """
     check_solver(solver)
-    key = f"pdg6dof-subproblem-N{n_nodes}-roll{int(fix_roll)}-prox{prox_weight:g}-{solver}"
+    key = f"pdg6dof-subproblem-N{n_nodes}-roll{int(fix_roll)}-soft{int(soft)}-{solver}"
 
     def build() -> PDGSubproblem:
-        sub = PDGSubproblem(n_nodes, fix_roll, prox_weight)
+        sub = PDGSubproblem(n_nodes, fix_roll, soft)
         canonicalize(sub.problem, solver)
         return sub
 

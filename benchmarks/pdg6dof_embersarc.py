@@ -1,0 +1,111 @@
+"""Solve EmbersArc/SCvx's 6-DoF landing scenario with ``scpformer solve pdg6dof``.
+
+The scenario is the one of EmbersArc/SCvx's ``models/model_6dof.py`` (a Python SCvx of
+Szmuk & Acikmese 2018): a 30 t vehicle (22 t dry), 800 kN maximum thrust, 30% minimum
+throttle, 7 deg gimbal, I_sp 282 s, J_B = diag(1e5, 4e6, 4e6) kg m^2, engine 14 m below the
+centre of mass, 90 deg/s rate limit, 90 deg tilt limit, 20 deg glideslope, no aerodynamics, a
+final velocity of 10 m/s down and a fixed final attitude and rate. Its initial states are
+random: altitude 350-400 m, East/North offsets within +-200 m, descent rate 80-100 m/s,
+horizontal velocity -0.5..-0.2 times the offset (per axis), pitch and yaw within +-30 deg and
+pitch/yaw rates within +-20 deg/s. Units here: U_L = |r_0| (as that file), U_T = sqrt(U_L / g0)
+so that |g| = 1 as in Table 1 (that file keeps seconds), and U_M = 10 t rather than the wet
+mass, because an instance file is checked against the default dry mass before the overrides
+apply. Every constant is a ``--const-*`` override; the initial state is an instance file.
+
+Usage: python benchmarks/pdg6dof_embersarc.py [--draws 3] [--seed 0] [extra solve flags]
+Each draw is solved with ``--n-nodes 30 --fix-roll``; the script prints one line per draw and
+exits 1 unless every draw converged.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from scpformer.cli.main import main as scpformer_main
+from scpformer.dynamics import quaternion as quat
+
+M_WET, M_DRY = 30000.0, 22000.0  # kg
+MASS_UNIT = 10000.0  # kg: U_M, so that m0 = 3 passes the instance check before the overrides
+T_MAX = 800000.0  # N
+G0 = 9.81  # m/s^2
+
+
+def draw_initial_state(rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """One initial state drawn as in EmbersArc's ``set_random_initial_state`` (SI units)."""
+    r = np.array([rng.uniform(350.0, 400.0), *rng.uniform(-200.0, 200.0, size=2)])
+    v = np.array([rng.uniform(-100.0, -80.0), *(rng.uniform(-0.5, -0.2, size=2) * r[1:])])
+    pitch, yaw = np.radians(rng.uniform(-30.0, 30.0, size=2))
+    q = quat.multiply(
+        quat.from_axis_angle([0.0, 0.0, 1.0], yaw), quat.from_axis_angle([0.0, 1.0, 0.0], pitch)
+    )
+    omega_deg = np.array([0.0, *rng.uniform(-20.0, 20.0, size=2)])
+    return {"r": r, "v": v, "q": quat.normalize(q), "omega_deg": omega_deg}
+
+
+def solve_arguments(state: dict[str, np.ndarray], instance_path: Path) -> list[str]:
+    """``scpformer solve pdg6dof`` arguments for one draw, nondimensionalized as EmbersArc."""
+    length = float(np.linalg.norm(state["r"]))  # U_L
+    unit_time = math.sqrt(length / G0)  # U_T: |g| = 1 U_L / U_T^2, as in Table 1
+    speed, force = length / unit_time, MASS_UNIT * length / unit_time**2
+    instance = {
+        "r0": (state["r"] / length).tolist(),
+        "v0": (state["v"] / speed).tolist(),
+        "q0": state["q"].tolist(),
+        "omega0_deg": (state["omega_deg"] * unit_time).tolist(),
+        "m0": M_WET / MASS_UNIT,
+        "gamma_gs_deg": 20.0,
+        "theta_max_deg": 90.0,
+    }
+    instance_path.write_text(json.dumps(instance))
+    constants = {
+        "g-I": [-1.0, 0.0, 0.0],
+        "J-B-diag": [j / (MASS_UNIT * length**2) for j in (1e5, 4e6, 4e6)],
+        "r-T-B": [-14.0 / length, 0.0, 0.0],
+        "rho-SA-CA": [0.0],
+        "P-amb": [0.0],
+        "I-sp": [282.0 / unit_time],  # alpha = 1 / (I_sp |g|): EmbersArc's 1 / (282 s g0)
+        "omega-max-deg": [90.0 * unit_time],
+        "delta-max-deg": [7.0],
+        "T-min": [0.3 * T_MAX / force],
+        "T-max": [T_MAX / force],
+        "m-dry": [M_DRY / MASS_UNIT],
+        "v-f": [-10.0 / speed, 0.0, 0.0],
+        "tf-min": [1.0 / unit_time],
+        "tf-max": [60.0 / unit_time],
+    }
+    args = ["solve", "pdg6dof", "--instance", str(instance_path), "--n-nodes", "30", "--fix-roll"]
+    for name, values in constants.items():
+        args += [f"--const-{name}", *(repr(float(v)) for v in values)]
+    return args
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--draws", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    args, extra = parser.parse_known_args()
+    rng = np.random.default_rng(args.seed)
+    codes = []
+    with tempfile.TemporaryDirectory() as folder:
+        for draw in range(args.draws):
+            state = draw_initial_state(rng)
+            argv = solve_arguments(state, Path(folder) / f"draw{draw}.json") + extra
+            print(
+                f"--- draw {draw}: r0 {np.round(state['r'], 1)} m, v0 {np.round(state['v'], 1)}"
+                f" m/s, omega0 {np.round(state['omega_deg'], 1)} deg/s, tilt "
+                f"{math.degrees(2 * math.asin(np.linalg.norm(state['q'][2:]))):.1f} deg"
+            )
+            codes.append(scpformer_main(argv))
+    print(f"converged: {codes.count(0)} of {len(codes)}")
+    return 0 if all(code == 0 for code in codes) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
