@@ -173,6 +173,8 @@ class ArtNormalization:
             raise ValueError("the view has no splits: run `scpformer dataset split` first")
         stats = view._stats or view._pooled(art_twins(view.samples.manifest))
         (state_mean, state_std), (action_mean, action_std) = stats["state"], stats["action"]
+        state_std = _per_step_floor(state_mean, state_std)
+        action_std = _per_step_floor(action_mean, action_std)
         scales = {key: _training_rms(view, key) for key in ("rtg", "ctg")}
         target_mean = target_std = None
         if targets is not None:
@@ -203,6 +205,27 @@ def _training_rms(view: ArtSequenceDataset, key: str) -> float:
         count += values.size
     rms = np.sqrt(squares / count) if count else 0.0
     return float(_floored(np.asarray(rms)))
+
+
+STEP_STD_FLOOR = 0.1  # per-step std >= this fraction of the element's std over all steps
+
+
+def _per_step_floor(mean: np.ndarray, std: np.ndarray) -> np.ndarray:
+    """Per-step std (T, d) floored at ``STEP_STD_FLOOR`` times the element's overall std.
+
+    Some time steps are nearly deterministic across the dataset: the rendezvous coasts
+    without impulses between the waypoint and docking, and every trajectory ends at the
+    docking state. Their per-step std is ~0 (the dataset's statistics then store 1.0, a
+    floor in physical units: 1 m/s per normalized unit of a control), so at inference a
+    small normalized error decodes into a huge impulse, and a small state deviation encodes
+    into a huge input. The floor is the element's std pooled over all steps (the law of
+    total variance over the per-step means and stds), scaled by ``STEP_STD_FLOOR``.
+    """
+    degenerate = std == 1.0  # the splits' marker of a floored (constant) element
+    variance = np.where(degenerate, 0.0, std**2)
+    overall = np.sqrt(np.mean(variance + (mean - mean.mean(axis=0)) ** 2, axis=0))  # (d,)
+    floor = STEP_STD_FLOOR * _floored(overall)
+    return np.maximum(np.where(degenerate, 0.0, std), floor)
 
 
 def _floored(std: np.ndarray) -> np.ndarray:
