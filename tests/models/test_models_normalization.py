@@ -77,3 +77,18 @@ def test_dict_round_trip_and_bad_input(normalization):
         normalization.encode("state", np.zeros(6), step=10_000)
     with pytest.raises(ValueError, match="rtg_scale must be a positive number"):
         ArtNormalization.from_dict({**normalization.to_dict(), "rtg_scale": 0.0})
+
+
+def test_nearly_constant_steps_get_a_floor_of_the_elements_overall_spread():
+    from scpformer.models.normalization import STEP_STD_FLOOR, _per_step_floor
+
+    rng = np.random.default_rng(0)
+    values = rng.normal(scale=0.02, size=(500, 10, 3))  # (samples, steps, elements) [m/s]
+    values[:, 7:] = 1e-12 * rng.normal(size=(500, 3, 3))  # coasting steps: no impulse
+    mean, std = values.mean(axis=0), values.std(axis=0)
+    std = np.where(std < 1e-8, 1.0, std)  # the splits' marker of a constant element
+    floored = _per_step_floor(mean, std)
+    overall = values.reshape(-1, 3).std(axis=0)
+    np.testing.assert_allclose(floored[7:], np.broadcast_to(STEP_STD_FLOOR * overall, (3, 3)),
+                               rtol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(floored[:7], std[:7])  # ordinary steps keep their own std
