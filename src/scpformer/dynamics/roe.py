@@ -525,24 +525,34 @@ def propagate_roe_mean(
     return _roe_flow(oe_to_qns(_chief(oe_chief)), _as_vec(roe, 6, "roe"), dt, mu, j2, r_e)
 
 
+def roe_to_qns_offset(qc: FloatArray, roe: FloatArray) -> FloatArray:
+    """Deputy minus chief quasi-nonsingular elements ``(a, u, ex, ey, i, raan)`` from
+    dimensionless ROE (inverse of D'Amico 2010, Eq. 2.22; broadcasting, not validated)."""
+    sin_i = np.sin(qc[..., 4])
+    if np.any(np.abs(sin_i) < _SIN_I_MIN):
+        raise ValueError("oe_chief.i: the ROE are singular for an equatorial chief orbit")
+    d_raan = roe[..., 5] / sin_i
+    parts = (qc[..., 0] * roe[..., 0], roe[..., 1] - d_raan * np.cos(qc[..., 4]), roe[..., 2],
+             roe[..., 3], roe[..., 4], d_raan)  # fmt: skip
+    return np.stack(np.broadcast_arrays(*parts), axis=-1)
+
+
+def qns_offset_to_roe(qc: FloatArray, diff: FloatArray) -> FloatArray:
+    """Dimensionless ROE from deputy minus chief quasi-nonsingular elements (D'Amico 2010,
+    Eq. 2.22; angle differences wrapped to ``[-pi, pi)``)."""
+    d_raan = wrap_to_pi(diff[..., 5])
+    parts = (diff[..., 0] / qc[..., 0], wrap_to_pi(diff[..., 1] + d_raan * np.cos(qc[..., 4])),
+             diff[..., 2], diff[..., 3], diff[..., 4], d_raan * np.sin(qc[..., 4]))  # fmt: skip
+    return np.stack(np.broadcast_arrays(*parts), axis=-1)
+
+
 def _roe_flow(
     qc: FloatArray, roe: FloatArray, dt: ArrayLike, mu: float, j2: float, r_e: float
 ) -> FloatArray:
     """:func:`propagate_roe_mean` from the chief's quasi-nonsingular elements (broadcasting)."""
-    sin_i = np.sin(qc[..., 4])
-    if np.any(np.abs(sin_i) < _SIN_I_MIN):
-        raise ValueError("oe_chief.i: the ROE flow is singular for an equatorial chief orbit")
-    d_raan = roe[..., 5] / sin_i
-    parts = (qc[..., 0] * roe[..., 0], roe[..., 1] - d_raan * np.cos(qc[..., 4]), roe[..., 2],
-             roe[..., 3], roe[..., 4], d_raan)  # fmt: skip
-    offset = np.stack(np.broadcast_arrays(*parts), axis=-1)
     qc_t = propagate_mean_qns(qc, dt, mu, j2, r_e)  # the chief once, not per deputy
-    diff = propagate_mean_qns(qc + offset, dt, mu, j2, r_e) - qc_t
-    d_raan = wrap_to_pi(diff[..., 5])
-    return np.stack(
-        [diff[..., 0] / qc_t[..., 0], wrap_to_pi(diff[..., 1] + d_raan * np.cos(qc_t[..., 4])),
-         diff[..., 2], diff[..., 3], diff[..., 4], d_raan * np.sin(qc_t[..., 4])], axis=-1,
-    )  # fmt: skip
+    diff = propagate_mean_qns(qc + roe_to_qns_offset(qc, roe), dt, mu, j2, r_e) - qc_t
+    return qns_offset_to_roe(qc_t, diff)
 
 
 def roe_flow_jacobian(

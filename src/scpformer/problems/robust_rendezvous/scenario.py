@@ -34,6 +34,7 @@ from scpformer.validation import check_finite, check_positive, known_fields
 
 WAYPOINTS = ("+T", "-T", "+R", "-R")
 MODES = ("deterministic", "chance")
+DYNAMICS = ("nonlinear", "stm")
 _WAYPOINT_AXIS = {"+T": (0.0, 1.0, 0.0), "-T": (0.0, -1.0, 0.0), "+R": (1.0, 0.0, 0.0),
                   "-R": (-1.0, 0.0, 0.0)}  # fmt: skip
 
@@ -173,6 +174,7 @@ class RobustSolverConfig:
     u_trust_scale: float = 1.0  # trust region on u is r * u_trust_scale [m/s] (paper: same r)
     n_linearized: int = 3  # K: worst drift samples per node linearized in Eq. 17 (paper: 1)
     margin_gradient: bool = True  # linearize the margin beta too (paper: held at the reference)
+    dynamics: str = "nonlinear"  # plan model: mean-element flow (nonlinear) or the J2 STM (stm)
     scvx: SCvxStarParameters = field(default_factory=SCvxStarParameters)
     verification: RobustVerification = field(default_factory=RobustVerification)
 
@@ -183,9 +185,14 @@ class RobustSolverConfig:
         )
         object.__setattr__(self, "n_linearized", _int_field("n_linearized", self.n_linearized, 1))
         object.__setattr__(self, "margin_gradient", bool(self.margin_gradient))
+        if self.dynamics not in DYNAMICS:
+            raise ValueError(
+                f"dynamics must be one of {', '.join(DYNAMICS)}, got {self.dynamics!r}"
+            )
 
 
 __all__ = [
+    "DYNAMICS",
     "MODES",
     "WAYPOINTS",
     "RobustScenario",
