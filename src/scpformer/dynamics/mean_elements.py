@@ -33,6 +33,7 @@ from scpformer.dynamics.orbits import (
     oe_to_qns,
     qns_to_oe,
     rtn_dcm,
+    rtn_to_eci,
     wrap_to_pi,
 )
 from scpformer.dynamics.roe import qns_offset_to_roe, roe_to_qns_offset
@@ -47,6 +48,7 @@ __all__ = [
     "osculating_to_mean_qns",
     "propagate_rk4",
     "qns_difference",
+    "rtn_to_mean_roe",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -115,9 +117,14 @@ def osculating_to_mean_qns(
 class MeanOscMap:
     """First-order map between osculating and mean elements about reference states."""
 
-    o_ref: FloatArray  # (N, 6) osculating qns of the reference (the target at the nodes)
+    x_ref: FloatArray  # (N, 6) ECI states of the reference (the target at the nodes) [m, m/s]
+    o_ref: FloatArray  # (N, 6) their osculating qns
     m_ref: FloatArray  # (N, 6) their mean qns
     J: FloatArray  # (N, 6, 6) dm/do at o_ref
+
+    def take(self, index) -> MeanOscMap:
+        """The map about a subset of the reference states."""
+        return MeanOscMap(*(v[index] for v in (self.x_ref, self.o_ref, self.m_ref, self.J)))
 
 
 def mean_osc_map(x_ref: FloatArray, period: float, samples: int = 48) -> MeanOscMap:
@@ -135,7 +142,7 @@ def mean_osc_map(x_ref: FloatArray, period: float, samples: int = 48) -> MeanOsc
     periods = period * (o[..., 0] / o_ref[:, None, 0]) ** 1.5  # (N, 13)
     means = osculating_to_mean_qns(np.concatenate([r, v], axis=-1), periods, samples)
     J = qns_difference(means[:, 1:7], means[:, 7:13]) / (2.0 * _STEPS[None, :, None])
-    return MeanOscMap(o_ref=o_ref, m_ref=means[:, 0], J=np.swapaxes(J, -1, -2))
+    return MeanOscMap(x_ref=x_ref, o_ref=o_ref, m_ref=means[:, 0], J=np.swapaxes(J, -1, -2))
 
 
 def impulse_mean_qns(mo: MeanOscMap, m: FloatArray, dv_rtn: FloatArray) -> FloatArray:
@@ -186,3 +193,15 @@ def impulse_roe_jacobian(
     d_roe = (out[:, 1:7] - out[:, 7:13]) / (2.0 * step_roe)  # (N, column, row)
     d_dv = (out[:, 13:16] - out[:, 16:19]) / (2.0 * step_dv)
     return out[:, 0], np.swapaxes(d_roe, 1, 2), np.swapaxes(d_dv, 1, 2)
+
+
+def rtn_to_mean_roe(mo: MeanOscMap, rtn: FloatArray) -> FloatArray:
+    """Dimensionless MEAN ROE ``(N, 6)`` of deputies whose OSCULATING relative state in the
+    reference's RTN frame is ``rtn`` ``(N, 6)`` [m, m/s]: deputy ECI state (exact), its
+    osculating elements, mean elements ``m_ref + J (o - o_ref)``, ROE w.r.t. the reference's
+    mean elements. The inverse, to first order in J2 times the separation, of what a truth
+    propagation started from the consistent osculating state shows."""
+    r_d, v_d = rtn_to_eci(mo.x_ref[:, :3], mo.x_ref[:, 3:], rtn)
+    o = oe_to_qns(eci_to_oe(r_d, v_d))
+    diff = np.einsum("nij,nj->ni", mo.J, qns_difference(o, mo.o_ref))
+    return qns_offset_to_roe(mo.m_ref, diff)

@@ -28,7 +28,12 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.dynamics.mean_elements import MeanOscMap, impulse_roe_jacobian, mean_osc_map
+from scpformer.dynamics.mean_elements import (
+    MeanOscMap,
+    impulse_roe_jacobian,
+    mean_osc_map,
+    rtn_to_mean_roe,
+)
 from scpformer.dynamics.orbits import J2, eci_to_oe, j2_secular_rates, oe_to_qns
 from scpformer.dynamics.roe import roe_flow_jacobian
 from scpformer.dynamics.truth import propagate_relative
@@ -68,11 +73,22 @@ class Boundary:
     x_final: np.ndarray  # (6,) Psi(t_N)^-1 x_f,rtn
 
 
-def boundary(instance: RobustInstance, model: LinearModel) -> Boundary:
-    """``x = Psi^{-1} x_rtn`` at both ends (see :mod:`.instance`)."""
+def boundary(instance: RobustInstance, model: LinearModel, dynamics: str = "stm") -> Boundary:
+    """``x = Psi^{-1} x_rtn`` at both ends (see :mod:`.instance`).
+
+    With the nonlinear dynamics the waypoint is reached in the truth model's OSCULATING
+    relative state: ``x_final`` is the mean ROE of the deputy whose osculating RTN state is
+    ``x_f`` (:func:`scpformer.dynamics.mean_elements.rtn_to_mean_roe`; it differs from
+    ``Psi^{-1} x_f`` by the J2 short-period relative motion, metres at the waypoints' ROE of
+    kilometres). The initial state stays the instance's mean ``roe0``, from which the replay
+    builds its consistent osculating start.
+    """
+    x_final = np.linalg.solve(model.Psi[-1], instance.xf_rtn)
+    if dynamics != "stm":
+        mo = target_mean_osc_map(instance).take(slice(-1, None))
+        x_final = model.oe[-1, 0] * rtn_to_mean_roe(mo, instance.xf_rtn[None, :])[0]
     return Boundary(
-        x_init=np.linalg.solve(model.Psi[0], np.asarray(instance.x0_rtn)),
-        x_final=np.linalg.solve(model.Psi[-1], instance.xf_rtn),
+        x_init=np.linalg.solve(model.Psi[0], np.asarray(instance.x0_rtn)), x_final=x_final
     )
 
 
@@ -125,9 +141,9 @@ class DynamicsLinearization:
 
 
 def _target_osc_states(instance: RobustInstance) -> tuple[np.ndarray, float]:
-    """Osculating ECI states of the target at the impulse nodes and its draconitic period."""
+    """Osculating ECI states of the target at the nodes and its draconitic period."""
     oe_c, _ = osculating_initial_state(instance)  # type: ignore[arg-type]
-    t = instance.times()[:-1]
+    t = instance.times()
     res = propagate_relative(oe_c, np.zeros(6), [0.0], t_out=t, j2=instance.scenario.j2)
     _, argp_dot, M_dot = j2_secular_rates(instance.target.oe.to_array())
     return res.x_chief, 2.0 * math.pi / float(argp_dot + M_dot)
@@ -137,9 +153,9 @@ _MEAN_OSC_CACHE: dict[tuple, MeanOscMap] = {}
 
 
 def target_mean_osc_map(instance: RobustInstance) -> MeanOscMap:
-    """:class:`~scpformer.dynamics.mean_elements.MeanOscMap` about the target at the impulse
-    nodes (depends only on the target orbit and the node times: computed once per process).
-    Without J2 mean and osculating elements coincide (identity map)."""
+    """:class:`~scpformer.dynamics.mean_elements.MeanOscMap` about the target at the nodes
+    ``0 .. N`` (depends only on the target orbit and the node times: computed once per
+    process). Without J2 mean and osculating elements coincide (identity map)."""
     key = (tuple(instance.target.oe.to_array()), tuple(instance.times()), instance.scenario.j2)
     if key not in _MEAN_OSC_CACHE:
         x_ref, period = _target_osc_states(instance)
@@ -147,7 +163,8 @@ def target_mean_osc_map(instance: RobustInstance) -> MeanOscMap:
             mo = mean_osc_map(x_ref, period)
         else:
             o = oe_to_qns(eci_to_oe(x_ref[:, :3], x_ref[:, 3:]))
-            mo = MeanOscMap(o_ref=o, m_ref=o, J=np.broadcast_to(np.eye(6), (o.shape[0], 6, 6)))
+            J = np.broadcast_to(np.eye(6), (o.shape[0], 6, 6))
+            mo = MeanOscMap(x_ref=x_ref, o_ref=o, m_ref=o, J=J)
         _MEAN_OSC_CACHE.clear()  # one target at a time (datasets share it)
         _MEAN_OSC_CACHE[key] = mo
     return _MEAN_OSC_CACHE[key]
@@ -180,7 +197,7 @@ def linearize_dynamics(
         return DynamicsLinearization(model.Phi, model.Phi @ model.B, np.zeros((n, 6)), x[1:] - F,
                                      y, model.B)  # fmt: skip
     a = model.oe[0, 0]
-    mo = target_mean_osc_map(instance)
+    mo = target_mean_osc_map(instance).take(slice(0, n))
     y, Gx, Gu = impulse_roe_jacobian(mo, model.oe[:-1], x[:n] / a, u)
     j2 = J2 if instance.scenario.j2 else 0.0
     flow, A = roe_flow_jacobian(model.oe[:-1], y, np.diff(model.t), j2=j2)
@@ -221,7 +238,7 @@ class PassiveSafetyProblem:
         self.geometry: DriftGeometry = drift_geometry(
             instance, 0.0 if collision_only else None, dynamics=config.dynamics
         )
-        self.bounds = boundary(instance, self.model)
+        self.bounds = boundary(instance, self.model, config.dynamics)
         self.n_rows = 1 if collision_only else config.n_linearized
         self.sub = compiled_safety_subproblem(instance.n_nodes, config.scvx.solver, self.n_rows)
         start_cold(self.sub.problem)  # the run's solves reuse one solver object
