@@ -80,6 +80,7 @@ from scpformer.dynamics.uncertainty import covariance_history, propagate_covaria
 from scpformer.problems.rendezvous.problem import LinearModel
 from scpformer.problems.rendezvous.problem import linear_model as _rendezvous_linear_model
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
+from scpformer.problems.robust_rendezvous.plan_dynamics import linearize_dynamics
 from scpformer.problems.robust_rendezvous.scenario import DYNAMICS, check_mode
 
 _TINY_DISTANCE = 1e-12  # normalized distance below which the gradient direction is undefined
@@ -499,6 +500,24 @@ def constraint_violation_budget(h: np.ndarray, tol: float = VIOLATION_TOL) -> np
     return np.append(np.cumsum(flags[::-1])[::-1], 0)
 
 
+def plan_safety(
+    instance: RobustInstance,
+    x: np.ndarray,
+    u: np.ndarray,
+    mode: str = "chance",
+    dynamics: str = "nonlinear",
+) -> SafetyEvaluation:
+    """Eqs. 14-16 of ANY trajectory ``(x, u)`` of the instance in the plan model ``dynamics``
+    (drift arcs from its post-impulse states)."""
+    model = linear_model(instance)
+    post = None
+    if dynamics != "stm":
+        dyn = linearize_dynamics(instance, model, x, u, dynamics)
+        post = (dyn.y, dyn.B)
+    geometry = drift_geometry(instance, dynamics=dynamics)
+    return evaluate_safety(geometry, model, x, u, instance, mode, post_impulse=post)
+
+
 def trajectory_violations(
     instance: RobustInstance,
     x: np.ndarray,
@@ -508,6 +527,4 @@ def trajectory_violations(
     dynamics: str = "nonlinear",
 ) -> np.ndarray:
     """Eq. 7 budget of ANY trajectory ``(x, u)`` of the instance (e.g. a warm start), (N+1,)."""
-    ev = evaluate_safety(drift_geometry(instance, dynamics=dynamics), linear_model(instance), x,
-                         u, instance, mode)  # fmt: skip
-    return constraint_violation_budget(ev.h, tol)
+    return constraint_violation_budget(plan_safety(instance, x, u, mode, dynamics).h, tol)
