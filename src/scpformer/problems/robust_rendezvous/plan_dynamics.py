@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -17,7 +18,7 @@ from scpformer.dynamics.orbits import J2, eci_to_oe, j2_secular_rates, oe_to_qns
 from scpformer.dynamics.roe import roe_flow_jacobian
 from scpformer.dynamics.truth import propagate_relative
 from scpformer.problems.rendezvous.problem import LinearModel, osculating_initial_state
-from scpformer.problems.robust_rendezvous.instance import RobustInstance
+from scpformer.problems.robust_rendezvous.instance import X0_RTN_TABLE1, RobustInstance
 
 
 @dataclass(frozen=True)
@@ -33,8 +34,15 @@ class DynamicsLinearization:
 
 
 def _target_osc_states(instance: RobustInstance) -> tuple[np.ndarray, float]:
-    """Osculating ECI states of the target at the nodes and its draconitic period."""
-    oe_c, _ = osculating_initial_state(instance)  # type: ignore[arg-type]
+    """Osculating ECI states of the target at the nodes and its draconitic period.
+
+    The target's consistent osculating elements come from the fixed point of
+    :func:`osculating_initial_state` run with Table 1's nominal servicer state, so that they
+    do not depend (through the integrator's step control) on the instance's servicer: the
+    cached map is then the same whatever instance a process solves first.
+    """
+    canonical = dataclasses.replace(instance, x0_rtn=X0_RTN_TABLE1)
+    oe_c, _ = osculating_initial_state(canonical)  # type: ignore[arg-type]
     t = instance.times()
     res = propagate_relative(oe_c, np.zeros(6), [0.0], t_out=t, j2=instance.scenario.j2)
     _, argp_dot, M_dot = j2_secular_rates(instance.target.oe.to_array())

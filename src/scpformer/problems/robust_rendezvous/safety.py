@@ -132,16 +132,17 @@ class DriftGeometry:
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """Mean ROE along the drift arcs from ``y`` (N, 6) [m] and the maps to the ellipsoid.
 
-        ``tau`` ``None`` gives the S design samples; an ``(N,)`` array gives one instant per
-        node. Returns ``x(t_i + tau)`` [m] ``(N, T, 6)``, its Jacobian w.r.t. ``y_i``
-        ``(N, T, 6, 6)`` (``None`` when not asked for, nonlinear model) and
-        ``E_i D Psi(t_i + tau)`` ``(N, T, 3, 6)`` [1/m].
+        ``tau`` ``None`` gives the S design samples; an ``(N,)`` array one instant per node, an
+        ``(N, T)`` array ``T`` instants per node. Returns ``x(t_i + tau)`` [m] ``(N, T, 6)``,
+        its Jacobian w.r.t. ``y_i`` ``(N, T, 6, 6)`` (``None`` when not asked for, nonlinear
+        model) and ``E_i D Psi(t_i + tau)`` ``(N, T, 3, 6)`` [1/m].
         """
         if tau is None:
             Psi, stm = self.Psi, self.Phi
             tau_b = self.tau[None, :]
         else:
-            tau_b = np.asarray(tau, dtype=float)[:, None]
+            tau_b = np.asarray(tau, dtype=float)
+            tau_b = tau_b if tau_b.ndim == 2 else tau_b[:, None]
             Psi = psi_matrix(self.target_at(self.t[:, None] + tau_b))
             stm = None
         EDPsi = np.einsum("irs,ijsk->ijrk", self.E, Psi[..., :3, :])
