@@ -12,10 +12,16 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 from scpformer.dynamics.mean_elements import MeanOscMap, impulse_roe_jacobian, mean_osc_map
-from scpformer.dynamics.orbits import J2, eci_to_oe, j2_secular_rates, oe_to_qns
-from scpformer.dynamics.roe import roe_flow_jacobian
+from scpformer.dynamics.orbits import J2, eci_to_oe, j2_secular_rates, oe_to_qns, qns_to_oe
+from scpformer.dynamics.roe import (
+    psi_matrix,
+    qns_offset_to_roe,
+    roe_flow_jacobian,
+    roe_to_qns_offset,
+)
 from scpformer.dynamics.truth import propagate_relative
 from scpformer.problems.rendezvous.problem import LinearModel, osculating_initial_state
 from scpformer.problems.robust_rendezvous.instance import X0_RTN_TABLE1, RobustInstance
@@ -33,8 +39,11 @@ class DynamicsLinearization:
     B: np.ndarray  # (N, 6, 3) d y_i / d u_i at the reference [s]
 
 
-def _target_osc_states(instance: RobustInstance) -> tuple[np.ndarray, float]:
-    """Osculating ECI states of the target at the nodes and its draconitic period.
+def _target_osc_states(
+    instance: RobustInstance, t: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
+    """Osculating ECI states of the target at ``t`` (default: the nodes) and its draconitic
+    period.
 
     The target's consistent osculating elements come from the fixed point of
     :func:`osculating_initial_state` run with Table 1's nominal servicer state, so that they
@@ -43,13 +52,46 @@ def _target_osc_states(instance: RobustInstance) -> tuple[np.ndarray, float]:
     """
     canonical = dataclasses.replace(instance, x0_rtn=X0_RTN_TABLE1)
     oe_c, _ = osculating_initial_state(canonical)  # type: ignore[arg-type]
-    t = instance.times()
+    t = instance.times() if t is None else t
     res = propagate_relative(oe_c, np.zeros(6), [0.0], t_out=t, j2=instance.scenario.j2)
     _, argp_dot, M_dot = j2_secular_rates(instance.target.oe.to_array())
     return res.x_chief, 2.0 * math.pi / float(argp_dot + M_dot)
 
 
 _MEAN_OSC_CACHE: dict[tuple, MeanOscMap] = {}
+_RTN_MAP_CACHE: dict[tuple, CubicSpline] = {}
+RTN_MAP_STEP_S = 60.0  # grid of the mean-ROE -> osculating-RTN map (cubic spline) [s]
+
+
+def mean_to_osculating_rtn(mo: MeanOscMap, a_mean: float) -> np.ndarray:
+    """First-order map ``(K, 6, 6)`` from scaled MEAN ROE [m] to the OSCULATING relative RTN
+    state [m, m/s] about the reference states of ``mo``.
+
+    ``x / a -> Delta m`` (mean QNS offset) ``-> Delta o = J^{-1} Delta m`` (osculating offset)
+    ``->`` osculating ROE ``-> Psi(o_ref)`` (the Keplerian Jacobian at the reference's
+    osculating elements). Without J2 it is ``Psi``. At the km separations of the approach the
+    J2 short-period relative motion it adds is metres: the size of the chance margin there.
+    """
+    eye = np.eye(6)[None]
+    R = np.swapaxes(roe_to_qns_offset(mo.m_ref[:, None, :], eye), 1, 2) / a_mean
+    Q = np.swapaxes(qns_offset_to_roe(mo.o_ref[:, None, :], eye), 1, 2)
+    Psi = psi_matrix(qns_to_oe(mo.o_ref))
+    return Psi @ (mo.o_ref[:, 0, None, None] * Q) @ np.linalg.solve(mo.J, R)
+
+
+def osculating_rtn_map(instance: RobustInstance) -> CubicSpline:
+    """``D(t)``: :func:`mean_to_osculating_rtn` about the target, a cubic spline in time over
+    the horizon and the last drift arc (grid ``RTN_MAP_STEP_S``; computed once per process and
+    target). Evaluate as ``D(t).reshape(*t.shape, 6, 6)``."""
+    key = (tuple(instance.target.oe.to_array()), tuple(instance.times()), instance.t_safety_s)
+    if key not in _RTN_MAP_CACHE:
+        end = instance.horizon_s + instance.t_safety_s
+        grid = np.linspace(0.0, end, math.ceil(end / RTN_MAP_STEP_S) + 1)
+        x_ref, period = _target_osc_states(instance, grid)
+        D = mean_to_osculating_rtn(mean_osc_map(x_ref, period), instance.target.oe.a)
+        _RTN_MAP_CACHE.clear()
+        _RTN_MAP_CACHE[key] = CubicSpline(grid, D.reshape(grid.size, 36))
+    return _RTN_MAP_CACHE[key]
 
 
 def target_mean_osc_map(instance: RobustInstance) -> MeanOscMap:

@@ -67,6 +67,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 from scpformer.dynamics.orbits import J2, propagate_kepler, propagate_mean_j2
 from scpformer.dynamics.roe import (
@@ -80,7 +81,10 @@ from scpformer.dynamics.uncertainty import covariance_history, propagate_covaria
 from scpformer.problems.rendezvous.problem import LinearModel
 from scpformer.problems.rendezvous.problem import linear_model as _rendezvous_linear_model
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
-from scpformer.problems.robust_rendezvous.plan_dynamics import linearize_dynamics
+from scpformer.problems.robust_rendezvous.plan_dynamics import (
+    linearize_dynamics,
+    osculating_rtn_map,
+)
 from scpformer.problems.robust_rendezvous.scenario import DYNAMICS, check_mode
 
 _TINY_DISTANCE = 1e-12  # normalized distance below which the gradient direction is undefined
@@ -122,6 +126,15 @@ class DriftGeometry:
     t: np.ndarray  # (N,) node times t_i [s]
     j2: bool  # secular J2 (else Keplerian) mean dynamics
     dynamics: str  # "nonlinear" (mean-element flow) or "stm" (Koenig STM about the target)
+    osc_rtn: CubicSpline | None  # D(t): mean ROE -> osculating RTN (nonlinear model with J2)
+
+    def rtn_map(self, t: np.ndarray) -> np.ndarray:
+        """Map ``(*t.shape, 6, 6)`` from scaled mean ROE to the relative RTN state at ``t``:
+        ``Psi`` of the mean target (STM model), or the mean-to-osculating map ``D(t)`` of
+        :func:`.plan_dynamics.osculating_rtn_map` (nonlinear model)."""
+        if self.osc_rtn is None:
+            return psi_matrix(self.target_at(t))
+        return self.osc_rtn(t).reshape(*np.shape(t), 6, 6)
 
     def target_at(self, t: np.ndarray) -> np.ndarray:
         """Mean target elements at the times ``t`` [s], ``(*t.shape, 6)``."""
@@ -143,7 +156,7 @@ class DriftGeometry:
         else:
             tau_b = np.asarray(tau, dtype=float)
             tau_b = tau_b if tau_b.ndim == 2 else tau_b[:, None]
-            Psi = psi_matrix(self.target_at(self.t[:, None] + tau_b))
+            Psi = self.rtn_map(self.t[:, None] + tau_b)
             stm = None
         EDPsi = np.einsum("irs,ijsk->ijrk", self.E, Psi[..., :3, :])
         oe = self.target_at(self.t)[:, None, :]
@@ -180,12 +193,17 @@ def drift_geometry(
     oe_nodes = propagate(oe0, t)  # (N, 6)
     oe_drift = propagate(oe0, t[:, None] + tau[None, :])  # (N, S, 6)
     Phi = stm(oe_nodes[:, None, :], tau[None, :])  # (N, S, 6, 6)
-    Psi = psi_matrix(oe_drift)
+    osc_rtn = osculating_rtn_map(instance) if dynamics == "nonlinear" and sc.j2 else None
+    Psi = (
+        psi_matrix(oe_drift)
+        if osc_rtn is None
+        else osc_rtn(t[:, None] + tau).reshape(t.size, tau.size, 6, 6)
+    )
     E = sc.ellipsoid_E()[:-1]
     G = np.einsum("irs,ijsk,ijkl->ijrl", E, Psi[..., :3, :], Phi)
     use_ae = np.arange(sc.n_nodes) < sc.n_ae_to_koz
     return DriftGeometry(tau=tau, Phi=Phi, Psi=Psi, G=G, E=E, use_ae=use_ae, oe0=oe0, t=t,
-                         j2=sc.j2, dynamics=dynamics)  # fmt: skip
+                         j2=sc.j2, dynamics=dynamics, osc_rtn=osc_rtn)  # fmt: skip
 
 
 # ======================================================================================
@@ -367,7 +385,7 @@ def evaluate_safety(
                                                 unc.q)  # fmt: skip
         tau_star = refine_worst_instant(geometry, y, X, unc.q, np.argmax(1.0 + beta - d, axis=1))
         xs, js, EDPsi_s = geometry.drift(y, tau_star)
-        Psi_s = psi_matrix(geometry.target_at(geometry.t + tau_star))[:, None]
+        Psi_s = geometry.rtn_map(geometry.t + tau_star)[:, None]
         x_t, jac = np.concatenate([x_t, xs], 1), np.concatenate([jac, js], 1)
         EDPsi = np.concatenate([EDPsi, EDPsi_s], 1)
         G = np.einsum("ijrk,ijkl->ijrl", EDPsi, jac)
