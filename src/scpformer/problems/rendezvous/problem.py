@@ -28,6 +28,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from scpformer.dynamics.mean_elements import average_qns
 from scpformer.dynamics.orbits import (
     eci_to_rtn,
     j2_secular_rates,
@@ -257,26 +258,16 @@ def _orbit_averaged_qns(
     """One-orbit averages of both spacecraft's quasi-nonsingular elements, drift removed.
 
     Each spacecraft is averaged over ``periods[k]``, ITS OWN draconitic period, over which its
-    short-period terms average out (one truth propagation of the pair serves both grids).
-    ``u`` and ``raan`` are unwrapped and their secular drift removed at the first-order J2
-    rates of the averaged ``(a, e, i)`` themselves, so that a guess whose mean semi-major
-    axis is off does not bias its mean ``u`` by the drift that error accumulates over the
-    averaging window.
+    short-period terms average out (one truth propagation of the pair serves both grids);
+    :func:`scpformer.dynamics.mean_elements.average_qns` removes the secular drift.
     """
     grids = [np.arange(samples) * period / samples for period in periods]
     r_c, v_c = oe_to_eci(oe_c)
     r_d, v_d = oe_to_eci(oe_d)
     rtn0 = eci_to_rtn(r_c, v_c, r_d, v_d)
     res = propagate_relative(oe_c, rtn0, [0.0], t_out=np.concatenate(grids), j2=True)
-    out = []
-    for t, oe in zip(grids, (res.oe_chief[:samples], res.oe_deputy[samples:]), strict=True):
-        q = oe_to_qns(oe)  # (samples, 6): (a, u, ex, ey, i, raan)
-        mean = q.mean(axis=0)
-        raan_dot, argp_dot, M_dot = j2_secular_rates(qns_to_oe(mean))
-        mean[1] = np.mean(np.unwrap(q[:, 1]) - (argp_dot + M_dot) * t)
-        mean[5] = np.mean(np.unwrap(q[:, 5]) - raan_dot * t)
-        out.append(mean)
-    return out
+    pairs = zip(grids, (res.oe_chief[:samples], res.oe_deputy[samples:]), strict=True)
+    return [average_qns(oe_to_qns(oe), t) for t, oe in pairs]
 
 
 def osculating_initial_state(
