@@ -497,6 +497,7 @@ def propagate_roe_mean(
     j2: float = J2,
     r_e: float = R_EARTH,
     mu: float = MU_EARTH,
+    chief_is_qns: bool = False,
 ) -> FloatArray:
     """Nonlinear flow of MEAN dimensionless ROE under first-order secular J2 (any separation).
 
@@ -516,13 +517,17 @@ def propagate_roe_mean(
         Dimensionless ROE at the initial time, ``(..., 6)`` (broadcast with ``oe_chief``).
     dt
         Propagation time(s) [s], broadcast against the batch shape.
+    chief_is_qns
+        ``oe_chief`` holds the chief's quasi-nonsingular elements, used as given (no
+        validation: the fast path of the solvers' inner loops).
 
     Returns
     -------
     numpy.ndarray
         Dimensionless ROE after ``dt``, shape ``(..., 6)``.
     """
-    return _roe_flow(oe_to_qns(_chief(oe_chief)), _as_vec(roe, 6, "roe"), dt, mu, j2, r_e)
+    qc = np.asarray(oe_chief, dtype=float) if chief_is_qns else oe_to_qns(_chief(oe_chief))
+    return _roe_flow(qc, _as_vec(roe, 6, "roe"), dt, mu, j2, r_e)
 
 
 def roe_to_qns_offset(qc: FloatArray, roe: FloatArray) -> FloatArray:
@@ -562,20 +567,22 @@ def roe_flow_jacobian(
     *,
     j2: float = J2,
     step: float = 1e-7,
+    chief_is_qns: bool = False,
 ) -> tuple[FloatArray, FloatArray]:
     """:func:`propagate_roe_mean` and its Jacobian w.r.t. the initial ROE, batched.
 
     Central differences with ``step`` (dimensionless, 0.7 m at LEO): the flow is smooth (a few
     trigonometric functions of linear drifts), so the truncation error is ``O(step^2)`` and the
     Jacobian agrees with :func:`stm_j2` to ~1e-8 at zero separation (tested). The Jacobian is
-    the same for scaled ROE.
+    the same for scaled ROE. ``chief_is_qns`` as in :func:`propagate_roe_mean`.
 
     Returns
     -------
     flow, jacobian
         ROE after ``dt`` ``(..., 6)`` and ``d flow / d roe`` ``(..., 6, 6)``.
     """
-    qc = oe_to_qns(_chief(oe_chief))[..., None, :]  # probes broadcast on a new axis
+    qc = np.asarray(oe_chief, dtype=float) if chief_is_qns else oe_to_qns(_chief(oe_chief))
+    qc = qc[..., None, :]  # probes broadcast on a new axis
     roe = _as_vec(roe, 6, "roe")[..., None, :]
     dt = np.asarray(dt, dtype=float)[..., None]
     probes = np.concatenate([np.zeros((1, 6)), step * np.eye(6), -step * np.eye(6)])  # (13, 6)

@@ -149,7 +149,9 @@ def _linear_min_distance(
     geometry = drift_geometry(instance, dynamics=dynamics)
     B = dyn.B[nodes]
     dy = e + np.einsum("kij,kmj->kmi", B, u_exec - u[nodes][:, None, :])  # (K, M, 6)
-    sub = dataclasses.replace(geometry, t=geometry.t[nodes], E=geometry.E[nodes])
+    sub = dataclasses.replace(geometry, t=geometry.t[nodes], E=geometry.E[nodes],
+                              oe_nodes=geometry.oe_nodes[nodes],
+                              qns_nodes=geometry.qns_nodes[nodes])  # fmt: skip
     x_t, jac, EDPsi = sub.drift(dyn.y[nodes], np.broadcast_to(tau, (nodes.size, tau.size)))
     states = x_t[:, None] + np.einsum("ktij,kmj->kmti", jac, dy)  # (K, M, T, 6)
     return np.linalg.norm(np.einsum("ktrl,kmtl->kmtr", EDPsi, states), axis=-1)

@@ -69,7 +69,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from scpformer.dynamics.orbits import J2, propagate_kepler, propagate_mean_j2
+from scpformer.dynamics.orbits import J2, oe_to_qns, propagate_kepler, propagate_mean_j2
 from scpformer.dynamics.roe import (
     propagate_roe_mean,
     psi_matrix,
@@ -127,6 +127,8 @@ class DriftGeometry:
     j2: bool  # secular J2 (else Keplerian) mean dynamics
     dynamics: str  # "nonlinear" (mean-element flow) or "stm" (Koenig STM about the target)
     osc_rtn: CubicSpline | None  # D(t): mean ROE -> osculating RTN (nonlinear model with J2)
+    oe_nodes: np.ndarray  # (N, 6) mean target elements at t_i
+    qns_nodes: np.ndarray  # (N, 6) the same, quasi-nonsingular
 
     def rtn_map(self, t: np.ndarray) -> np.ndarray:
         """Map ``(*t.shape, 6, 6)`` from scaled mean ROE to the relative RTN state at ``t``:
@@ -159,17 +161,22 @@ class DriftGeometry:
             Psi = self.rtn_map(self.t[:, None] + tau_b)
             stm = None
         EDPsi = np.einsum("irs,ijsk->ijrk", self.E, Psi[..., :3, :])
-        oe = self.target_at(self.t)[:, None, :]
         if self.dynamics == "stm":
             if stm is None:
-                stm = (stm_j2 if self.j2 else stm_kepler)(oe, tau_b)
+                stm = self.stm(tau_b)
             return np.einsum("ijkl,il->ijk", stm, y), stm, EDPsi
-        a = self.oe0[0]
+        a, qc = self.oe0[0], self.qns_nodes[:, None, :]
         j2 = J2 if self.j2 else 0.0
+        roe = y[:, None, :] / a
         if not jacobian:
-            return a * propagate_roe_mean(oe, y[:, None, :] / a, tau_b, j2=j2), None, EDPsi
-        flow, jac = roe_flow_jacobian(oe, y[:, None, :] / a, tau_b, j2=j2)
+            flow = propagate_roe_mean(qc, roe, tau_b, j2=j2, chief_is_qns=True)
+            return a * flow, None, EDPsi
+        flow, jac = roe_flow_jacobian(qc, roe, tau_b, j2=j2, chief_is_qns=True)
         return a * flow, jac, EDPsi
+
+    def stm(self, tau: np.ndarray) -> np.ndarray:
+        """STM about the target ``Phi(t_i + tau, t_i)`` ``(N, T, 6, 6)`` for ``tau`` (N, T)."""
+        return (stm_j2 if self.j2 else stm_kepler)(self.oe_nodes[:, None, :], tau)
 
 
 def drift_geometry(
@@ -203,7 +210,8 @@ def drift_geometry(
     G = np.einsum("irs,ijsk,ijkl->ijrl", E, Psi[..., :3, :], Phi)
     use_ae = np.arange(sc.n_nodes) < sc.n_ae_to_koz
     return DriftGeometry(tau=tau, Phi=Phi, Psi=Psi, G=G, E=E, use_ae=use_ae, oe0=oe0, t=t,
-                         j2=sc.j2, dynamics=dynamics, osc_rtn=osc_rtn)  # fmt: skip
+                         j2=sc.j2, dynamics=dynamics, osc_rtn=osc_rtn, oe_nodes=oe_nodes,
+                         qns_nodes=oe_to_qns(oe_nodes))  # fmt: skip
 
 
 # ======================================================================================
@@ -294,8 +302,7 @@ def _arc_h(geometry: DriftGeometry, y: np.ndarray, tau: np.ndarray, X, q: float)
     r = np.einsum("ijrk,ijk->ijr", EDPsi, x_t)
     if X is None:
         return 1.0 - np.linalg.norm(r, axis=-1)[:, 0]
-    oe = geometry.target_at(geometry.t)[:, None, :]
-    stm = (stm_j2 if geometry.j2 else stm_kepler)(oe, np.asarray(tau)[:, None])
+    stm = geometry.stm(np.asarray(tau)[:, None])
     d, _, _, _, beta = _distance_and_margin(np.einsum("ijrk,ijkl->ijrl", EDPsi, stm), r, X, q)
     return (1.0 + beta - d)[:, 0]
 
