@@ -238,12 +238,13 @@ class PassiveSafetyProblem:
             self.sub.set_dynamics(dyn.Phi, dyn.Gamma, self.bounds.x_init, self.bounds.x_final,
                                   dyn.f)  # fmt: skip
         scale = self.config.u_trust_scale
+        a_x, a_u, c = ev.subproblem_rows(z.x, z.u)  # Eq. 17 rows, margin linearized
         self.sub.set_iterate(
             z.x,
             z.u,
-            ev.a_rows,
-            ev.c_rows,
-            1.0 + ev.beta_rows + ev.offset_rows,
+            a_x,
+            a_u,
+            c,
             mu=mu,
             w=w,
             r=r,
