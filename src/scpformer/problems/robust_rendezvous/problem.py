@@ -17,6 +17,11 @@ The final feasible solution is kept: :func:`solve` returns stage 3 when it conve
 otherwise the latest converged earlier stage, with ``extras["stage"]`` naming the stage that
 produced the trajectory; the ``status`` is always that of the requested problem (stage 3), so
 ``Solution.converged`` is true only for a verified passively safe trajectory.
+
+Dynamics. ``RobustSolverConfig.dynamics = "nonlinear"`` (default) plans in the nonlinear mean
+dynamics of :mod:`.plan_dynamics` (SCvx* relinearizes them at every iterate; the TPBVP is
+re-solved about its own solution), so that the plans hold in the truth model; ``"stm"`` is
+the paper's Eq. 1. ``extras["dynamics"]`` names the model the returned trajectory obeys.
 """
 
 from __future__ import annotations

@@ -9,9 +9,16 @@ Notation (nodes as in :mod:`.scenario`)
 * ``G_ij = E_i D Psi(t_i + tau_j) Phi(t_i + tau_j, t_i)`` (3, 6) [1/m]; the normalized
   distance of the drift sample from the target's safety ellipsoid is ``d_ij(y) = |G_ij y|_2``
   (``>= 1`` outside; ``E_i^2 = P`` of the AE or the KOZ, Sec. 4).
-* ``t* = t_i + tau_{j*}``: the drift sample where the constraint is worst,
-  ``j* = argmax_j (1 + beta_ij - d_ij)``; in the deterministic case (``beta = 0``) this is the
-  paper's minimum-separation instant ``argmin_j d_ij(y_bar_i)`` (Eq. 16).
+* ``t*``: the instant of the CONTINUOUS drift arc where the constraint is worst,
+  ``argmax_tau (1 + beta(tau) - d(tau))``, located to ``T_STAR_TOL_S`` by a golden-section
+  search around the worst sample ``argmax_j (1 + beta_ij - d_ij)``
+  (:func:`refine_worst_instant`) and evaluated as one more column next to the samples; in the
+  deterministic case (``beta = 0``) this is the paper's minimum-separation instant (Eq. 16).
+* Drift model (:class:`DriftGeometry`): the STM about the target with ``Psi`` (the paper),
+  or, with the plan's nonlinear mean dynamics, the mean-ROE flow linearized about ``y_bar_i``
+  (``G`` then holds its Jacobian) and the map ``D(t)`` from mean ROE to the OSCULATING relative
+  state (:func:`.plan_dynamics.osculating_rtn_map`) in place of ``Psi``. The flow is not
+  1-homogeneous: the rows of Eq. 17 carry ``a_hat^T y_bar - d`` (``offset_rows``).
 
 Constraint (Eqs. 2, 15-16), normalized. With ``M_i = G*^T G*`` Eq. 16 reads
 ``a_ps = M_i y_bar``, ``b_ps = sqrt(y_bar^T M_i y_bar) = d*`` and Eq. 15 is
@@ -25,11 +32,13 @@ which is the first-order expansion at ``y_bar`` of the nonlinear
 ``h_i(y) = 1 + beta_hat_i(y) - min_j d_ij(y)`` (``d`` is 1-homogeneous, so
 ``d(y_bar) = a_hat^T y_bar``).
 
-Worst sample. With ``beta_ij`` the margin of sample ``j`` (gradient ``a_hat_ij`` of
-``d_ij``), the code evaluates ``h_i = max_j (1 + beta_ij - d_ij)`` and linearizes it at
-``t*``. With the margin, the paper's ``t*`` (minimum distance of the MEAN arc) would make
-``h`` discontinuous: when two samples swap as the closest one, ``beta`` jumps from one
-gradient direction to the other, and SCvx* then rejects arbitrarily short steps (observed).
+Worst instant. With ``beta_ij`` the margin of sample ``j`` (gradient ``a_hat_ij`` of
+``d_ij``), the code evaluates ``h_i = max (1 + beta - d)`` over the samples and the refined
+instant, and linearizes it at ``t*`` (passive safety in continuous time: the 20 samples
+alone miss dips of the arc between them). With the margin, the paper's ``t*`` (minimum
+distance of the MEAN arc) would make ``h`` discontinuous: when two samples swap as the
+closest one, ``beta`` jumps from one gradient direction to the other, and SCvx* then rejects
+arbitrarily short steps (observed).
 The worst-sample reading is continuous, equal to the paper's without margin, and no weaker:
 it enforces the chance constraint at every sampled instant. The code evaluates and
 linearizes this normalized form (dimensionless; its values are Eq. 15 divided by ``b_ps``),
