@@ -7,8 +7,9 @@ node through the two-body + J2 truth propagator (``--propagator``), on a grid of
 ``--step`` seconds of each drift arc (the design instants included). Prints one line per plan
 (max violation probability over the nodes at the design instants and on the dense grid, the
 number of nodes whose violation count exceeds the one-sided 1 - 1e-4 binomial quantile at
-Delta) as it goes, then the table: per waypoint and mode, the max over plans of both maxima
-and the plans that pass.
+Delta) as it goes, then the table: per waypoint, mode and solve outcome (a solve that does not
+converge keeps the collision-avoidance stage, which is not passively safe), the max over plans
+of both maxima and the plans that pass.
 
 Usage: python benchmarks/robust_monte_carlo.py [--seeds 1-20] [--draws 2000] [--modes chance]
 """
@@ -43,7 +44,7 @@ def main() -> int:
     args = parser.parse_args()
     cfg = MonteCarloConfig(n_samples=args.draws, propagator=args.propagator,
                            dense_step_s=args.step, seed=0)  # fmt: skip
-    table: dict[tuple[str, str], list[tuple[float, float, bool]]] = {}
+    table: dict[tuple[str, str, bool], list[tuple[float, float, bool]]] = {}
     for seed in args.seeds:
         base = sample_instances(seed, 1)[0]
         for waypoint in args.waypoints:
@@ -59,19 +60,20 @@ def main() -> int:
                 bound = res.threshold()
                 over = int(np.sum(res.counts(dense=True) > bound))
                 row = (float(res.p_design.max()), float(res.p_dense.max()), over == 0)
-                table.setdefault((waypoint, mode), []).append(row)
+                table.setdefault((waypoint, mode, sol.converged), []).append(row)
                 worst = int(np.argmax(res.p_dense))
                 print(f"seed {seed:2d} {waypoint} {mode:13s} {sol.status.value:15s} "
                       f"stage={sol.extras.get('stage')} max p design {row[0]:.4f} dense "
                       f"{row[1]:.4f} (node {worst}) nodes over bound {over} "
                       f"(bound {bound}/{res.n_samples}) {time.perf_counter() - start:.0f} s",
                       flush=True)  # fmt: skip
-    print(f"\n{'waypoint':8s} {'mode':13s} {'plans':>5s} {'max p design':>12s} "
+    print(f"\n{'waypoint':8s} {'mode':13s} {'solve':9s} {'plans':>5s} {'max p design':>12s} "
           f"{'max p dense':>11s} {'pass':>6s}   (Delta = {res.delta:g})")  # fmt: skip
-    for (waypoint, mode), rows in sorted(table.items()):
+    for (waypoint, mode, converged), rows in sorted(table.items()):
         arr = np.array([r[:2] for r in rows])
         passed = sum(r[2] for r in rows)
-        print(f"{waypoint:8s} {mode:13s} {len(rows):5d} {arr[:, 0].max():12.4f} "
+        label = "converged" if converged else "not conv."
+        print(f"{waypoint:8s} {mode:13s} {label:9s} {len(rows):5d} {arr[:, 0].max():12.4f} "
               f"{arr[:, 1].max():11.4f} {passed:3d}/{len(rows):<3d}")  # fmt: skip
     return 0
 
