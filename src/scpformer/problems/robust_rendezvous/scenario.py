@@ -154,12 +154,13 @@ class RobustVerification:
     """
 
     model_residual_m: float = 1e-3  # max |x_{k+1} - Phi (x_k + B u_k)| and boundary misses [m]
+    dynamics_defect_m: float = 0.02  # max nonlinear mean-dynamics defect of a plan [m]
     safety_tol: float = 1e-3  # h_i <= safety_tol counts as safe (normalized distance) [-]
     truth_replay: bool = False  # replay the impulses through the two-body + J2 propagator
     terminal_position_m: float = 50.0  # |r(t_N) - r_f| of the replay, when replayed [m]
 
     def __post_init__(self) -> None:
-        for name in ("model_residual_m", "safety_tol", "terminal_position_m"):
+        for name in ("model_residual_m", "dynamics_defect_m", "safety_tol", "terminal_position_m"):
             object.__setattr__(
                 self, name, check_positive(f"verification.{name}", getattr(self, name))
             )
