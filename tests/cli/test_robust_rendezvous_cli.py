@@ -22,12 +22,14 @@ def test_solve_writes_npz_figure_and_monte_carlo_report(tmp_path, capsys):
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "converged" in text and "passive_safety" in text and "design level Delta" in text
+    assert "nonlinear mean elements" in text
     with np.load(out, allow_pickle=False) as data:
         assert set(data.files) == set(NPZ_FIELDS)
         assert data["roe"].shape == (101, 6) and data["dv"].shape == (100, 3)
         assert data["covariance"].shape == (100, 6, 6) and data["safety"].shape == (100,)
         assert np.all(data["safety"] >= data["safety_mean"])
-        assert np.allclose(data["rtn"][-1], [0, -750, 0, 0, 0, 0], atol=1e-6)
+        # the mean state's first-order RTN: the osculating one is the waypoint (J2 short-period)
+        assert np.allclose(data["rtn"][-1], [0, -750, 0, 0, 0, 0], atol=2.0)
         constants = json.loads(str(data["constants"]))
         assert constants["mode"] == "chance" and constants["instance"]["waypoint"] == "-T"
     assert png.read_bytes()[:8] == PNG_MAGIC

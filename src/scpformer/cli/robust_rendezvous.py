@@ -128,12 +128,19 @@ def instance_from_args(args: argparse.Namespace) -> RobustInstance:
     return dataclasses.replace(base, **changes)
 
 
+_DYNAMICS_LABEL = {
+    "nonlinear": "nonlinear mean elements (secular J2 flow, exact impulses)",
+    "stm": "linear J2 STM about the target (Koenig 2017)",
+}
+
+
 def summary_rows(solution: Solution) -> list[tuple[str, str]]:
     """Human-readable (key, value) rows of a solution."""
     ex = solution.extras
     rows = [
         ("status", solution.status.value),
         ("trajectory from stage", str(ex.get("stage"))),
+        ("dynamics model", _DYNAMICS_LABEL.get(ex.get("dynamics"), str(ex.get("dynamics")))),
         ("stages", ", ".join(f"{k}: {v}" for k, v in ex.get("stage_status", {}).items())),
         ("SCvx* iterations", str(solution.iterations)),
     ]

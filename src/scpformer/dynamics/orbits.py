@@ -45,6 +45,7 @@ __all__ = [
     "orbital_period",
     "propagate_kepler",
     "propagate_mean_j2",
+    "propagate_mean_qns",
     "qns_to_oe",
     "rtn_dcm",
     "rtn_to_eci",
@@ -477,12 +478,41 @@ def j2_secular_rates(
         Rates in rad/s with the batch shape of ``oe``.
     """
     oe = validate_oe(oe)
-    a, e, i = oe[..., 0], oe[..., 1], oe[..., 2]
-    eta = np.sqrt(1.0 - e**2)
-    n = np.sqrt(mu / a**3)
+    return _secular_rates(oe[..., 0], oe[..., 1] ** 2, np.cos(oe[..., 2]), mu, j2, r_e)
+
+
+def _secular_rates(
+    a: FloatArray, e2: FloatArray, ci: FloatArray, mu: float, j2: float, r_e: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``(raan_dot, argp_dot, M_dot)`` of :func:`j2_secular_rates` from ``a``, ``e^2``, ``cos i``
+    (no validation: the fast core of the mean propagators)."""
+    eta = np.sqrt(1.0 - e2)
     kappa = 0.75 * j2 * r_e**2 * np.sqrt(mu) / (a**3.5 * eta**4)
-    ci = np.cos(i)
+    n = np.sqrt(mu / a**3)
     return -2.0 * kappa * ci, kappa * (5.0 * ci**2 - 1.0), n + kappa * eta * (3.0 * ci**2 - 1.0)
+
+
+def propagate_mean_qns(
+    qns: FloatArray, dt: ArrayLike, mu: float = MU_EARTH, j2: float = J2, r_e: float = R_EARTH
+) -> FloatArray:
+    """Propagate MEAN quasi-nonsingular elements ``(a, u, ex, ey, i, raan)`` with secular J2.
+
+    The same model as :func:`propagate_mean_j2` in nonsingular form: ``a, i`` and ``e`` fixed,
+    ``u += (argp_dot + M_dot) dt``, ``(ex, ey)`` rotated by ``argp_dot dt``,
+    ``raan += raan_dot dt`` (angles not wrapped). Smooth in ``(ex, ey)`` through ``e = 0``,
+    which is why the nonlinear ROE flow uses it. Not validated (fast core): pass elements of
+    a bound orbit.
+    """
+    qns = np.asarray(qns, dtype=float)
+    dt = np.asarray(dt, dtype=float)
+    a, u, ex, ey, i, raan = np.moveaxis(qns, -1, 0)
+    raan_dot, argp_dot, M_dot = _secular_rates(a, ex**2 + ey**2, np.cos(i), mu, j2, r_e)
+    c, s = np.cos(argp_dot * dt), np.sin(argp_dot * dt)
+    a, i = np.broadcast_to(a, c.shape), np.broadcast_to(i, c.shape)
+    return np.stack(
+        [a, u + (argp_dot + M_dot) * dt, c * ex - s * ey, s * ex + c * ey, i, raan + raan_dot * dt],
+        axis=-1,
+    )
 
 
 def _broadcast_dt(oe: FloatArray, dt: ArrayLike) -> tuple[FloatArray, FloatArray]:

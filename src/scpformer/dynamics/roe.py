@@ -41,6 +41,8 @@ from scpformer.dynamics.orbits import (
     eci_to_rtn,
     mean_to_true,
     oe_to_eci,
+    oe_to_qns,
+    propagate_mean_qns,
     rtn_to_eci,
     validate_oe,
     wrap_angle,
@@ -50,7 +52,9 @@ from scpformer.dynamics.orbits import (
 __all__ = [
     "control_input_matrix",
     "oe_to_roe",
+    "propagate_roe_mean",
     "psi_matrix",
+    "roe_flow_jacobian",
     "roe_to_oe",
     "roe_to_rtn_exact",
     "rtn_dv_to_roe",
@@ -480,6 +484,111 @@ def stm_j2(
     Phi[..., 5, 3] = -4.0 * kt * eyi * G * S
     Phi[..., 5, 4] = 2.0 * kt * T
     return Phi
+
+
+# ----------------------------------------------------------------------------------------
+# nonlinear mean-ROE flow (secular J2) and its Jacobian
+# ----------------------------------------------------------------------------------------
+def propagate_roe_mean(
+    oe_chief: ArrayLike | OrbitalElements,
+    roe: ArrayLike,
+    dt: ArrayLike,
+    *,
+    j2: float = J2,
+    r_e: float = R_EARTH,
+    mu: float = MU_EARTH,
+    chief_is_qns: bool = False,
+) -> FloatArray:
+    """Nonlinear flow of MEAN dimensionless ROE under first-order secular J2 (any separation).
+
+    Deputy mean quasi-nonsingular elements from the chief's and the ROE (the inverse of
+    D'Amico 2010, Eq. 2.22, as in :func:`roe_to_oe`), both spacecraft propagated with their
+    own secular J2 rates (:func:`~scpformer.dynamics.orbits.propagate_mean_qns`), ROE formed
+    again. Exact in mean elements for the first-order secular J2 model; its Jacobian at zero
+    separation is the STM of Koenig et al. (2017) (:func:`stm_j2`), whose neglected
+    second-order terms (e.g. ``15/8 n a da^2 dt`` along-track) reach tens of metres per orbit
+    at kilometres of ``a da``. ``j2=0`` gives the Keplerian flow.
+
+    Parameters
+    ----------
+    oe_chief
+        Chief MEAN elements at the initial time, ``(..., 6)``.
+    roe
+        Dimensionless ROE at the initial time, ``(..., 6)`` (broadcast with ``oe_chief``).
+    dt
+        Propagation time(s) [s], broadcast against the batch shape.
+    chief_is_qns
+        ``oe_chief`` holds the chief's quasi-nonsingular elements, used as given (no
+        validation: the fast path of the solvers' inner loops).
+
+    Returns
+    -------
+    numpy.ndarray
+        Dimensionless ROE after ``dt``, shape ``(..., 6)``.
+    """
+    qc = np.asarray(oe_chief, dtype=float) if chief_is_qns else oe_to_qns(_chief(oe_chief))
+    return _roe_flow(qc, _as_vec(roe, 6, "roe"), dt, mu, j2, r_e)
+
+
+def roe_to_qns_offset(qc: FloatArray, roe: FloatArray) -> FloatArray:
+    """Deputy minus chief quasi-nonsingular elements ``(a, u, ex, ey, i, raan)`` from
+    dimensionless ROE (inverse of D'Amico 2010, Eq. 2.22; broadcasting, not validated)."""
+    sin_i = np.sin(qc[..., 4])
+    if np.any(np.abs(sin_i) < _SIN_I_MIN):
+        raise ValueError("oe_chief.i: the ROE are singular for an equatorial chief orbit")
+    d_raan = roe[..., 5] / sin_i
+    parts = (qc[..., 0] * roe[..., 0], roe[..., 1] - d_raan * np.cos(qc[..., 4]), roe[..., 2],
+             roe[..., 3], roe[..., 4], d_raan)  # fmt: skip
+    return np.stack(np.broadcast_arrays(*parts), axis=-1)
+
+
+def qns_offset_to_roe(qc: FloatArray, diff: FloatArray) -> FloatArray:
+    """Dimensionless ROE from deputy minus chief quasi-nonsingular elements (D'Amico 2010,
+    Eq. 2.22; angle differences wrapped to ``[-pi, pi)``)."""
+    d_raan = wrap_to_pi(diff[..., 5])
+    parts = (diff[..., 0] / qc[..., 0], wrap_to_pi(diff[..., 1] + d_raan * np.cos(qc[..., 4])),
+             diff[..., 2], diff[..., 3], diff[..., 4], d_raan * np.sin(qc[..., 4]))  # fmt: skip
+    return np.stack(np.broadcast_arrays(*parts), axis=-1)
+
+
+def _roe_flow(
+    qc: FloatArray, roe: FloatArray, dt: ArrayLike, mu: float, j2: float, r_e: float
+) -> FloatArray:
+    """:func:`propagate_roe_mean` from the chief's quasi-nonsingular elements (broadcasting)."""
+    qc_t = propagate_mean_qns(qc, dt, mu, j2, r_e)  # the chief once, not per deputy
+    diff = propagate_mean_qns(qc + roe_to_qns_offset(qc, roe), dt, mu, j2, r_e) - qc_t
+    return qns_offset_to_roe(qc_t, diff)
+
+
+def roe_flow_jacobian(
+    oe_chief: ArrayLike | OrbitalElements,
+    roe: ArrayLike,
+    dt: ArrayLike,
+    *,
+    j2: float = J2,
+    step: float = 1e-7,
+    chief_is_qns: bool = False,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`propagate_roe_mean` and its Jacobian w.r.t. the initial ROE, batched.
+
+    Central differences with ``step`` (dimensionless, 0.7 m at LEO): the flow is smooth (a few
+    trigonometric functions of linear drifts), so the truncation error is ``O(step^2)`` and the
+    Jacobian agrees with :func:`stm_j2` to ~1e-8 at zero separation (tested). The Jacobian is
+    the same for scaled ROE. ``chief_is_qns`` as in :func:`propagate_roe_mean`.
+
+    Returns
+    -------
+    flow, jacobian
+        ROE after ``dt`` ``(..., 6)`` and ``d flow / d roe`` ``(..., 6, 6)``.
+    """
+    qc = np.asarray(oe_chief, dtype=float) if chief_is_qns else oe_to_qns(_chief(oe_chief))
+    qc = qc[..., None, :]  # probes broadcast on a new axis
+    roe = _as_vec(roe, 6, "roe")[..., None, :]
+    dt = np.asarray(dt, dtype=float)[..., None]
+    probes = np.concatenate([np.zeros((1, 6)), step * np.eye(6), -step * np.eye(6)])  # (13, 6)
+    out = _roe_flow(qc, roe + probes, dt, MU_EARTH, j2, R_EARTH)
+    jac = (out[..., 1:7, :] - out[..., 7:13, :]) / (2.0 * step)  # (..., column j, row)
+    return out[..., 0, :], np.swapaxes(jac, -1, -2)
 
 
 # ----------------------------------------------------------------------------------------

@@ -15,9 +15,10 @@ from matplotlib.patches import Ellipse
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.io import safety_record
 from scpformer.problems.robust_rendezvous.safety import (
+    covariance_at_tstar,
     drift_geometry,
-    evaluate_safety,
     linear_model,
+    plan_safety,
 )
 
 
@@ -43,22 +44,21 @@ def plot_drift_arcs(
     the arcs pass closest and the ellipses are visible; ``None`` shows the whole transfer.
     """
     model = linear_model(instance)
-    dense = drift_geometry(instance)
-    rec = safety_record(instance, x, u)
+    geometry = drift_geometry(instance)
+    ev = plan_safety(instance, x, u, "chance")
+    cov_star = covariance_at_tstar(ev)
     rtn = model.rtn(x)
     ax.plot(rtn[:, 1], rtn[:, 0], "k.-", lw=1.2, ms=3, label="controlled (mean)")
-    y = x[:-1] + np.einsum("ikl,il->ik", model.B, u)
-    arcs = np.einsum("ijrl,ijls,is->ijr", dense.Psi[..., :3, :], dense.Phi, y)  # (N, S, 3)
+    x_arcs, _, _ = geometry.drift(ev.y, jacobian=False)  # (N, S, 6) in the plan's dynamics
+    arcs = np.einsum("ijrl,ijl->ijr", geometry.Psi[..., :3, :], x_arcs)  # (N, S, 3)
     switch = instance.scenario.n_ae_to_koz
     q = instance.uncertainty.q
-    j_star = evaluate_safety(dense, model, x, u, instance, "chance").j_star
     for i in range(0, instance.n_nodes, every):
         color = "tab:green" if i < switch else "tab:gray"
         ax.plot(arcs[i, :, 1], arcs[i, :, 0], "-", color=color, lw=0.6, alpha=0.7)
-        j = int(j_star[i])
-        Psi = dense.Psi[i, j]
-        cov = Psi[:2, :] @ rec["covariance_tstar"][i] @ Psi[:2, :].T
-        ax.add_patch(_rt_ellipse(cov, arcs[i, j], q, fc="none", ec=color, lw=0.8))
+        Psi = ev.Psi_star[i]  # at the arc's worst instant t*
+        cov = Psi[:2, :] @ cov_star[i] @ Psi[:2, :].T
+        ax.add_patch(_rt_ellipse(cov, Psi[:3] @ ev.x_star[i], q, fc="none", ec=color, lw=0.8))
     for axes, name, style in (
         (instance.scenario.ae_semi_axes_m, "AE", "tab:green"),
         (instance.scenario.koz_semi_axes_m, "KOZ", "tab:red"),

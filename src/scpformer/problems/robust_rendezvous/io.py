@@ -4,7 +4,7 @@ The rendezvous family's fields (:mod:`scpformer.problems.rendezvous.io`; N impul
 nodes): ``t``, ``roe``, ``rtn``, ``dv``, ``cost``, ``status``, ``constraint_to_go`` (here the
 Eq. 7 constraint-violation budget of the solved mode, (N+1,)), ``reward_to_go`` (Eq. 9),
 ``target_oe`` (JSON: mean elements, consistent osculating elements and relative state) and
-``constants`` (JSON: scenario, instance, mode, stage). Plus, for nodes ``0 .. N-1``:
+``constants`` (JSON: scenario, instance, mode, stage, dynamics). Plus, for nodes ``0 .. N-1``:
 
 * ``covariance`` (N, 6, 6): ``X(t_i)`` of Eq. 14 [m^2] (zeros in deterministic mode);
 * ``covariance_tstar`` (N, 6, 6): ``X(t*)``, propagated to the minimum-separation instant;
@@ -33,9 +33,8 @@ from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.safety import (
     constraint_violation_budget,
     covariance_at_tstar,
-    drift_geometry,
-    evaluate_safety,
     linear_model,
+    plan_safety,
 )
 from scpformer.scp.solution import Solution
 
@@ -46,14 +45,17 @@ NPZ_FIELDS = (
 )  # fmt: skip
 
 
-def safety_record(instance: RobustInstance, x: np.ndarray, u: np.ndarray) -> dict[str, Any]:
-    """Covariances and safety values of the chance-constrained evaluation of ``(x, u)``."""
-    geometry, model = drift_geometry(instance), linear_model(instance)
-    ev = evaluate_safety(geometry, model, x, u, instance, "chance")
+def safety_record(
+    instance: RobustInstance, x: np.ndarray, u: np.ndarray, dynamics: str = "nonlinear"
+) -> dict[str, Any]:
+    """Covariances and safety values of the chance-constrained evaluation of ``(x, u)`` in the
+    plan model ``dynamics``."""
+    model = linear_model(instance)
+    ev = plan_safety(instance, x, u, "chance", dynamics)
     return {
         "covariance": ev.X,
-        "covariance_tstar": covariance_at_tstar(geometry, ev),
-        "t_star": model.t[:-1] + geometry.tau[ev.j_star],
+        "covariance_tstar": covariance_at_tstar(ev),
+        "t_star": model.t[:-1] + ev.tau_star,
         "safety": ev.h,
         "safety_mean": ev.h_mean,
         "eq15": ev.eq15,
@@ -76,13 +78,14 @@ def save_solution(
     n = instance.n_nodes
     if x.shape != (n + 1, 6) or u.shape != (n, 3):
         raise ValueError(f"solution shapes {x.shape}, {u.shape} do not match N = {n}")
-    safety = safety_record(instance, x, u)
+    safety = safety_record(instance, x, u, solution.extras.get("dynamics", "nonlinear"))
     h = safety["safety"] if mode == "chance" else safety["safety_mean"]
     constants = {
         "scenario": instance.scenario.to_dict(),
         "instance": instance.to_dict(),
         "mode": mode,
         "stage": solution.extras.get("stage"),
+        "dynamics": solution.extras.get("dynamics"),
         "period_s": instance.target.period_s,
         "t_safety_s": instance.t_safety_s,
         "q": instance.uncertainty.q,

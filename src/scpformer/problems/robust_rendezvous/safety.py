@@ -9,9 +9,16 @@ Notation (nodes as in :mod:`.scenario`)
 * ``G_ij = E_i D Psi(t_i + tau_j) Phi(t_i + tau_j, t_i)`` (3, 6) [1/m]; the normalized
   distance of the drift sample from the target's safety ellipsoid is ``d_ij(y) = |G_ij y|_2``
   (``>= 1`` outside; ``E_i^2 = P`` of the AE or the KOZ, Sec. 4).
-* ``t* = t_i + tau_{j*}``: the drift sample where the constraint is worst,
-  ``j* = argmax_j (1 + beta_ij - d_ij)``; in the deterministic case (``beta = 0``) this is the
-  paper's minimum-separation instant ``argmin_j d_ij(y_bar_i)`` (Eq. 16).
+* ``t*``: the instant of the CONTINUOUS drift arc where the constraint is worst,
+  ``argmax_tau (1 + beta(tau) - d(tau))``, located to ``T_STAR_TOL_S`` by a golden-section
+  search around the worst sample ``argmax_j (1 + beta_ij - d_ij)``
+  (:func:`refine_worst_instant`) and evaluated as one more column next to the samples; in the
+  deterministic case (``beta = 0``) this is the paper's minimum-separation instant (Eq. 16).
+* Drift model (:class:`DriftGeometry`): the STM about the target with ``Psi`` (the paper),
+  or, with the plan's nonlinear mean dynamics, the mean-ROE flow linearized about ``y_bar_i``
+  (``G`` then holds its Jacobian) and the map ``D(t)`` from mean ROE to the OSCULATING relative
+  state (:func:`.plan_dynamics.osculating_rtn_map`) in place of ``Psi``. The flow is not
+  1-homogeneous: the rows of Eq. 17 carry ``a_hat^T y_bar - d`` (``offset_rows``).
 
 Constraint (Eqs. 2, 15-16), normalized. With ``M_i = G*^T G*`` Eq. 16 reads
 ``a_ps = M_i y_bar``, ``b_ps = sqrt(y_bar^T M_i y_bar) = d*`` and Eq. 15 is
@@ -25,11 +32,13 @@ which is the first-order expansion at ``y_bar`` of the nonlinear
 ``h_i(y) = 1 + beta_hat_i(y) - min_j d_ij(y)`` (``d`` is 1-homogeneous, so
 ``d(y_bar) = a_hat^T y_bar``).
 
-Worst sample. With ``beta_ij`` the margin of sample ``j`` (gradient ``a_hat_ij`` of
-``d_ij``), the code evaluates ``h_i = max_j (1 + beta_ij - d_ij)`` and linearizes it at
-``t*``. With the margin, the paper's ``t*`` (minimum distance of the MEAN arc) would make
-``h`` discontinuous: when two samples swap as the closest one, ``beta`` jumps from one
-gradient direction to the other, and SCvx* then rejects arbitrarily short steps (observed).
+Worst instant. With ``beta_ij`` the margin of sample ``j`` (gradient ``a_hat_ij`` of
+``d_ij``), the code evaluates ``h_i = max (1 + beta - d)`` over the samples and the refined
+instant, and linearizes it at ``t*`` (passive safety in continuous time: the 20 samples
+alone miss dips of the arc between them). With the margin, the paper's ``t*`` (minimum
+distance of the MEAN arc) would make ``h`` discontinuous: when two samples swap as the
+closest one, ``beta`` jumps from one gradient direction to the other, and SCvx* then rejects
+arbitrarily short steps (observed).
 The worst-sample reading is continuous, equal to the paper's without margin, and no weaker:
 it enforces the chance constraint at every sampled instant. The code evaluates and
 linearizes this normalized form (dimensionless; its values are Eq. 15 divided by ``b_ps``),
@@ -67,17 +76,30 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
-from scpformer.dynamics.orbits import propagate_kepler, propagate_mean_j2
-from scpformer.dynamics.roe import psi_matrix, stm_j2, stm_kepler
+from scpformer.dynamics.orbits import J2, oe_to_qns, propagate_kepler, propagate_mean_j2
+from scpformer.dynamics.roe import (
+    propagate_roe_mean,
+    psi_matrix,
+    roe_flow_jacobian,
+    stm_j2,
+    stm_kepler,
+)
 from scpformer.dynamics.uncertainty import covariance_history, propagate_covariance
 from scpformer.problems.rendezvous.problem import LinearModel
 from scpformer.problems.rendezvous.problem import linear_model as _rendezvous_linear_model
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
-from scpformer.problems.robust_rendezvous.scenario import check_mode
+from scpformer.problems.robust_rendezvous.plan_dynamics import (
+    linearize_dynamics,
+    osculating_rtn_map,
+)
+from scpformer.problems.robust_rendezvous.scenario import DYNAMICS, check_mode
 
 _TINY_DISTANCE = 1e-12  # normalized distance below which the gradient direction is undefined
 VIOLATION_TOL = 1e-3  # Eq. 7 tolerance on h: SCvx* eps_feas, 0.2 m at the KOZ [-]
+T_STAR_TOL_S = 0.5  # t* is located to this many seconds: h errs by ~h''/2 dt^2 < 1e-7 [s]
+_GOLDEN = 0.5 * (np.sqrt(5.0) - 1.0)
 
 
 # ======================================================================================
@@ -104,18 +126,80 @@ class DriftGeometry:
     """Everything about the free-drift arcs that does not depend on the iterate."""
 
     tau: np.ndarray  # (S,) drift offsets tau_j [s]
-    Phi: np.ndarray  # (N, S, 6, 6) Phi(t_i + tau_j, t_i)
+    Phi: np.ndarray  # (N, S, 6, 6) STM Phi(t_i + tau_j, t_i) about the target
     Psi: np.ndarray  # (N, S, 6, 6) Psi(t_i + tau_j)
-    G: np.ndarray  # (N, S, 3, 6) E_i D Psi Phi [1/m]
+    G: np.ndarray  # (N, S, 3, 6) E_i D Psi Phi [1/m] (the drift map of the STM model)
     E: np.ndarray  # (N, 3, 3) E_i = P^(1/2) of the guarding ellipsoid [1/m]
     use_ae: np.ndarray  # (N,) bool: node guarded by the approach ellipsoid (else the KOZ)
+    oe0: np.ndarray  # (6,) mean target elements at t_0
+    t: np.ndarray  # (N,) node times t_i [s]
+    j2: bool  # secular J2 (else Keplerian) mean dynamics
+    dynamics: str  # "nonlinear" (mean-element flow) or "stm" (Koenig STM about the target)
+    osc_rtn: CubicSpline | None  # D(t): mean ROE -> osculating RTN (nonlinear model with J2)
+    oe_nodes: np.ndarray  # (N, 6) mean target elements at t_i
+    qns_nodes: np.ndarray  # (N, 6) the same, quasi-nonsingular
+
+    def rtn_map(self, t: np.ndarray) -> np.ndarray:
+        """Map ``(*t.shape, 6, 6)`` from scaled mean ROE to the relative RTN state at ``t``:
+        ``Psi`` of the mean target (STM model), or the mean-to-osculating map ``D(t)`` of
+        :func:`.plan_dynamics.osculating_rtn_map` (nonlinear model)."""
+        if self.osc_rtn is None:
+            return psi_matrix(self.target_at(t))
+        return self.osc_rtn(t).reshape(*np.shape(t), 6, 6)
+
+    def target_at(self, t: np.ndarray) -> np.ndarray:
+        """Mean target elements at the times ``t`` [s], ``(*t.shape, 6)``."""
+        return (propagate_mean_j2 if self.j2 else propagate_kepler)(self.oe0, t)
+
+    def drift(
+        self, y: np.ndarray, tau: np.ndarray | None = None, jacobian: bool = True
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """Mean ROE along the drift arcs from ``y`` (N, 6) [m] and the maps to the ellipsoid.
+
+        ``tau`` ``None`` gives the S design samples; an ``(N,)`` array one instant per node, an
+        ``(N, T)`` array ``T`` instants per node. Returns ``x(t_i + tau)`` [m] ``(N, T, 6)``,
+        its Jacobian w.r.t. ``y_i`` ``(N, T, 6, 6)`` (``None`` when not asked for, nonlinear
+        model) and ``E_i D Psi(t_i + tau)`` ``(N, T, 3, 6)`` [1/m].
+        """
+        if tau is None:
+            Psi, stm = self.Psi, self.Phi
+            tau_b = self.tau[None, :]
+        else:
+            tau_b = np.asarray(tau, dtype=float)
+            tau_b = tau_b if tau_b.ndim == 2 else tau_b[:, None]
+            Psi = self.rtn_map(self.t[:, None] + tau_b)
+            stm = None
+        EDPsi = np.einsum("irs,ijsk->ijrk", self.E, Psi[..., :3, :])
+        if self.dynamics == "stm":
+            if stm is None:
+                stm = self.stm(tau_b)
+            return np.einsum("ijkl,il->ijk", stm, y), stm, EDPsi
+        a, qc = self.oe0[0], self.qns_nodes[:, None, :]
+        j2 = J2 if self.j2 else 0.0
+        roe = y[:, None, :] / a
+        if not jacobian:
+            flow = propagate_roe_mean(qc, roe, tau_b, j2=j2, chief_is_qns=True)
+            return a * flow, None, EDPsi
+        flow, jac = roe_flow_jacobian(qc, roe, tau_b, j2=j2, chief_is_qns=True)
+        return a * flow, jac, EDPsi
+
+    def stm(self, tau: np.ndarray) -> np.ndarray:
+        """STM about the target ``Phi(t_i + tau, t_i)`` ``(N, T, 6, 6)`` for ``tau`` (N, T)."""
+        return (stm_j2 if self.j2 else stm_kepler)(self.oe_nodes[:, None, :], tau)
 
 
-def drift_geometry(instance: RobustInstance, t_safety_s: float | None = None) -> DriftGeometry:
+def drift_geometry(
+    instance: RobustInstance, t_safety_s: float | None = None, dynamics: str = "nonlinear"
+) -> DriftGeometry:
     """Sample the drift arcs of nodes ``0 .. N-1`` (vectorized; ~5 ms for 100 x 20 samples).
 
     ``t_safety_s`` defaults to the scenario's ``T_safety``; ``0`` gives collision avoidance.
+    ``dynamics`` is the model of the drift: ``"nonlinear"`` (the mean-element flow of
+    :func:`scpformer.dynamics.roe.propagate_roe_mean`, linearized about each iterate) or
+    ``"stm"`` (the STM about the target, the paper's model).
     """
+    if dynamics not in DYNAMICS:
+        raise ValueError(f"dynamics must be one of {', '.join(DYNAMICS)}, got {dynamics!r}")
     sc = instance.scenario
     t_safety = instance.t_safety_s if t_safety_s is None else float(t_safety_s)
     tau = drift_offsets(t_safety, sc.n_safety)
@@ -125,11 +209,18 @@ def drift_geometry(instance: RobustInstance, t_safety_s: float | None = None) ->
     oe_nodes = propagate(oe0, t)  # (N, 6)
     oe_drift = propagate(oe0, t[:, None] + tau[None, :])  # (N, S, 6)
     Phi = stm(oe_nodes[:, None, :], tau[None, :])  # (N, S, 6, 6)
-    Psi = psi_matrix(oe_drift)
+    osc_rtn = osculating_rtn_map(instance) if dynamics == "nonlinear" and sc.j2 else None
+    Psi = (
+        psi_matrix(oe_drift)
+        if osc_rtn is None
+        else osc_rtn(t[:, None] + tau).reshape(t.size, tau.size, 6, 6)
+    )
     E = sc.ellipsoid_E()[:-1]
     G = np.einsum("irs,ijsk,ijkl->ijrl", E, Psi[..., :3, :], Phi)
     use_ae = np.arange(sc.n_nodes) < sc.n_ae_to_koz
-    return DriftGeometry(tau=tau, Phi=Phi, Psi=Psi, G=G, E=E, use_ae=use_ae)
+    return DriftGeometry(tau=tau, Phi=Phi, Psi=Psi, G=G, E=E, use_ae=use_ae, oe0=oe0, t=t,
+                         j2=sc.j2, dynamics=dynamics, osc_rtn=osc_rtn, oe_nodes=oe_nodes,
+                         qns_nodes=oe_to_qns(oe_nodes))  # fmt: skip
 
 
 # ======================================================================================
@@ -137,32 +228,46 @@ def drift_geometry(instance: RobustInstance, t_safety_s: float | None = None) ->
 # ======================================================================================
 @dataclass(frozen=True)
 class SafetyEvaluation:
-    """Passive-safety constraint of every node at one trajectory (see the module docstring)."""
+    """Passive-safety constraint of every node at one trajectory (see the module docstring).
 
-    h: np.ndarray  # (N,) max_j (1 + beta_ij - d_ij): <= 0 is safe with the margin
-    h_mean: np.ndarray  # (N,) 1 - d_ij at t*: the mean-state constraint (beta = 0)
+    Columns ``0 .. S-1`` are the design samples ``tau_j``; column ``S`` (when
+    ``T_safety > 0``) is the refined worst instant of the continuous arc.
+    """
+
+    h: np.ndarray  # (N,) max over the arc of (1 + beta - d): <= 0 is safe with the margin
+    h_mean: np.ndarray  # (N,) 1 - d at t*: the mean-state constraint (beta = 0)
     beta: np.ndarray  # (N,) beta_hat at t*: q sqrt(a_hat^T X a_hat), normalized margin
-    d: np.ndarray  # (N, S) normalized distances of the drift samples
-    j_star: np.ndarray  # (N,) index of t* in tau
+    d: np.ndarray  # (N, C) normalized distances of the columns (samples, then t*)
+    tau: np.ndarray  # (N, C) drift offsets of the columns [s]
+    j_star: np.ndarray  # (N,) column of t*
     a_hat: np.ndarray  # (N, 6) gradient of d at t* w.r.t. y_i
     X: np.ndarray | None  # (N, 6, 6) covariance X(t_i) of Eq. 14 (None: deterministic)
     y: np.ndarray  # (N, 6) post-maneuver states
-    rows: np.ndarray  # (N, K) drift samples linearized in the subproblem (worst first)
+    rows: np.ndarray  # (N, K) columns linearized in the subproblem (worst first)
     a_rows: np.ndarray  # (N, K, 6) their gradients a_hat_ij w.r.t. y_i
     c_rows: np.ndarray  # (N, K, 3) B_i^T a_hat_ij: gradients w.r.t. u_i
     beta_rows: np.ndarray  # (N, K) their margins beta_hat_ij
+    offset_rows: np.ndarray  # (N, K) a_hat_ij^T y_i - d_ij (0 for the linear drift map)
     grad_beta_x: np.ndarray  # (N, K, 6) d beta_ij / d x_i (zeros when not linearized)
     grad_beta_u: np.ndarray  # (N, K, 3) d beta_ij / d u_i
+    x_star: np.ndarray  # (N, 6) mean ROE at t* [m]
+    Phi_star: np.ndarray  # (N, 6, 6) d x(t*) / d y_i (the drift Jacobian at t*)
+    Psi_star: np.ndarray  # (N, 6, 6) Psi(t*)
+
+    @property
+    def tau_star(self) -> np.ndarray:
+        """``t* - t_i`` [s], (N,)."""
+        return np.take_along_axis(self.tau, self.j_star[:, None], axis=1)[:, 0]
 
     def subproblem_rows(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, ...]:
         """``(a_x, a_u, c)`` of the rows ``c - a_x^T x_i - a_u^T u_i <= zeta_i`` (Eq. 17).
 
         The first-order expansion of ``h_ij = 1 + beta_ij - d_ij`` at the reference
         ``(x, u)``: ``a_x = a_hat - grad_x beta``, ``a_u = B^T a_hat - grad_u beta`` and
-        ``c = 1 + beta - grad_x beta . x - grad_u beta . u``.
+        ``c = 1 + beta + (a_hat^T y - d) - grad_x beta . x - grad_u beta . u``.
         """
         n = u.shape[0]
-        c = 1.0 + self.beta_rows
+        c = 1.0 + self.beta_rows + self.offset_rows
         c -= np.einsum("ijk,ik->ij", self.grad_beta_x, x[:n])
         c -= np.einsum("ijk,ik->ij", self.grad_beta_u, u)
         return self.a_rows - self.grad_beta_x, self.c_rows - self.grad_beta_u, c
@@ -185,6 +290,56 @@ class SafetyEvaluation:
         return b * (1.0 - b)
 
 
+def _distance_and_margin(
+    G: np.ndarray, r: np.ndarray, X: np.ndarray | None, q: float
+) -> tuple[np.ndarray, ...]:
+    """``d = |r|``, unit ``r / d``, ``a = G^T r / d``, variance ``a^T X a`` and ``beta``."""
+    d = np.linalg.norm(r, axis=-1)
+    unit = r / np.maximum(d, _TINY_DISTANCE)[..., None]
+    a = np.einsum("ijr,ijrl->ijl", unit, G)
+    if X is None:
+        zero = np.zeros_like(d)
+        return d, unit, a, zero, zero
+    var = np.maximum(np.einsum("ijk,ikl,ijl->ij", a, X, a), 0.0)
+    return d, unit, a, var, q * np.sqrt(var)
+
+
+def _arc_h(geometry: DriftGeometry, y: np.ndarray, tau: np.ndarray, X, q: float) -> np.ndarray:
+    """``1 + beta - d`` at one drift instant per node, (N,); the margin's direction uses the
+    STM's drift map (the search only needs the location of the maximum)."""
+    x_t, _, EDPsi = geometry.drift(y, tau, jacobian=False)
+    r = np.einsum("ijrk,ijk->ijr", EDPsi, x_t)
+    if X is None:
+        return 1.0 - np.linalg.norm(r, axis=-1)[:, 0]
+    stm = geometry.stm(np.asarray(tau)[:, None])
+    d, _, _, _, beta = _distance_and_margin(np.einsum("ijrk,ijkl->ijrl", EDPsi, stm), r, X, q)
+    return (1.0 + beta - d)[:, 0]
+
+
+def refine_worst_instant(
+    geometry: DriftGeometry, y: np.ndarray, X: np.ndarray | None, q: float, j0: np.ndarray,
+    tol_s: float = T_STAR_TOL_S,
+) -> np.ndarray:  # fmt: skip
+    """Worst instant ``t* - t_i`` [s] of each continuous drift arc, (N,).
+
+    Golden-section search, vectorized over nodes, of ``max 1 + beta(tau) - d(tau)`` on
+    ``[tau_{j0-1}, tau_{j0+1}]`` around the worst design sample ``j0``, to ``tol_s``.
+    """
+    tau = geometry.tau
+    lo = tau[np.maximum(j0 - 1, 0)].astype(float)
+    hi = tau[np.minimum(j0 + 1, tau.size - 1)].astype(float)
+    c, e = hi - _GOLDEN * (hi - lo), lo + _GOLDEN * (hi - lo)
+    hc, he = _arc_h(geometry, y, c, X, q), _arc_h(geometry, y, e, X, q)
+    while np.max(hi - lo) > tol_s:
+        left = hc >= he  # the maximum lies in [lo, e]
+        hi, lo = np.where(left, e, hi), np.where(left, lo, c)
+        new = np.where(left, hi - _GOLDEN * (hi - lo), lo + _GOLDEN * (hi - lo))
+        h_new = _arc_h(geometry, y, new, X, q)
+        c, e = np.where(left, new, e), np.where(left, c, new)
+        hc, he = np.where(left, h_new, he), np.where(left, hc, h_new)
+    return np.where(hc >= he, c, e)
+
+
 def evaluate_safety(
     geometry: DriftGeometry,
     model: LinearModel,
@@ -194,15 +349,22 @@ def evaluate_safety(
     mode: str,
     n_rows: int = 1,
     margin_gradient: bool = True,
+    post_impulse: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SafetyEvaluation:
     """Eqs. 14-16 at ``(x, u)`` for every node at once; ``mode="deterministic"`` sets ``X = 0``.
+
+    The design samples of each drift arc are evaluated, and (``T_safety > 0``) the worst
+    instant of the continuous arc is located around the worst sample
+    (:func:`refine_worst_instant`) and appended as one more column, so that ``h`` is the
+    constraint at the arc's true worst instant, with its margin.
 
     Parameters
     ----------
     geometry
-        From :func:`drift_geometry` (``T_safety`` and the ellipsoids).
+        From :func:`drift_geometry` (``T_safety``, the ellipsoids and the drift model).
     model
-        Linear model of the instance (``B``, ``Phi``, ``Psi`` at the nodes).
+        Linear model of the instance (``B``, ``Phi``, ``Psi`` at the nodes; ``Phi`` also
+        propagates the covariance of Eq. 14).
     x, u
         States (N+1, 6) [m] and impulses (N, 3) [m/s].
     instance
@@ -210,33 +372,48 @@ def evaluate_safety(
     mode
         ``"deterministic"`` or ``"chance"``.
     n_rows
-        Number ``K`` of drift samples per node returned for linearization (the ``K`` worst;
+        Number ``K`` of columns per node returned for linearization (the ``K`` worst;
         1 is the paper's single constraint at ``t*``).
     margin_gradient
         Also differentiate the margin ``beta`` with respect to ``(x_i, u_i)``: through the
         direction ``a`` of the constraint gradient, the range of the navigation model and the
         Gates model. ``False`` holds ``beta`` at its reference value, as the paper's Eq. 17
         ("given beta").
+    post_impulse
+        ``(y, B)``: the post-impulse states (N, 6) [m] of the plan's dynamics and their
+        derivative w.r.t. ``u`` (N, 6, 3) [s] (nonlinear impulse map); default
+        ``y = x + B u`` with the model's ``B``. The drift arcs start from ``y``.
     """
     check_mode(mode)
     n = u.shape[0]
-    y = x[:n] + np.einsum("ikl,il->ik", model.B, u)  # (N, 6)
-    r = np.einsum("ijrl,il->ijr", geometry.G, y)  # (N, S, 3)
-    d = np.linalg.norm(r, axis=-1)  # (N, S)
-    unit = r / np.maximum(d, _TINY_DISTANCE)[..., None]
-    a = np.einsum("ijr,ijrl->ijl", unit, geometry.G)  # (N, S, 6): grad of d_ij w.r.t. y_i
-    X, beta = None, np.zeros_like(d)
-    g_x, g_u = np.zeros_like(a), np.zeros((*d.shape, 3))
+    B = model.B if post_impulse is None else post_impulse[1]
+    y_lin = x[:n] + np.einsum("ikl,il->ik", B, u)  # (N, 6)
+    y = y_lin if post_impulse is None else post_impulse[0]
+    unc = instance.uncertainty
+    X = None
     if mode == "chance":
-        unc = instance.uncertainty
         X = covariance_history(x[:n], u, model.Phi, model.B, model.Psi[:n], unc).X
-        var = np.maximum(np.einsum("ijk,ikl,ijl->ij", a, X, a), 0.0)
-        beta = unc.q * np.sqrt(var)
-        if margin_gradient:
-            g_x, g_u = _margin_gradient(model, x[:n], u, a, var, instance)
-            g_y = _direction_gradient(geometry.G, unit, d, a, X, var, unc.q)
-            g_x, g_u = g_x + g_y, g_u + np.einsum("ikl,ijk->ijl", model.B, g_y)
-    h_all = 1.0 + beta - d  # (N, S)
+    x_t, jac, EDPsi = geometry.drift(y)  # (N, S, 6), (N, S, 6, 6), (N, S, 3, 6)
+    G = np.einsum("ijrk,ijkl->ijrl", EDPsi, jac)
+    Psi, taus = geometry.Psi, np.broadcast_to(geometry.tau, (n, geometry.tau.size))
+    if geometry.tau.size > 1:
+        d, _, _, _, beta = _distance_and_margin(G, np.einsum("ijrk,ijk->ijr", EDPsi, x_t), X,
+                                                unc.q)  # fmt: skip
+        tau_star = refine_worst_instant(geometry, y, X, unc.q, np.argmax(1.0 + beta - d, axis=1))
+        xs, js, EDPsi_s = geometry.drift(y, tau_star)
+        Psi_s = geometry.rtn_map(geometry.t + tau_star)[:, None]
+        x_t, jac = np.concatenate([x_t, xs], 1), np.concatenate([jac, js], 1)
+        EDPsi = np.concatenate([EDPsi, EDPsi_s], 1)
+        G = np.einsum("ijrk,ijkl->ijrl", EDPsi, jac)
+        Psi, taus = np.concatenate([Psi, Psi_s], 1), np.concatenate([taus, tau_star[:, None]], 1)
+    r = np.einsum("ijrk,ijk->ijr", EDPsi, x_t)  # (N, C, 3)
+    d, unit, a, var, beta = _distance_and_margin(G, r, X, unc.q)
+    g_x, g_u = np.zeros_like(a), np.zeros((*d.shape, 3))
+    if X is not None and margin_gradient:
+        g_x, g_u = _margin_gradient(model, x[:n], u, a, var, instance)
+        g_y = _direction_gradient(G, unit, d, a, X, var, unc.q)
+        g_x, g_u = g_x + g_y, g_u + np.einsum("ikl,ijk->ijl", B, g_y)
+    h_all = 1.0 + beta - d  # (N, C)
     order = np.argsort(-h_all, axis=1, kind="stable")[:, : max(1, min(n_rows, d.shape[1]))]
     idx = np.arange(n)
     j_star = order[:, 0]
@@ -250,16 +427,21 @@ def evaluate_safety(
         h_mean=1.0 - d[idx, j_star],
         beta=beta[idx, j_star],
         d=d,
+        tau=taus,
         j_star=j_star,
         a_hat=a[idx, j_star],
         X=X,
         y=y,
         rows=order,
         a_rows=a_rows,
-        c_rows=np.einsum("ikl,ijk->ijl", model.B, a_rows),
+        c_rows=np.einsum("ikl,ijk->ijl", B, a_rows),
         beta_rows=pick(beta),
+        offset_rows=pick(np.einsum("ijl,il->ij", a, y_lin) - d),
         grad_beta_x=pick(g_x),
         grad_beta_u=pick(g_u),
+        x_star=x_t[idx, j_star],
+        Phi_star=jac[idx, j_star],
+        Psi_star=Psi[idx, j_star],
     )
 
 
@@ -329,12 +511,14 @@ def _margin_gradient(
     return g_x, scale[..., None] * d_var_u
 
 
-def covariance_at_tstar(geometry: DriftGeometry, ev: SafetyEvaluation) -> np.ndarray | None:
-    """``X(t*) = Phi(t*, t_i) X(t_i) Phi^T`` (Eq. 14, second line), (N, 6, 6), or None."""
+def covariance_at_tstar(ev: SafetyEvaluation) -> np.ndarray | None:
+    """``X(t*) = Phi(t*, t_i) X(t_i) Phi^T`` (Eq. 14, second line), (N, 6, 6), or None.
+
+    ``Phi`` is the drift Jacobian at ``t*`` (the STM, or the nonlinear flow's Jacobian).
+    """
     if ev.X is None:
         return None
-    Phi = geometry.Phi[np.arange(ev.j_star.size), ev.j_star]
-    return propagate_covariance(ev.X, Phi)
+    return propagate_covariance(ev.X, ev.Phi_star)
 
 
 def violation_flags(h: np.ndarray, tol: float = VIOLATION_TOL) -> np.ndarray:
@@ -351,13 +535,31 @@ def constraint_violation_budget(h: np.ndarray, tol: float = VIOLATION_TOL) -> np
     return np.append(np.cumsum(flags[::-1])[::-1], 0)
 
 
+def plan_safety(
+    instance: RobustInstance,
+    x: np.ndarray,
+    u: np.ndarray,
+    mode: str = "chance",
+    dynamics: str = "nonlinear",
+) -> SafetyEvaluation:
+    """Eqs. 14-16 of ANY trajectory ``(x, u)`` of the instance in the plan model ``dynamics``
+    (drift arcs from its post-impulse states)."""
+    model = linear_model(instance)
+    post = None
+    if dynamics != "stm":
+        dyn = linearize_dynamics(instance, model, x, u, dynamics)
+        post = (dyn.y, dyn.B)
+    geometry = drift_geometry(instance, dynamics=dynamics)
+    return evaluate_safety(geometry, model, x, u, instance, mode, post_impulse=post)
+
+
 def trajectory_violations(
     instance: RobustInstance,
     x: np.ndarray,
     u: np.ndarray,
     mode: str = "chance",
     tol: float = VIOLATION_TOL,
+    dynamics: str = "nonlinear",
 ) -> np.ndarray:
     """Eq. 7 budget of ANY trajectory ``(x, u)`` of the instance (e.g. a warm start), (N+1,)."""
-    ev = evaluate_safety(drift_geometry(instance), linear_model(instance), x, u, instance, mode)
-    return constraint_violation_budget(ev.h, tol)
+    return constraint_violation_budget(plan_safety(instance, x, u, mode, dynamics).h, tol)

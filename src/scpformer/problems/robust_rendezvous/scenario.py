@@ -34,6 +34,7 @@ from scpformer.validation import check_bool, check_finite, check_positive, known
 
 WAYPOINTS = ("+T", "-T", "+R", "-R")
 MODES = ("deterministic", "chance")
+DYNAMICS = ("nonlinear", "stm")
 _WAYPOINT_AXIS = {"+T": (0.0, 1.0, 0.0), "-T": (0.0, -1.0, 0.0), "+R": (1.0, 0.0, 0.0),
                   "-R": (-1.0, 0.0, 0.0)}  # fmt: skip
 
@@ -153,12 +154,13 @@ class RobustVerification:
     """
 
     model_residual_m: float = 1e-3  # max |x_{k+1} - Phi (x_k + B u_k)| and boundary misses [m]
+    dynamics_defect_m: float = 0.02  # max nonlinear mean-dynamics defect of a plan [m]
     safety_tol: float = 1e-3  # h_i <= safety_tol counts as safe (normalized distance) [-]
     truth_replay: bool = False  # replay the impulses through the two-body + J2 propagator
     terminal_position_m: float = 50.0  # |r(t_N) - r_f| of the replay, when replayed [m]
 
     def __post_init__(self) -> None:
-        for name in ("model_residual_m", "safety_tol", "terminal_position_m"):
+        for name in ("model_residual_m", "dynamics_defect_m", "safety_tol", "terminal_position_m"):
             object.__setattr__(
                 self, name, check_positive(f"verification.{name}", getattr(self, name))
             )
@@ -175,6 +177,7 @@ class RobustSolverConfig:
     u_trust_scale: float = 1.0  # trust region on u is r * u_trust_scale [m/s] (paper: same r)
     n_linearized: int = 3  # K: worst drift samples per node linearized in Eq. 17 (paper: 1)
     margin_gradient: bool = True  # linearize the margin beta too (paper: held at the reference)
+    dynamics: str = "nonlinear"  # plan model: mean-element flow (nonlinear) or the J2 STM (stm)
     scvx: SCvxStarParameters = field(default_factory=SCvxStarParameters)
     verification: RobustVerification = field(default_factory=RobustVerification)
 
@@ -187,9 +190,14 @@ class RobustSolverConfig:
         object.__setattr__(
             self, "margin_gradient", check_bool("margin_gradient", self.margin_gradient)
         )
+        if self.dynamics not in DYNAMICS:
+            raise ValueError(
+                f"dynamics must be one of {', '.join(DYNAMICS)}, got {self.dynamics!r}"
+            )
 
 
 __all__ = [
+    "DYNAMICS",
     "MODES",
     "WAYPOINTS",
     "RobustScenario",

@@ -4,14 +4,17 @@ Notation: nodes ``i = 0 .. N`` (see :mod:`.scenario`); variables ``X`` (N+1, 6) 
 ROE [m] and ``U = 1e3 u`` (N, 3) [mm/s] (so that ``Phi B U`` is of order metres like ``X``)::
 
     min   sum_i |u_i|_2 + mu^T zeta + w/2 |zeta|^2                    (Eq. 17, J_pen of Oguri)
-    s.t.  x_{i+1} = Phi_i x_i + Phi_i B_i u_i                 i = 0 .. N-1
+    s.t.  x_{i+1} = Phi_i x_i + Phi_i B_i u_i + f_i           i = 0 .. N-1
           x_0 = x_init,  x_N = x_f
           c_i - a_i^T x_i - e_i^T u_i <= zeta_i,  zeta >= 0   i = 0 .. N-1   (Eq. 15 / b_ps)
           |x_i - x_bar_i|_inf <= r                            i = 1 .. N-1
           |u_i - u_bar_i|_inf <= s_u r                        i = 0 .. N-1
 
 with ``a_i = a_hat_i``, ``e_i = B_i^T a_hat_i`` and ``c_i = 1 + beta_hat_i`` from
-:func:`.safety.evaluate_safety` at the reference. With ``n_rows = K > 1`` each node gets the
+:func:`.safety.evaluate_safety` at the reference. The dynamics are the STM about the target
+(``f_i = 0``) or the first-order expansion of the nonlinear mean-element flow about the
+reference, ``Phi_i`` its Jacobian and ``f_i = F(y_bar_i) - Phi_i y_bar_i`` (see
+:mod:`.problem`). With ``n_rows = K > 1`` each node gets the
 rows of its ``K`` worst drift samples, all bounded by the node's one buffer ``zeta_i``: the
 cutting-plane model ``max_k`` of the linearizations of ``h_i = max_j h_ij``, which anticipates
 a switch of ``t*`` to a neighbouring sample (``K = 1`` is Eq. 17 as printed).
@@ -82,6 +85,7 @@ class SafetySubproblem:
         P = cp.Parameter
         self.phi = P((n, 36), name="Phi")  # row-major Phi_i
         self.gamma = P((n, 18), name="Phi_B")  # row-major Phi_i B_i / U_SCALE
+        self.f = P((n, 6), name="f")  # affine term of linearized nonlinear dynamics [m]
         self.x_init = P(6, name="x_init")
         self.x_final = P(6, name="x_f")
         self.a_x = P((n * k, 6), name="a_hat")  # gradients of d_ij w.r.t. x_i [1/m]
@@ -98,6 +102,7 @@ class SafetySubproblem:
     def _build(self) -> cp.Problem:
         X, U, n, term = self.X, self.U, self.n_nodes, self.term
         dynamics = batched_matvec(self.phi, X[:-1], 6, 6) + batched_matvec(self.gamma, U, 6, 3)
+        dynamics = dynamics + self.f
         node = np.repeat(np.arange(n), self.n_rows)  # row -> node, K rows per node
         X_rows, U_rows = (X[node, :], U[node, :]) if self.n_rows > 1 else (X[:n], U)
         safety = (
@@ -130,12 +135,19 @@ class SafetySubproblem:
 
     # -- parameter updates ---------------------------------------------------------------
     def set_dynamics(
-        self, Phi: np.ndarray, Gamma: np.ndarray, x_init: np.ndarray, x_final: np.ndarray
+        self,
+        Phi: np.ndarray,
+        Gamma: np.ndarray,
+        x_init: np.ndarray,
+        x_final: np.ndarray,
+        f: np.ndarray | None = None,
     ) -> None:
-        """Write ``Phi_i`` (N, 6, 6), ``Phi_i B_i`` (N, 6, 3) [s] and the boundary ROE [m]."""
+        """Write ``Phi_i`` (N, 6, 6), ``Phi_i B_i`` (N, 6, 3) [s], the boundary ROE [m] and the
+        affine terms ``f_i`` (N, 6) [m] (zeros when ``None``)."""
         n = self.n_nodes
         self.phi.value = np.asarray(Phi, dtype=float).reshape(n, 36)
         self.gamma.value = np.asarray(Gamma, dtype=float).reshape(n, 18) / U_SCALE
+        self.f.value = np.zeros((n, 6)) if f is None else np.asarray(f, dtype=float)
         self.x_init.value = np.asarray(x_init, dtype=float)
         self.x_final.value = np.asarray(x_final, dtype=float)
 
