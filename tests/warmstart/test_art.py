@@ -13,10 +13,14 @@ from scpformer.data.rendezvous_family import sequence_fields
 from scpformer.problems.rendezvous import linear_model, sample_instances, solve
 from scpformer.problems.robust_rendezvous import RobustInstance, solve_tpbvp, trajectory_violations
 from scpformer.problems.robust_rendezvous.safety import linear_model as robust_linear_model
+from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig
 from scpformer.warmstart import AcceptanceCheck, ArtWarmStart, generate
 from scpformer.warmstart.families import art_family
 
 N = 100
+
+
+STM = RobustSolverConfig(dynamics="stm")  # the robust model ART propagates with
 
 
 @pytest.fixture(scope="module")
@@ -28,8 +32,10 @@ def rendezvous():
 
 @pytest.fixture(scope="module")
 def robust():
+    # The TPBVP in the STM model, the model ART's Algorithm 2 propagates with (the solve
+    # itself plans in the nonlinear mean dynamics by default and relinearizes)
     instance = RobustInstance()
-    return instance, solve_tpbvp(instance)
+    return instance, solve_tpbvp(instance, STM)
 
 
 @pytest.fixture(scope="module")
@@ -145,7 +151,7 @@ def test_guess_batch_generates_every_instance_as_one_batch(rendezvous, norm):
 def test_rejected_guess_falls_back_to_the_convex_warm_start(robust, norm):
     instance, tpbvp = robust
     idle = ReplayModel(norm.encode("action", np.zeros((1, N, 3))))  # never burns: E_R = -1
-    result = ArtWarmStart(idle, norm, family="robust-rendezvous").guess(instance)
+    result = ArtWarmStart(idle, norm, family="robust-rendezvous", config=STM).guess(instance)
     record = result.record
     assert record.source == "art" and not record.accepted
     assert record.fallback_source == "tpbvp" and record.used == "tpbvp"
@@ -160,11 +166,11 @@ def test_replayed_tpbvp_is_accepted_when_safe_enough_and_rejected_by_a_stricter_
     u = tpbvp.trajectory.u[None]
     budget = trajectory_violations(instance, tpbvp.trajectory.x, tpbvp.trajectory.u)[0]
     loose = AcceptanceCheck(e_c=(0.0, float(budget)))
-    accepted = ArtWarmStart(replay_model(norm, u), norm, family="robust-rendezvous",
+    accepted = ArtWarmStart(replay_model(norm, u), norm, family="robust-rendezvous", config=STM,
                             acceptance=loose).guess(instance)  # fmt: skip
     assert accepted.record.accepted and accepted.record.details["E_R"] == pytest.approx(0.0)
     assert accepted.record.details["E_C"] == budget
-    strict = ArtWarmStart(replay_model(norm, u), norm, family="robust-rendezvous")
+    strict = ArtWarmStart(replay_model(norm, u), norm, family="robust-rendezvous", config=STM)
     rejected = strict.guess(instance)  # default check: E_C <= 2 < budget
     assert not rejected.record.accepted and rejected.record.fallback_source == "tpbvp"
 
@@ -236,12 +242,14 @@ def test_from_checkpoint_wraps_the_checkpoints_model_frame_and_family(monkeypatc
     def load_checkpoint(path, *, family=None, frame=None, kind=None, device="cpu"):
         asked.update(path=path, family=family, frame=frame)
         return types.SimpleNamespace(model=model, normalization=norm, frame="roe",
-                                     family="robust-rendezvous")  # fmt: skip
+                                     family="robust-rendezvous", config=STM)  # fmt: skip
 
     fake = types.ModuleType("scpformer.train.checkpoint")
     fake.load_checkpoint = load_checkpoint
     monkeypatch.setitem(sys.modules, "scpformer.train.checkpoint", fake)
-    ws = ArtWarmStart.from_checkpoint("RUN", family="robust-rendezvous", acceptance=None)
+    ws = ArtWarmStart.from_checkpoint(
+        "RUN", family="robust-rendezvous", config=STM, acceptance=None
+    )
     assert asked == {"path": "RUN", "family": "robust-rendezvous", "frame": None}
     assert ws.frame == "roe" and ws.family == "robust-rendezvous"
     result = ws.guess(instance)
@@ -281,6 +289,6 @@ def test_from_checkpoint_takes_a_loaded_checkpoint_and_checks_its_family(rendezv
     ws = ArtWarmStart.from_checkpoint(ckpt, family="rendezvous", rtg=-cvx.cost)
     assert np.abs(ws.guess(instance).trajectory.x - cvx.trajectory.x).max() < 1e-8
     with pytest.raises(ValueError, match="a rendezvous checkpoint, not robust-rendezvous"):
-        ArtWarmStart.from_checkpoint(ckpt, family="robust-rendezvous")
+        ArtWarmStart.from_checkpoint(ckpt, family="robust-rendezvous", config=STM)
     with pytest.raises(ValueError, match="holds no ART normalization"):
         ArtWarmStart.from_checkpoint(types.SimpleNamespace(**{**vars(ckpt), "normalization": None}))

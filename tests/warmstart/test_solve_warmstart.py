@@ -99,7 +99,7 @@ def test_as_provider_maps_names_results_and_trajectories_and_refuses_the_rest(in
 
 
 def test_robust_solve_from_art_records_it_and_keeps_the_tpbvp_as_fallback_stage(norm):
-    instance = RobustInstance()
+    instance = RobustInstance(waypoint="-T")
     tpbvp = solve_tpbvp(instance)
     provider = ArtWarmStart(replay_model(norm, tpbvp.trajectory.u[None]), norm,
                             family="robust-rendezvous", mode="deterministic",
@@ -115,7 +115,7 @@ def test_robust_solve_from_art_records_it_and_keeps_the_tpbvp_as_fallback_stage(
 
 
 def test_robust_rejected_art_falls_back_to_ps_cvx(norm):
-    instance = RobustInstance()
+    instance = RobustInstance(waypoint="-T")
     idle = ReplayModel(norm.encode("action", np.zeros((1, N, 3))))
     provider = ArtWarmStart(idle, norm, family="robust-rendezvous", mode="deterministic")
     from_art = solve_robust(instance, mode="deterministic", warmstart=provider)
@@ -128,7 +128,7 @@ def test_robust_rejected_art_falls_back_to_ps_cvx(norm):
 
 
 def test_robust_tpbvp_provider_records_the_eq7_budget_of_cvx():
-    instance = RobustInstance()
+    instance = RobustInstance(waypoint="-T")
     chance = RobustTpbvpWarmStart(mode="chance").guess(instance).record
     deterministic = RobustTpbvpWarmStart(mode="deterministic").guess(instance).record
     assert chance.source == "tpbvp" and chance.constraint_to_go >= deterministic.constraint_to_go

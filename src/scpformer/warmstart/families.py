@@ -16,7 +16,7 @@ A :class:`Batch` holds the instances' matrices stacked, so that the generation l
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -156,7 +156,7 @@ class _RobustGroup:
     """Instances sharing one uncertainty model: their drift geometry, stacked per node."""
 
     instance: RobustInstance  # representative (supplies the uncertainty model)
-    G: np.ndarray  # (b, N, S, 3, 6) E_i D Psi Phi of each instance's drift arcs
+    geometry: tuple[DriftGeometry, ...]  # each instance's drift arcs (as its solve sees them)
 
 
 @dataclass(frozen=True)
@@ -176,11 +176,11 @@ class RobustArtFamily:
         models = [robust_linear_model(instance) for instance in instances]
         bounds = [boundary(instance, model) for instance, model in zip(instances, models,
                                                                           strict=True)]  # fmt: skip
-        geometry = [drift_geometry(instance).G for instance in instances]
+        geometry = [drift_geometry(instance) for instance in instances]
         groups = []
         for idx, _ in _grouped([instance.uncertainty for instance in instances]):
-            G = np.stack([geometry[i] for i in idx])
-            groups.append((idx, _RobustGroup(instances[idx[0]], G)))
+            group = _RobustGroup(instances[idx[0]], tuple(geometry[i] for i in idx))
+            groups.append((idx, group))
         x0 = np.stack([b.x_init for b in bounds])
         x_target = np.stack([b.x_final for b in bounds])
         return _stack(instances, models, x0, x_target, groups)
@@ -194,20 +194,12 @@ class RobustArtFamily:
         """
         flags = np.zeros(x.shape[0], dtype=int)
         for idx, group in batch.groups:
-            model = LinearModel(
-                t=np.zeros(idx.size + 1),
-                oe=np.zeros((idx.size + 1, 6)),
-                Phi=batch.Phi[idx, k],
-                B=batch.B[idx, k],
-                Psi=batch.Psi[idx, k],
-            )
-            G = group.G[:, k]  # (b, S, 3, 6)
-            geometry = DriftGeometry(tau=np.zeros(G.shape[1]), Phi=np.zeros(0),
-                                     Psi=np.zeros(0), G=G, E=np.zeros(0),
-                                     use_ae=np.zeros(0, dtype=bool))  # fmt: skip
-            ev = evaluate_safety(geometry, model, x[idx], u[idx], group.instance, self.mode,
-                                 margin_gradient=False)  # fmt: skip
-            flags[idx] = violation_flags(ev.h, VIOLATION_TOL)
+            for i, geometry in zip(idx, group.geometry, strict=True):
+                model = LinearModel(t=np.zeros(2), oe=np.zeros((2, 6)), Phi=batch.Phi[[i], k],
+                                    B=batch.B[[i], k], Psi=batch.Psi[[i], k])  # fmt: skip
+                ev = evaluate_safety(_node(geometry, k), model, x[[i]], u[[i]], group.instance,
+                                     self.mode, margin_gradient=False)  # fmt: skip
+                flags[i] = violation_flags(ev.h, VIOLATION_TOL)[0]
         return flags
 
     def trajectory_ctg(self, instance: RobustInstance, model: LinearModel, x: np.ndarray,
@@ -218,6 +210,12 @@ class RobustArtFamily:
     def fallback(self, config: Any = None) -> WarmStart:
         """The convex TPBVP (the robust paper's CVX warm start and ``J_CVX``)."""
         return RobustTpbvpWarmStart(config, self.mode)
+
+
+def _node(geometry: DriftGeometry, k: int) -> DriftGeometry:
+    """The drift geometry of node ``k`` alone (every per-node array sliced to ``[k:k+1]``)."""
+    per_node = ("Phi", "Psi", "G", "E", "use_ae", "t", "oe_nodes", "qns_nodes")
+    return replace(geometry, **{name: getattr(geometry, name)[k : k + 1] for name in per_node})
 
 
 def art_family(name: str, mode: str = "chance") -> RendezvousArtFamily | RobustArtFamily:
