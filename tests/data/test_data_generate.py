@@ -77,7 +77,6 @@ def test_rerunning_a_finished_dataset_solves_nothing(tmp_path):
 KILLED_RUN = textwrap.dedent(
     """
     import sys
-    sys.path.insert(0, {here!r})
     from toy_families import ToyFamily
     from scpformer.data.generate import GenerateConfig, generate
 
@@ -90,9 +89,13 @@ KILLED_RUN = textwrap.dedent(
 
 def test_a_run_killed_mid_shard_resumes_to_the_same_bytes(tmp_path):
     script = tmp_path / "killed_run.py"
-    script.write_text(KILLED_RUN.format(here=str(HERE)))
+    script.write_text(KILLED_RUN)
     out = tmp_path / "ds"
-    proc = subprocess.Popen([sys.executable, str(script), str(out)], start_new_session=True)
+    path = os.pathsep.join(filter(None, [str(HERE), os.environ.get("PYTHONPATH", "")]))
+    env = {**os.environ, "PYTHONPATH": path}  # the script imports the toy families beside us
+    proc = subprocess.Popen(
+        [sys.executable, str(script), str(out)], start_new_session=True, env=env
+    )
     first = out / storage.shard_name(0)
     deadline = time.monotonic() + 60
     while not first.exists() and time.monotonic() < deadline and proc.poll() is None:
