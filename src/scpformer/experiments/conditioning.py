@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
 from scpformer.data.splits import load_splits
 from scpformer.data.storage import ShardedSamples
 from scpformer.experiments import report as rep
@@ -67,8 +66,7 @@ class ConditioningSolver(ModelSolver):
         from scpformer.warmstart.art import generate
         from scpformer.warmstart.families import RendezvousArtFamily
 
-        config = RendezvousDataConfig.from_dict(self.data_config)
-        instance = instance_from_theta(task.theta, config.scenario)
+        instance = self.instance(task.theta)
         nc, nr = len(task.ctg_requested), len(task.cost_requested)
         adapter = RendezvousArtFamily()
         batch = adapter.batch([instance] * (nc + nr))

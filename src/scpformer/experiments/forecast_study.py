@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
 from scpformer.experiments import report as rep
 from scpformer.experiments.forecast import ForecastMetrics, forecast_metrics
 from scpformer.experiments.runner import (
@@ -126,8 +125,7 @@ class ForecastSolver(ModelSolver):
         from scpformer.warmstart.art import generate
         from scpformer.warmstart.families import RendezvousArtFamily
 
-        config = RendezvousDataConfig.from_dict(self.data_config)
-        instance = instance_from_theta(task.theta, config.scenario)
+        instance = self.instance(task.theta)
         adapter = RendezvousArtFamily()
         batch = adapter.batch([instance])
         row: dict[str, Any] = {

@@ -322,6 +322,13 @@ class ModelSolver:
         torch.set_num_threads(1)
         self.models = [load_checkpoint(p, family=self.family) for p in self.checkpoints]
 
+    def instance(self, theta: np.ndarray) -> Any:
+        """The rendezvous instance of ``theta`` in the dataset's scenario."""
+        from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
+
+        config = RendezvousDataConfig.from_dict(self.data_config)
+        return instance_from_theta(theta, config.scenario)
+
 
 def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
     """The row of an instance whose work did not return (error, timeout, crash)."""

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.data.rendezvous_family import RendezvousDataConfig, instance_from_theta
+from scpformer.data.rendezvous_family import RendezvousDataConfig
 from scpformer.experiments import report as rep
 from scpformer.experiments.runner import (
     KEY,
@@ -107,7 +107,7 @@ class WarmstartSolver(ModelSolver):
         )
 
         config = RendezvousDataConfig.from_dict(self.data_config)
-        instance = instance_from_theta(task.theta, config.scenario)
+        instance = self.instance(task.theta)
         guesses = {
             kind: RendezvousConvexWarmStart(kind, config.solver).guess(instance)
             for kind in WARMSTARTS[:2]
