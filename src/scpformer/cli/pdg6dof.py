@@ -71,8 +71,30 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--plot", type=Path, help="write a trajectory figure to this .png, .pdf or .svg file"
     )
+    group = parser.add_argument_group("warm start")
+    group.add_argument(
+        "--warmstart",
+        choices=("straight_line", "tscvx"),
+        default="straight_line",
+        help="straight_line, or tscvx: T-SCvx (Algorithm 2) with the networks of --model "
+        "(default: straight_line)",
+    )
+    group.add_argument("--model", type=Path, metavar="RUN", help="T-SCvx training run folder")
     add_config_arguments(parser)
     parser.set_defaults(handler=run_solve)
+
+
+def warmstart_from_args(args: argparse.Namespace) -> object:
+    """``"straight_line"`` or the T-SCvx provider of ``--warmstart tscvx --model RUN``."""
+    if args.warmstart != "tscvx":
+        if args.model is not None:
+            raise ValueError("--model: used with --warmstart tscvx only")
+        return args.warmstart
+    if args.model is None:
+        raise ValueError("--warmstart tscvx needs --model RUN (a T-SCvx training run folder)")
+    from scpformer.warmstart.tscvx import TscvxWarmStart
+
+    return TscvxWarmStart.from_run(args.model)
 
 
 def print_summary(solution: Solution, instance: PDGInstance) -> None:
@@ -80,6 +102,8 @@ def print_summary(solution: Solution, instance: PDGInstance) -> None:
     rows = [("status", solution.status.value), ("iterations", str(solution.iterations))]
     if solution.message:
         rows.append(("message", solution.message))
+    if "tscvx" in solution.extras:
+        rows += tscvx_rows(solution.extras)
     if solution.trajectory is not None:
         x, tf = solution.trajectory.x, float(solution.trajectory.p[0])
         rows += [
@@ -109,6 +133,20 @@ def print_summary(solution: Solution, instance: PDGInstance) -> None:
         print(f"{key:<{width}}  {value}")
 
 
+def tscvx_rows(extras: dict) -> list[tuple[str, str]]:
+    """What the T-SCvx run did: guess, rows kept, repairs, fallback."""
+    log, record = extras["tscvx"], extras.get("warmstart", {})
+    kept = log["rows_kept"]
+    rows = [
+        ("T-SCvx guess", f"{record.get('used', '-')} ({record.get('reason', '')})"),
+        ("T-SCvx rows kept", f"median {np.median(kept):.0f} per solve" if kept else "-"),
+        ("T-SCvx repairs", str(sum(log["repairs"]))),
+    ]
+    if log["fallback"]:
+        rows.append(("T-SCvx fallback", f"{log['fallback']} ({log['fallback_reason']})"))
+    return rows
+
+
 def history_plot_path(plot: Path) -> Path:
     """Where the SCvx history figure goes next to ``--plot`` (same format)."""
     return plot.with_name(f"{plot.stem}_history{plot.suffix}")
@@ -119,7 +157,7 @@ def run_solve(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     history = history_plot_path(args.plot) if args.plot else None
     check_solve_outputs(args.out, args.plot, history)
-    solution = solve(instance, config)
+    solution = solve(instance, config, guess=warmstart_from_args(args))
     print_summary(solution, instance)
     if solution.trajectory is not None:
         if args.out:

@@ -42,6 +42,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -183,17 +184,23 @@ def update_trust_radius(eta: float, rho: float, params: SCvxParameters) -> tuple
     return float(np.clip(eta, params.eta_lb, params.eta_ub)), True
 
 
+RadiusUpdate = Callable[[float, float, SCvxParameters], tuple[float, bool]]
+
+
 def solve_scvx(
     problem: ConvexifiedProblem,
     guess: Trajectory,
     params: SCvxParameters | None = None,
     eta_init: float | None = None,
+    radius_update: RadiusUpdate | None = None,
 ) -> Solution:
     """Run SCvx from ``guess``; ``eta_init`` overrides ``params.eta_init`` (e.g. T-SCvx's 0.01).
 
     ``params.iter_max`` counts subproblem solves, second-order corrections included; every
-    solve is one record of the history.
+    solve is one record of the history. ``radius_update(eta, rho, params) -> (eta, accepted)``
+    replaces Eq. 15 (:func:`update_trust_radius`), e.g. by T-SCvx's Eq. 22.
     """
+    radius_update = radius_update or update_trust_radius
     params = params or SCvxParameters()
     start = time.perf_counter()
     eta = params.eta_init if eta_init is None else eta_init
@@ -230,7 +237,7 @@ def solve_scvx(
         if math.isnan(rho) or abs(delta_L) <= 1e-12 * max(1.0, abs(J_bar)):
             accepted = True  # the subproblem predicts no change: z_bar is stationary
         else:
-            eta, accepted = update_trust_radius(eta, rho, params)
+            eta, accepted = radius_update(eta, rho, params)
         history.append(
             _record(
                 len(history) + 1, accepted, cand, ev, J, J_bar, z_bar, eta_used, problem, t_iter

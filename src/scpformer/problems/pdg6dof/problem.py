@@ -20,7 +20,11 @@ from scpformer.dynamics import powered_descent as pd
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.guess import straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.problems.pdg6dof.subproblem import compiled_subproblem, trust_region_scales
+from scpformer.problems.pdg6dof.subproblem import (
+    SubproblemSolution,
+    compiled_subproblem,
+    trust_region_scales,
+)
 from scpformer.scp.conic import SOLVED, start_cold
 from scpformer.scp.discretization import FOHDiscretization, foh_discretize
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
@@ -163,22 +167,26 @@ class PDGProblem:
         """One conic solve with the trust region of radius ``eta`` (soft or hard, see config)."""
         weight = self.config.prox_weight / eta**2
         box = SOFT_BOX_FACTOR * eta if weight > 0.0 else eta
-        sol = self.subproblem.solve(eta, lambda_, solver, box=box, soft_weight=weight)
-        if sol.status not in SOLVED or sol.x is None:
-            return Candidate(None, np.nan, np.nan, np.nan, sol.status, sol.solve_time, False)
-        virtual_max = max(float(np.abs(sol.nu).max()), float(sol.buffers.max()))
-        return Candidate(
-            trajectory=Trajectory(x=sol.x, u=sol.u, p=np.array([sol.sigma])),
-            linear_cost=sol.linear_cost,
-            virtual_norm=float(np.abs(sol.nu).sum() + sol.buffers.sum()),
-            virtual_max=virtual_max,
-            status=sol.status,
-            solver_time=sol.solve_time,
-            ok=True,
-        )
+        return candidate(self.subproblem.solve(eta, lambda_, solver, box=box, soft_weight=weight))
 
     def verify(self, z: Trajectory) -> Verification:
         return verify_trajectory(self.instance, z, self.config)
+
+
+def candidate(sol: SubproblemSolution) -> Candidate:
+    """The SCvx candidate of a subproblem solution (failed solves keep their status)."""
+    if sol.status not in SOLVED or sol.x is None:
+        return Candidate(None, np.nan, np.nan, np.nan, sol.status, sol.solve_time, False)
+    virtual_max = max(float(np.abs(sol.nu).max()), float(sol.buffers.max()))
+    return Candidate(
+        trajectory=Trajectory(x=sol.x, u=sol.u, p=np.array([sol.sigma])),
+        linear_cost=sol.linear_cost,
+        virtual_norm=float(np.abs(sol.nu).sum() + sol.buffers.sum()),
+        virtual_max=virtual_max,
+        status=sol.status,
+        solver_time=sol.solve_time,
+        ok=True,
+    )
 
 
 def propagate(
@@ -296,7 +304,9 @@ def solve(
     guess
         Initial guess: a :class:`Trajectory`, a warm start provider (:mod:`scpformer.warmstart`),
         its ``WarmStartResult`` or ``"straight_line"``; default the straight-line guess. A
-        provider's record is returned in ``extras["warmstart"]``.
+        provider's record is returned in ``extras["warmstart"]``. A
+        :class:`~scpformer.warmstart.tscvx.TscvxWarmStart` runs T-SCvx (Algorithm 2,
+        :func:`~scpformer.problems.pdg6dof.tscvx.solve_tscvx`) instead of SCvx.
     eta_init
         Initial trust radius overriding ``config.scvx.eta_init`` (T-SCvx uses 0.01).
 
@@ -326,9 +336,13 @@ def solve(
         return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
     from scpformer.warmstart.base import as_provider
     from scpformer.warmstart.convex import StraightLineWarmStart
+    from scpformer.warmstart.tscvx import TscvxWarmStart
 
     named = {"straight_line": lambda: StraightLineWarmStart(config.n_nodes)}
-    result = as_provider(guess, named).guess(instance)
+    provider = as_provider(guess, named)
+    if isinstance(provider, TscvxWarmStart):  # the predicted tight rows too: Algorithm 2
+        return provider.solve(instance, config, eta_init=eta_init)
+    result = provider.guess(instance)
     if result.trajectory is None:
         raise ValueError(f"guess: the warm start produced no trajectory ({result.record.reason})")
     checked = check_trajectory("guess", result.trajectory, default)

@@ -134,6 +134,24 @@ class PDGSubproblem:
         ones = np.ones((self.n_nodes, 1))
         terminal_q = [6, 7, 8, 9] if self.fix_roll else [8, 9]
         terminal_w = [10, 11, 12] if self.fix_roll else [11, 12]
+        self.inequalities = {  # one (N,) constraint per name of constraints.CONSTRAINT_NAMES
+            "mass": X[:, 13] >= self.m_dry,  # 5a
+            "glideslope": cp.multiply(self.tan_gs, cp.norm(X[:, 1:3], 2, axis=1)) <= X[:, 0],
+            "tilt": cp.norm(X[:, 8:10], 2, axis=1) <= self.tilt_bound,  # 5c
+            "omega": cp.norm(X[:, 10:13], 2, axis=1) <= self.omega_max,  # 5d
+            "thrust_min": self.T_min - cp.sum(cp.multiply(self.thrust_dir, U), axis=1)
+            <= self.buffers,  # 6a lower, linearized about u_ref with the virtual buffer
+            "thrust_max": thrust <= self.T_max,  # 6a upper
+            "gimbal": cp.multiply(self.cos_delta, thrust) <= U[:, 0],  # 6b
+        }
+        self.trust_box = [  # the hard trust region (a far safeguard under the soft one)
+            X - self.x_ref <= ones @ self.eta_x[None, :],
+            self.x_ref - X <= ones @ self.eta_x[None, :],
+            U - self.u_ref <= ones @ self.eta_u[None, :],
+            self.u_ref - U <= ones @ self.eta_u[None, :],
+            sigma - self.sigma_ref <= self.eta_sigma,
+            self.sigma_ref - sigma <= self.eta_sigma,
+        ]
         constraints = [
             *dynamics,
             X[0] == self.x0,
@@ -141,21 +159,10 @@ class PDGSubproblem:
             X[-1, 3:6] == self.v_f,
             X[-1, terminal_q] == (np.array([1.0, 0, 0, 0])[[t - 6 for t in terminal_q]]),
             X[-1, terminal_w] == 0.0,
-            X[:, 13] >= self.m_dry,  # 5a
-            cp.multiply(self.tan_gs, cp.norm(X[:, 1:3], 2, axis=1)) <= X[:, 0],  # 5b
-            cp.norm(X[:, 8:10], 2, axis=1) <= self.tilt_bound,  # 5c
-            cp.norm(X[:, 10:13], 2, axis=1) <= self.omega_max,  # 5d
-            self.T_min - cp.sum(cp.multiply(self.thrust_dir, U), axis=1) <= self.buffers,  # 6a lo
-            thrust <= self.T_max,  # 6a upper
-            cp.multiply(self.cos_delta, thrust) <= U[:, 0],  # 6b
+            *self.inequalities.values(),
             sigma >= self.tf_bounds[0],
             sigma <= self.tf_bounds[1],
-            X - self.x_ref <= ones @ self.eta_x[None, :],
-            self.x_ref - X <= ones @ self.eta_x[None, :],
-            U - self.u_ref <= ones @ self.eta_u[None, :],
-            self.u_ref - U <= ones @ self.eta_u[None, :],
-            sigma - self.sigma_ref <= self.eta_sigma,
-            self.sigma_ref - sigma <= self.eta_sigma,
+            *self.trust_box,
         ]
         penalty = cp.sum(cp.abs(self.nu)) + cp.sum(self.buffers)
         cost = -X[-1, 13] + self.lambda_ * penalty
@@ -257,6 +264,19 @@ class PDGSubproblem:
         :func:`trust_region_scales`. A soft subproblem also adds
         ``soft_weight sum_i ((z_i - z_bar_i) / scale_i)^2`` to the cost.
         """
+        self.set_trust_region(eta, lambda_, box, soft_weight)
+        call = solve_timed(self.problem, solver, reuse=True)
+        if not call.solved or self.X.value is None:
+            return failed_solution(call.status, call.wall_time, call.solver_time)
+        return self.solution(
+            self.X.value, self.U.value, float(self.sigma.value), self.nu.value,
+            self.buffers.value, lambda_, call.status, call.solver_time, call.wall_time,
+        )  # fmt: skip
+
+    def set_trust_region(
+        self, eta: float, lambda_: float, box: float | None = None, soft_weight: float = 0.0
+    ) -> None:
+        """Write the trust region (box radius ``box``, default ``eta``; soft weight) and lambda."""
         box = eta if box is None else box
         self.eta_x.value = box * self.scale_x
         self.eta_u.value = box * self.scale_u
@@ -264,21 +284,32 @@ class PDGSubproblem:
         self.lambda_.value = lambda_
         if self.soft:
             self._set_soft_weights(soft_weight)
-        call = solve_timed(self.problem, solver, reuse=True)
-        if not call.solved or self.X.value is None:
-            return _failed(call.status, call.wall_time, call.solver_time)
-        nu, buffers = self.nu.value, np.maximum(self.buffers.value, 0.0)
-        linear_cost = -self.X.value[-1, 13] + lambda_ * (np.abs(nu).sum() + buffers.sum())
+
+    @staticmethod
+    def solution(
+        x: np.ndarray,
+        u: np.ndarray,
+        sigma: float,
+        nu: np.ndarray,
+        buffers: np.ndarray,
+        lambda_: float,
+        status: str,
+        solve_time: float,
+        wall_time: float,
+    ) -> SubproblemSolution:
+        """A solved subproblem's values with its linearized cost ``L`` (Eq. 13)."""
+        buffers = np.maximum(buffers, 0.0)
+        linear_cost = -x[-1, 13] + lambda_ * (np.abs(nu).sum() + buffers.sum())
         return SubproblemSolution(
-            status=call.status,
-            x=self.X.value.copy(),
-            u=self.U.value.copy(),
-            sigma=float(self.sigma.value),
-            nu=nu.copy(),
-            buffers=buffers.copy(),
+            status=status,
+            x=np.array(x, dtype=float),
+            u=np.array(u, dtype=float),
+            sigma=float(sigma),
+            nu=np.array(nu, dtype=float),
+            buffers=np.array(buffers, dtype=float),
             linear_cost=float(linear_cost),
-            solve_time=call.solver_time,
-            wall_time=call.wall_time,
+            solve_time=solve_time,
+            wall_time=wall_time,
         )
 
 
@@ -306,7 +337,7 @@ def trust_region_scales(instance: PDGInstance) -> tuple[np.ndarray, np.ndarray, 
     return scale_x, np.full(3, 0.25 * c.T_max), 0.5
 
 
-def _failed(status: str, wall: float, solve_time: float) -> SubproblemSolution:
+def failed_solution(status: str, wall: float, solve_time: float) -> SubproblemSolution:
     return SubproblemSolution(
         status=status,
         x=None,

@@ -1,0 +1,260 @@
+"""The 6-DoF subproblem reduced to chosen inequality rows, solved on sliced conic data.
+
+T-SCvx (Algorithm 2, step 1 of the T-SCvx paper) solves each convex subproblem with only the
+inequality rows predicted tight. cvxpy compiles the parametric subproblem once
+(:func:`~scpformer.problems.pdg6dof.subproblem.compiled_subproblem`); at every iteration it
+maps the parameter values to the conic data ``(P, c, A, b, cones)`` of Clarabel. This module
+keeps, once per compiled problem, a :class:`ConicLayout`: which conic rows and second-order
+cones belong to each ``(name, node)`` row of
+:func:`~scpformer.problems.pdg6dof.constraints.constraint_index`, and where each variable
+sits in the conic solution vector. A reduced solve then
+
+1. lets cvxpy write the full conic data from the current parameters (no canonicalization),
+2. drops the rows and cones of the left-out ``(name, node)`` rows and the columns that no
+   kept row, quadratic or linear cost term touches any more (the epigraph variable of a
+   dropped norm),
+3. calls Clarabel on the smaller problem and maps its primal solution back to ``(x, u,
+   sigma, nu, buffers)``.
+
+What a ``(name, node)`` row owns in the conic problem (cvxpy 1.9 canonicalization, checked
+by the layout tests against :func:`~scpformer.problems.pdg6dof.constraints.constraint_values`):
+mass and thrust_min one nonnegative row; glideslope, tilt and omega one nonnegative row and
+the second-order cone of their norm's epigraph variable; thrust_max and gimbal one
+nonnegative row each and, together, the cone of the thrust norm they share (kept while either
+is kept). Equalities, the virtual-control rows, the final-time bounds and the trust region
+are always kept; with ``drop_box`` the safeguard box of the soft trust region is left out
+too (the caller checks the solution against it, see :meth:`ReducedSubproblem.solve`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import clarabel
+import cvxpy as cp
+import numpy as np
+import scipy.sparse as sp
+
+from scpformer.problems.pdg6dof import constraints as con
+from scpformer.problems.pdg6dof.subproblem import PDGSubproblem, SubproblemSolution, failed_solution
+from scpformer.scp.conic import SOLVERS
+
+ALWAYS = -1  # owner of a conic row kept in every reduced problem
+BOX = -2  # owner of a row of the safeguard trust-region box
+CLARABEL_STATUS = {"Solved": cp.OPTIMAL, "AlmostSolved": cp.OPTIMAL_INACCURATE}
+
+
+@dataclass(frozen=True)
+class ConicLayout:
+    """Where the ``(name, node)`` rows and the variables sit in the compiled conic problem.
+
+    Row ``i`` of ``A`` belongs to ``owner_a[i]`` and ``owner_b[i]``: flag indices (name-major,
+    as the tight-flag vector), :data:`ALWAYS` or :data:`BOX`; a row is kept when either owner
+    is kept (the two differ only on the thrust cone shared by thrust_max and gimbal).
+    """
+
+    n_zero: int  # equality rows (first in A)
+    n_nonneg: int  # nonnegative rows (next)
+    soc_sizes: np.ndarray  # (n_cones,) dimensions of the second-order cones (last)
+    owner_a: np.ndarray  # (m,) int
+    owner_b: np.ndarray  # (m,) int
+    variables: dict[str, tuple[int, tuple[int, ...]]]  # name -> (column offset, shape)
+
+    @property
+    def n_rows(self) -> int:
+        """Rows of the full conic problem."""
+        return self.owner_a.size
+
+    def rows_of(self, flag: int) -> np.ndarray:
+        """Conic rows owned by the ``(name, node)`` row with index ``flag``."""
+        return np.flatnonzero((self.owner_a == flag) | (self.owner_b == flag))
+
+    def kept_rows(self, keep: np.ndarray, keep_box: bool = True) -> np.ndarray:
+        """Boolean mask of the conic rows kept for the flag mask ``keep`` (R,)."""
+        lookup = np.concatenate([np.asarray(keep, dtype=bool), [keep_box, True]])
+        return lookup[self.owner_a] | lookup[self.owner_b]  # ALWAYS = -1, BOX = -2
+
+    def value(self, solution: np.ndarray, name: str) -> np.ndarray:
+        """The variable ``name`` read from a conic primal vector (cvxpy's column-major order)."""
+        offset, shape = self.variables[name]
+        size = int(np.prod(shape))
+        return solution[offset : offset + size].reshape(shape, order="F")
+
+
+def conic_layout(sub: PDGSubproblem) -> ConicLayout:
+    """Map the compiled Clarabel problem of ``sub`` (see the module docstring)."""
+    data, _, inverse = sub.problem.get_problem_data(SOLVERS["clarabel"], solver_opts={})
+    solver_data = inverse[-1].inverse_data
+    stuffing = next(d for d in inverse if hasattr(d, "var_offsets") and hasattr(d, "minimize"))
+    ordered = [*solver_data["eq_constr"], *solver_data["other_constr"]]
+    dims = data["dims"]
+    n_nodes = sub.n_nodes
+    flag_of = {
+        sub.inequalities[name].id: i * n_nodes for i, name in enumerate(con.CONSTRAINT_NAMES)
+    }
+    box_ids = {c.id for c in sub.trust_box}
+    norm_owners = _norm_owners(ordered, flag_of)
+    owner_a, owner_b = [], []
+    for constraint in ordered:
+        rows = _rows_per_node(constraint, dims)
+        if constraint.id in flag_of:
+            base = flag_of[constraint.id]
+            a = b = base + np.repeat(np.arange(n_nodes), rows // n_nodes)
+        elif isinstance(constraint, cp.constraints.SOC) and _epigraph_id(constraint) in norm_owners:
+            bases = norm_owners[_epigraph_id(constraint)]
+            nodes = np.repeat(np.arange(n_nodes), rows // n_nodes)
+            a, b = bases[0] + nodes, bases[-1] + nodes
+        else:
+            a = b = np.full(rows, BOX if constraint.id in box_ids else ALWAYS)
+        owner_a.append(a)
+        owner_b.append(b)
+    offsets = {var.name(): stuffing.var_offsets[vid] for vid, var in stuffing.id2var.items()}
+    variables = {  # by name: cvxpy replaces the nonneg buffer variable by a free copy
+        name: (offsets[var.name()], var.shape) for name, var in _named_variables(sub)
+    }
+    layout = ConicLayout(
+        n_zero=int(dims.zero),
+        n_nonneg=int(dims.nonneg),
+        soc_sizes=np.asarray(dims.soc, dtype=int),
+        owner_a=np.concatenate(owner_a).astype(int),
+        owner_b=np.concatenate(owner_b).astype(int),
+        variables=variables,
+    )
+    if layout.n_rows != data["A"].shape[0]:
+        raise RuntimeError(f"conic layout maps {layout.n_rows} rows, A has {data['A'].shape[0]}")
+    return layout
+
+
+def _rows_per_node(constraint: cp.Constraint, dims: object) -> int:
+    """Conic rows of one canonical constraint (an SOC of K cones: K times its cone size)."""
+    if isinstance(constraint, cp.constraints.SOC):
+        return int(sum(constraint.cone_sizes()))
+    return int(constraint.size)
+
+
+def _epigraph_id(cone: cp.constraints.SOC) -> int | None:
+    """Id of the variable ``t`` of ``|v| <= t`` (None when ``t`` is not a bare variable)."""
+    variables = cone.args[0].variables()
+    return variables[0].id if len(variables) == 1 else None
+
+
+def _norm_owners(ordered: list[cp.Constraint], flag_of: dict[int, int]) -> dict[int, list[int]]:
+    """Epigraph variable id -> flag bases of the named constraints that bound it."""
+    owners: dict[int, list[int]] = {}
+    for constraint in ordered:
+        if constraint.id in flag_of:
+            for var in constraint.variables():
+                owners.setdefault(var.id, []).append(flag_of[constraint.id])
+    epigraphs = {_epigraph_id(c) for c in ordered if isinstance(c, cp.constraints.SOC)} - {None}
+    return {vid: bases for vid, bases in owners.items() if vid in epigraphs}
+
+
+def _named_variables(sub: PDGSubproblem) -> list[tuple[str, cp.Variable]]:
+    groups = [(f"x{i}", var) for i, var in enumerate(sub.state_groups)]
+    return [*groups, ("u", sub.U), ("sigma", sub.sigma), ("nu", sub.nu), ("s", sub.buffers)]
+
+
+@dataclass(frozen=True)
+class ReducedSize:
+    """Size of the conic problem handed to Clarabel."""
+
+    rows: int
+    columns: int
+    cones: int  # second-order cones
+    flags_kept: int  # (name, node) rows kept
+
+
+class ReducedSubproblem:
+    """Solve the compiled subproblem of ``sub`` with a subset of its ``(name, node)`` rows.
+
+    The parameters of ``sub`` (instance, linearization, trust region) are set by the caller
+    exactly as for a full solve; :meth:`solve` reads them through cvxpy's parameter map.
+    """
+
+    def __init__(self, sub: PDGSubproblem, layout: ConicLayout | None = None) -> None:
+        self.sub = sub
+        self.layout = layout or conic_layout(sub)
+        self.last_size: ReducedSize | None = None
+
+    def conic_data(self) -> dict[str, object]:
+        """The full conic data of the current parameter values (cvxpy's parameter map only)."""
+        data, _, _ = self.sub.problem.get_problem_data(SOLVERS["clarabel"], solver_opts={})
+        return data
+
+    def solve(self, keep: np.ndarray, lambda_: float, keep_box: bool = True) -> SubproblemSolution:
+        """Solve with the ``(name, node)`` rows of ``keep`` (R,) and every other row.
+
+        ``keep_box = False`` leaves out the safeguard box of the trust region (only sound
+        with a soft trust region; the caller re-solves with it if the step leaves the box).
+        ``solve_time`` is the Clarabel call alone (setup and solve), ``wall_time`` includes
+        the parameter map, the slicing and the unpacking.
+        """
+        start = time.perf_counter()
+        data = self.conic_data()
+        rows = self.layout.kept_rows(keep, keep_box)
+        A = sp.csr_array(data["A"])[rows]
+        P = sp.csc_array(data["P"])
+        c = np.asarray(data["c"], dtype=float)
+        cols = _used_columns(A, P, c)
+        A = sp.csc_array(A[:, cols])
+        P = sp.triu(P[cols][:, cols]).tocsc()
+        cones = self._cones(rows)
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        t0 = time.perf_counter()
+        try:
+            result = clarabel.DefaultSolver(P, c[cols], A, data["b"][rows], cones, settings).solve()
+        except Exception as err:  # a solver failure is a status (conic.py)
+            return failed_solution(f"solver_error: {err}", time.perf_counter() - start, 0.0)
+        solve_time = time.perf_counter() - t0
+        self.last_size = ReducedSize(
+            rows=int(rows.sum()),
+            columns=int(cols.sum()),
+            cones=len(cones) - 2,
+            flags_kept=int(np.count_nonzero(keep)),
+        )
+        status = CLARABEL_STATUS.get(str(result.status), str(result.status))
+        if status not in CLARABEL_STATUS.values():
+            return failed_solution(status, time.perf_counter() - start, solve_time)
+        full = np.zeros(cols.size)
+        full[cols] = np.asarray(result.x)
+        return self._unpack(full, lambda_, status, solve_time, start)
+
+    def _cones(self, rows: np.ndarray) -> list[object]:
+        lay = self.layout
+        first_rows = lay.n_zero + lay.n_nonneg + np.concatenate([[0], np.cumsum(lay.soc_sizes)])
+        kept_socs = [
+            clarabel.SecondOrderConeT(int(size))
+            for size, first in zip(lay.soc_sizes, first_rows[:-1], strict=True)
+            if rows[first]
+        ]
+        n_nonneg = int(rows[lay.n_zero : lay.n_zero + lay.n_nonneg].sum())
+        return [clarabel.ZeroConeT(lay.n_zero), clarabel.NonnegativeConeT(n_nonneg), *kept_socs]
+
+    def _unpack(
+        self, solution: np.ndarray, lambda_: float, status: str, solve_time: float, start: float
+    ) -> SubproblemSolution:
+        lay = self.layout
+        n_groups = len(self.sub.state_groups)
+        x = np.hstack([lay.value(solution, f"x{i}") for i in range(n_groups)])
+        return PDGSubproblem.solution(
+            x,
+            lay.value(solution, "u"),
+            float(lay.value(solution, "sigma")),
+            lay.value(solution, "nu"),
+            lay.value(solution, "s"),
+            lambda_,
+            status,
+            solve_time,
+            time.perf_counter() - start,
+        )
+
+
+def _used_columns(A: sp.csr_array, P: sp.csc_array, c: np.ndarray) -> np.ndarray:
+    """Columns some kept row, the quadratic term or the linear cost touches."""
+    used = np.zeros(A.shape[1], dtype=bool)
+    used[A.indices] = True
+    used[P.indices] = True  # rows of P's nonzeros ...
+    used[np.diff(P.indptr) > 0] = True  # ... and its columns (P may hold one triangle)
+    return used | (c != 0.0)

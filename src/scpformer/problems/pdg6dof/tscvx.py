@@ -1,0 +1,381 @@
+"""T-SCvx (Algorithm 2 of the T-SCvx paper): SCvx on subproblems reduced to the tight rows.
+
+Given a predictor of the tight rows ``tau = f_2(theta, k)`` and of the solution
+``z = f_1(theta)`` (the API of :mod:`scpformer.models.tscvx`, :class:`TscvxPredictor`),
+:func:`solve_tscvx` runs the SCvx loop of :func:`scpformer.scp.scvx.solve_scvx` (the same
+ratio test, second-order correction and stopping test as cold SCvx, on the full problem) with
+three changes:
+
+* step 1: the subproblem of iteration k holds the ``(name, node)`` rows predicted tight,
+  ``f_2(theta, k)``, plus the rows that the current iterate violates or nearly violates
+  (:func:`near_active_rows`, ``g / scale >= -margin``), plus all equalities, solved on the
+  sliced conic data of :mod:`scpformer.problems.pdg6dof.reduced`;
+* the penalized cost J is that of the FULL nonlinear problem (Eq. 16): the convex rows left
+  out of a subproblem enter J with weight lambda when a candidate violates them, and a
+  candidate that violates a left-out row by more than ``violation_tol`` is re-solved with
+  those rows added (a repair) before the ratio test sees it;
+* the trust radius follows Eq. 22 with the fraction ``tau_r`` of predicted flags that changed
+  since the previous iteration (:func:`eq22_update`).
+
+Fallbacks: after ``max_repairs`` repairs in one iteration, or ``stall_rejections`` rejected
+steps in a row, the loop switches to the full subproblem for the rest of the run
+(``extras["tscvx"]["fallback"] = "full"``); a run that still ends unconverged is replaced by
+a cold SCvx solve from the straight-line guess (``"cold"``), so T-SCvx never reports a
+trajectory that the full problem's verification rejects and converges at least as often.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from scpformer.problems.pdg6dof import constraints as con
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.problem import (
+    SOFT_BOX_FACTOR,
+    PDGProblem,
+    PDGSolverConfig,
+    candidate,
+)
+from scpformer.problems.pdg6dof.reduced import ConicLayout, ReducedSubproblem, conic_layout
+from scpformer.problems.pdg6dof.subproblem import PDGSubproblem, SubproblemSolution
+from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
+from scpformer.scp.solution import Solution, Trajectory
+from scpformer.validation import check_positive
+
+
+class TscvxPredictor(Protocol):
+    """What T-SCvx asks of the networks (``scpformer.models.tscvx.TscvxPredictor``)."""
+
+    n_nodes: int
+
+    def predict_tight(self, theta: np.ndarray, k: int) -> np.ndarray:
+        """Flags (7N,) of the rows predicted tight at SCvx iteration ``k`` (1-based)."""
+
+    def predict_solution(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """Predicted ``(x (N, 14), u (N, 3), t_f)``."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class TscvxParameters:
+    """T-SCvx settings (not in the paper, but for Table 1's eta_reduced,init = 0.01).
+
+    ``eta_init = 1``, not Table 1's 0.01: the stopping test shared with cold SCvx
+    (:func:`scpformer.scp.scvx.meets_stopping_test`) certifies stationarity only with a trust
+    radius of at least ``eta_stationary = 1``, and from a guess at the optimum the steps are
+    too small for the ratio test to grow 0.01 to 1 (measured on 4 nominal instances with the
+    oracle predictor: 10 to 100 solves at 0.01, with one run stuck at max_iterations, against
+    1 to 2 solves at 1). The soft trust region keeps the first steps short anyway.
+
+    ``margin``: a row left out of the prediction is still kept when the current iterate has
+    ``g / scale >= -margin`` (scales of :func:`row_scales`: 5% of the constraint's range by
+    default), so that a step of the trust region's size rarely crosses a left-out row.
+    ``shrink_floor``: Eq. 22 divides the radius by ``alpha^tau_r`` on a poor or rejected step;
+    with unchanged predictions (``tau_r = 0``) a rejected step would then be retried with the
+    same radius, the same subproblem and the same outcome. The exponent is therefore
+    ``max(tau_r, shrink_floor)`` (1: contractions as Eq. 15; 0: Eq. 22 literally).
+    ``drop_box``: under the soft trust region the hard box (radius ``SOFT_BOX_FACTOR eta``)
+    is a safeguard that never binds in practice; it is left out and the step re-solved with
+    it when it leaves the box.
+    """
+
+    eta_init: float = 1.0  # initial trust radius (Table 1's eta_reduced,init: 0.01, see above)
+    margin: float = 0.05  # near-active rows of the iterate are kept (units of row_scales)
+    violation_tol: float = 1e-6  # left-out row violated when g > this [nondimensional]
+    max_repairs: int = 2  # re-solves per iteration with violated rows added, then full
+    stall_rejections: int = 3  # rejected steps in a row before the full subproblem
+    shrink_floor: float = 1.0  # least exponent of alpha in Eq. 22's contractions
+    drop_box: bool = True  # leave out the safeguard box of the soft trust region
+    cold_fallback: bool = True  # an unconverged run is replaced by cold SCvx
+
+    def __post_init__(self) -> None:
+        for name in ("eta_init", "violation_tol"):
+            check_positive(name, getattr(self, name))
+        if not self.margin >= 0.0:
+            raise ValueError(f"margin must be nonnegative, got {self.margin}")
+        if not 0.0 <= self.shrink_floor <= 1.0:
+            raise ValueError(f"shrink_floor must be in [0, 1], got {self.shrink_floor}")
+        for name in ("max_repairs", "stall_rejections"):
+            value = getattr(self, name)
+            if int(value) != value or value < 0:
+                raise ValueError(f"{name} must be a nonnegative integer, got {value}")
+
+
+def eq22_update(
+    eta: float, rho: float, params: SCvxParameters, tau_r: float, shrink_floor: float = 0.0
+) -> tuple[float, bool]:
+    """Trust radius after a step with ratio ``rho`` and whether it is accepted (Eq. 22).
+
+    ``rho < rho_0``: rejected, ``eta / alpha^e``; ``rho < rho_1``: ``eta / alpha^e``;
+    ``rho >= rho_2``: ``beta^(1 - tau_r) eta``; else unchanged; with
+    ``e = max(tau_r, shrink_floor)`` and the result clipped to ``[eta_lb, eta_ub]``.
+    """
+    shrink = params.beta_sh ** max(tau_r, shrink_floor)
+    accepted = rho >= params.rho_0
+    if rho < params.rho_1:
+        eta = eta / shrink
+    elif rho >= params.rho_2:
+        eta = eta * params.beta_gr ** (1.0 - tau_r)
+    return float(np.clip(eta, params.eta_lb, params.eta_ub)), accepted
+
+
+def row_scales(instance: PDGInstance, n_nodes: int) -> np.ndarray:
+    """Range of each ``(name, node)`` row's ``g`` (7N,), flag order: the unit of ``margin``.
+
+    Mass ``m0 - m_dry``; glideslope 1 U_L; tilt ``sin(theta_max / 2)``; rate ``omega_max``;
+    the thrust rows ``T_max``.
+    """
+    c = instance.constants
+    per_name = {
+        "mass": instance.m0 - c.m_dry,
+        "glideslope": 1.0,
+        "tilt": max(instance.tilt_bound, 1e-3),
+        "omega": math.radians(c.omega_max_deg),
+        "thrust_min": c.T_max,
+        "thrust_max": c.T_max,
+        "gimbal": c.T_max,
+    }
+    return np.repeat([per_name[name] for name in con.CONSTRAINT_NAMES], n_nodes)
+
+
+def near_active_rows(
+    instance: PDGInstance, z: Trajectory, margin: float, scales: np.ndarray
+) -> np.ndarray:
+    """Rows with ``g(z) / scale >= -margin`` (violated or nearly so), flag order (7N,)."""
+    values = con.constraint_values(instance, z.x, z.u).reshape(-1)
+    return values >= -margin * scales
+
+
+def convex_excess(instance: PDGInstance, z: Trajectory) -> float:
+    """``sum max(0, h(z))`` over the convex rows: their term of Eq. 16 (tau_i = 1).
+
+    Zero up to the conic solver's tolerance for a full subproblem's solution, which imposes
+    the convex rows exactly; positive when a reduced subproblem left a violated row out.
+    """
+    values = con.constraint_values(instance, z.x, z.u)
+    convex = [i for i, n in enumerate(con.CONSTRAINT_NAMES) if n not in con.NONCONVEX_NAMES]
+    return float(np.maximum(values[convex], 0.0).sum())
+
+
+@functools.lru_cache(maxsize=8)
+def _layout(sub: PDGSubproblem) -> ConicLayout:
+    """The conic layout of a process-wide compiled subproblem (computed once)."""
+    return conic_layout(sub)
+
+
+@dataclass
+class TscvxLog:
+    """What each subproblem solve of a T-SCvx run did (``Solution.extras["tscvx"]``)."""
+
+    rows_kept: list[int] = field(default_factory=list)  # (name, node) rows per solve
+    conic_rows: list[int] = field(default_factory=list)  # rows handed to the conic solver
+    predicted: list[int] = field(default_factory=list)  # rows predicted tight per solve
+    tau_r: list[float] = field(default_factory=list)  # Eq. 22's changed fraction per solve
+    repairs: list[int] = field(default_factory=list)  # re-solves with violated rows added
+    modes: list[str] = field(default_factory=list)  # "reduced" or "full"
+    fallback: str | None = None  # None, "full" (switched mid-run) or "cold"
+    fallback_reason: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+class TscvxProblem(PDGProblem):
+    """:class:`PDGProblem` whose subproblems hold the predicted tight rows (Algorithm 2)."""
+
+    def __init__(
+        self,
+        instance: PDGInstance,
+        config: PDGSolverConfig,
+        tight: Any,
+        params: TscvxParameters,
+    ) -> None:
+        super().__init__(instance, config)
+        self.tight = tight  # k -> (7N,) bool flags predicted tight at iteration k
+        self.params = params
+        self.reduced = ReducedSubproblem(self.subproblem, _layout(self.subproblem))
+        self.scales = row_scales(instance, config.n_nodes)
+        self.log = TscvxLog()
+        self.full_mode = False
+        self.tau_r = 0.0
+        self._previous_tau: np.ndarray | None = None
+        self._keep: np.ndarray | None = None
+        self._last_z: Trajectory | None = None
+        self._rejections = 0
+
+    def evaluate(self, z: Trajectory) -> Evaluation:
+        """Eq. 16 on the full problem: the penalty also charges violated convex rows."""
+        ev = super().evaluate(z)
+        return dataclasses.replace(ev, penalty=ev.penalty + convex_excess(self.instance, z))
+
+    def update_radius(self, eta: float, rho: float, params: SCvxParameters) -> tuple[float, bool]:
+        """Eq. 22 with this iteration's ``tau_r`` (the radius update handed to SCvx)."""
+        return eq22_update(eta, rho, params, self.tau_r, self.params.shrink_floor)
+
+    def solve_subproblem(
+        self, z: Trajectory, evaluation: Evaluation, eta: float, lambda_: float, solver: str
+    ) -> Candidate:
+        self._track_rejections(z)
+        iteration = len(self.log.modes) + 1
+        tau = np.asarray(self.tight(iteration), dtype=bool)
+        self.tau_r = (
+            0.0
+            if self._previous_tau is None
+            else float(np.abs(tau.astype(int) - self._previous_tau).mean())
+        )
+        self._previous_tau = tau.astype(int)
+        self.log.predicted.append(int(tau.sum()))
+        self.log.tau_r.append(self.tau_r)
+        if self.full_mode:
+            return self._full(super().solve_subproblem(z, evaluation, eta, lambda_, solver))
+        self._keep = tau | near_active_rows(self.instance, z, self.params.margin, self.scales)
+        self.subproblem.set_instance(self.instance)
+        self.subproblem.set_linearization(evaluation.linearization, z.x, z.u, float(z.p[0]))
+        return self._reduced(z, eta, lambda_, solver)
+
+    def solve_correction(
+        self,
+        z: Trajectory,
+        evaluation: Evaluation,
+        candidate: Candidate,
+        candidate_evaluation: Evaluation,
+        eta: float,
+        lambda_: float,
+        solver: str,
+    ) -> Candidate:
+        if self.full_mode:
+            return super().solve_correction(
+                z, evaluation, candidate, candidate_evaluation, eta, lambda_, solver
+            )
+        disc = candidate_evaluation.linearization
+        self.subproblem.shift_affine_term(disc.defects(candidate.trajectory.x))
+        return self._reduced(z, eta, lambda_, solver, log=False)
+
+    def _track_rejections(self, z: Trajectory) -> None:
+        """Count rejected steps in a row (SCvx hands back the same iterate after a rejection)."""
+        self._rejections = self._rejections + 1 if z is self._last_z else 0
+        self._last_z = z
+        if not self.full_mode and self._rejections >= self.params.stall_rejections > 0:
+            self._switch_to_full(f"{self._rejections} rejected steps in a row")
+
+    def _switch_to_full(self, reason: str) -> None:
+        self.full_mode = True
+        self.log.fallback, self.log.fallback_reason = "full", reason
+
+    def _full(self, cand: Candidate) -> Candidate:
+        self.tau_r = 0.0
+        self.log.modes.append("full")
+        self.log.rows_kept.append(len(self.scales))
+        self.log.conic_rows.append(self.reduced.layout.n_rows)
+        self.log.repairs.append(0)
+        return cand
+
+    def _reduced(
+        self, z: Trajectory, eta: float, lambda_: float, solver: str, log: bool = True
+    ) -> Candidate:
+        """Solve with ``self._keep``, adding left-out rows the candidate violates."""
+        weight = self.config.prox_weight / eta**2
+        box = SOFT_BOX_FACTOR * eta if weight > 0.0 else eta
+        keep_box = not (self.params.drop_box and weight > 0.0)
+        self.subproblem.set_trust_region(eta, lambda_, box, weight)
+        solver_time, repairs = 0.0, 0
+        while True:
+            sol = self.reduced.solve(self._keep, lambda_, keep_box)
+            solver_time += sol.solve_time
+            missing, box_left = self._left_out_violations(sol, z, box, keep_box)
+            if not (missing.any() or box_left):
+                break
+            if repairs >= self.params.max_repairs:
+                self._switch_to_full(f"left-out rows still violated after {repairs} repairs")
+                full = super()._solve(eta, lambda_, solver)
+                cand = dataclasses.replace(full, solver_time=full.solver_time + solver_time)
+                return self._full(cand) if log else cand
+            self._keep = self._keep | missing
+            keep_box = keep_box or box_left
+            repairs += 1
+        if log:
+            self.log.modes.append("reduced")
+            self.log.rows_kept.append(int(self._keep.sum()))
+            size = self.reduced.last_size
+            self.log.conic_rows.append(size.rows if size is not None else 0)
+            self.log.repairs.append(repairs)
+        else:
+            self.log.repairs[-1] += repairs
+        return dataclasses.replace(candidate(sol), solver_time=solver_time)
+
+    def _left_out_violations(
+        self, sol: SubproblemSolution, z: Trajectory, box: float, keep_box: bool
+    ) -> tuple[np.ndarray, bool]:
+        """Left-out rows the solution violates, and whether it left the dropped box."""
+        if sol.x is None:
+            return np.zeros_like(self._keep), False
+        values = con.constraint_values(self.instance, sol.x, sol.u).reshape(-1)
+        missing = (values > self.params.violation_tol) & ~self._keep
+        if keep_box:
+            return missing, False
+        step = self.step_norm(Trajectory(x=sol.x, u=sol.u, p=np.array([sol.sigma])), z)
+        return missing, step > box
+
+
+def solve_tscvx(
+    instance: PDGInstance,
+    config: PDGSolverConfig,
+    guess: Trajectory,
+    tight: Any,
+    params: TscvxParameters | None = None,
+) -> Solution:
+    """Algorithm 2 from ``guess`` with the predicted flags ``tight(k)`` (see module docstring).
+
+    The returned solution's ``extras["tscvx"]`` is the :class:`TscvxLog` of the run (of the
+    T-SCvx run, also when the cold fallback replaced its result).
+    """
+    from scpformer.problems.pdg6dof.problem import solve
+
+    params = params or TscvxParameters()
+    problem = TscvxProblem(instance, config, tight, params)
+    solution = solve_scvx(
+        problem, guess, config.scvx, eta_init=params.eta_init, radius_update=problem.update_radius
+    )
+    log = problem.log
+    if not solution.converged and params.cold_fallback:
+        log.fallback = "cold"
+        log.fallback_reason = f"T-SCvx ended {solution.status.value}: {solution.message}"
+        cold = solve(instance, config)
+        extras = {"tscvx": log.to_dict(), "tscvx_iterations": solution.iterations}
+        return dataclasses.replace(cold, extras={**cold.extras, **extras})
+    return dataclasses.replace(solution, extras={**solution.extras, "tscvx": log.to_dict()})
+
+
+def consistent_guess(
+    instance: PDGInstance, x: np.ndarray, u: np.ndarray, tf: float, n_nodes: int
+) -> Trajectory:
+    """A predicted ``(x, u, t_f)`` made consistent where cheap.
+
+    ``x_0`` is the instance's initial state, quaternions are normalized, the mass is clipped
+    to ``[m_dry, m0]`` and made nonincreasing, thrust magnitudes are clipped to
+    ``[T_min, T_max]`` and the final time to ``[tf_min, tf_max]``. Raises ``ValueError`` on
+    a wrong shape or a non-finite value.
+    """
+    c = instance.constants
+    x = np.array(x, dtype=float)
+    u = np.array(u, dtype=float)
+    tf = float(tf)
+    if x.shape != (n_nodes, 14) or u.shape != (n_nodes, 3):
+        raise ValueError(f"predicted x {x.shape}, u {u.shape}: expected ({n_nodes}, 14), (.., 3)")
+    if not (np.isfinite(x).all() and np.isfinite(u).all() and math.isfinite(tf)):
+        raise ValueError("the predicted solution holds NaN or infinity")
+    x[0] = instance.x0
+    norms = np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
+    x[:, 6:10] = np.where(norms > 1e-9, x[:, 6:10] / np.maximum(norms, 1e-9), [1.0, 0, 0, 0])
+    x[:, 13] = np.minimum.accumulate(np.clip(x[:, 13], c.m_dry, instance.m0))
+    thrust = np.linalg.norm(u, axis=1, keepdims=True)
+    safe = np.where(thrust > 1e-9, thrust, 1.0)
+    direction = np.where(thrust > 1e-9, u / safe, [1.0, 0.0, 0.0])
+    u = direction * np.clip(thrust, c.T_min, c.T_max)
+    tf = float(np.clip(tf, c.tf_min, c.tf_max))
+    return Trajectory(x=x, u=u, p=np.array([tf]))

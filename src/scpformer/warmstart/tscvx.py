@@ -1,0 +1,133 @@
+"""T-SCvx warm start of the 6-DoF problem: the solution network's guess, and Algorithm 2.
+
+``TscvxWarmStart(predictor).guess(instance)`` is the initial guess of Algorithm 2 (its
+input line): the predicted ``(x, u, t_f)`` made consistent where cheap
+(:func:`~scpformer.problems.pdg6dof.tscvx.consistent_guess`), replaced by the straight-line
+guess when the prediction is unusable (wrong shape, NaN) or its penalized cost J (Eq. 16) is
+above the straight line's. Handed to :func:`scpformer.problems.pdg6dof.problem.solve` as
+``guess=``, the provider also supplies the predicted tight rows, and the solve runs T-SCvx
+(:func:`~scpformer.problems.pdg6dof.tscvx.solve_tscvx`) instead of cold SCvx.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scpformer.problems.pdg6dof.guess import straight_line_trajectory
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.problem import PDGProblem, PDGSolverConfig
+from scpformer.problems.pdg6dof.tscvx import (
+    TscvxParameters,
+    TscvxPredictor,
+    consistent_guess,
+    convex_excess,
+    solve_tscvx,
+)
+from scpformer.scp.solution import Solution, Trajectory
+from scpformer.warmstart.base import WarmStartRecord, WarmStartResult, timed
+from scpformer.warmstart.convex import check_instance
+
+
+@dataclass(frozen=True)
+class TscvxWarmStart:
+    """The T-SCvx networks behind the warm-start interface (see the module docstring)."""
+
+    predictor: TscvxPredictor
+    params: TscvxParameters = field(default_factory=TscvxParameters)
+    config: PDGSolverConfig | None = None  # used by ``guess`` alone (default: n_nodes of the
+    # predictor); ``solve`` uses the solve's configuration
+
+    @classmethod
+    def from_run(cls, run_dir: str | Path, device: str = "cpu", **kwargs: Any) -> TscvxWarmStart:
+        """Load ``RUN`` with :func:`scpformer.models.tscvx.load_tscvx_predictor`.
+
+        A missing or unreadable run is a ``ValueError`` naming it.
+        """
+        path = Path(run_dir)
+        if not path.exists():
+            raise ValueError(f"--model {path}: no such T-SCvx run folder")
+        try:
+            from scpformer.models.tscvx import load_tscvx_predictor
+        except ModuleNotFoundError as err:
+            raise ValueError(f"--model {path}: loading T-SCvx runs needs {err.name}") from err
+        try:
+            predictor = load_tscvx_predictor(path, device=device)
+        except Exception as err:  # a corrupt run raises whatever torch/pickle/zip raise
+            raise ValueError(f"--model {path}: not a readable T-SCvx run ({err})") from err
+        return cls(predictor, **kwargs)
+
+    def guess(self, instance: PDGInstance) -> WarmStartResult:
+        config = self.config or PDGSolverConfig(n_nodes=int(self.predictor.n_nodes))
+        return self.guess_for(instance, config)
+
+    def guess_for(self, instance: PDGInstance, config: PDGSolverConfig) -> WarmStartResult:
+        """The guess under ``config`` (its node count and lambda)."""
+        check_instance(instance, PDGInstance, "pdg6dof")
+        start = time.perf_counter()
+        from scpformer.data.pdg6dof_family import theta_vector
+
+        fallback = straight_line_trajectory(instance, config.n_nodes)
+        try:
+            x, u, tf = self.predictor.predict_solution(theta_vector(instance))
+            predicted = consistent_guess(instance, x, u, tf, config.n_nodes)
+        except ValueError as err:
+            return self._result(fallback, False, f"prediction unusable: {err}", {}, start)
+        scores = _penalized_costs(instance, config, {"prediction": predicted,
+                                                     "straight_line": fallback})  # fmt: skip
+        details = {f"J_{name}": value for name, value in scores.items()}
+        if not scores["prediction"] <= scores["straight_line"]:
+            reason = "J of the prediction above the straight line's"
+            return self._result(fallback, False, reason, details, start)
+        return self._result(predicted, True, "J below the straight line's", details, start)
+
+    def tight(self, instance: PDGInstance) -> Any:
+        """``k -> flags (7N,)`` of the rows predicted tight at iteration ``k``."""
+        from scpformer.data.pdg6dof_family import theta_vector
+
+        theta = theta_vector(instance)
+        return lambda k: np.asarray(self.predictor.predict_tight(theta, int(k)), dtype=bool)
+
+    def solve(
+        self, instance: PDGInstance, config: PDGSolverConfig, eta_init: float | None = None
+    ) -> Solution:
+        """T-SCvx (Algorithm 2) from this provider's guess; ``extras`` hold both records."""
+        params = self.params if eta_init is None else replace(self.params, eta_init=eta_init)
+        result = self.guess_for(instance, config)
+        solution = solve_tscvx(instance, config, result.trajectory, self.tight(instance), params)
+        return replace(solution, extras={**solution.extras,
+                                         "warmstart": result.record.to_dict()})  # fmt: skip
+
+    @staticmethod
+    def _result(
+        trajectory: Trajectory, accepted: bool, reason: str, details: dict, start: float
+    ) -> WarmStartResult:
+        record = WarmStartRecord(
+            source="tscvx",
+            time_s=0.0,
+            cost=float(-trajectory.x[-1, 13]),
+            constraint_to_go=math.nan,
+            accepted=accepted,
+            reason=reason,
+            fallback_source=None if accepted else "straight_line",
+            details=details,
+        )
+        return WarmStartResult(trajectory, timed(record, start))
+
+
+def _penalized_costs(
+    instance: PDGInstance, config: PDGSolverConfig, guesses: dict[str, Trajectory]
+) -> dict[str, float]:
+    """``J = C + lambda P`` (Eq. 16) of each guess on the full nonlinear problem."""
+    problem = PDGProblem(instance, config)
+    out = {}
+    for name, z in guesses.items():
+        ev = problem.evaluate(z)
+        penalty = ev.penalty + convex_excess(instance, z)
+        out[name] = float(ev.cost + config.scvx.lambda_ * penalty)
+    return out
