@@ -172,12 +172,12 @@ def _layout(sub: PDGSubproblem) -> ConicLayout:
 class TscvxLog:
     """What each subproblem solve of a T-SCvx run did (``Solution.extras["tscvx"]``)."""
 
-    rows_kept: list[int] = field(default_factory=list)  # (name, node) rows per solve
+    rows_kept: list[int] = field(default_factory=list)  # (name, node) rows per conic solve
     conic_rows: list[int] = field(default_factory=list)  # rows handed to the conic solver
-    predicted: list[int] = field(default_factory=list)  # rows predicted tight per solve
-    tau_r: list[float] = field(default_factory=list)  # Eq. 22's changed fraction per solve
+    predicted: list[int] = field(default_factory=list)  # rows predicted tight per iteration
+    tau_r: list[float] = field(default_factory=list)  # Eq. 22's changed fraction per iteration
     repairs: list[int] = field(default_factory=list)  # re-solves with violated rows added
-    modes: list[str] = field(default_factory=list)  # "reduced" or "full"
+    modes: list[str] = field(default_factory=list)  # reduced|full [correction], per solve
     fallback: str | None = None  # None, "full" (switched mid-run) or "cold"
     fallback_reason: str = ""
 
@@ -249,12 +249,15 @@ class TscvxProblem(PDGProblem):
         solver: str,
     ) -> Candidate:
         if self.full_mode:
-            return super().solve_correction(
-                z, evaluation, candidate, candidate_evaluation, eta, lambda_, solver
+            return self._full(
+                super().solve_correction(
+                    z, evaluation, candidate, candidate_evaluation, eta, lambda_, solver
+                ),
+                "full correction",
             )
         disc = candidate_evaluation.linearization
         self.subproblem.shift_affine_term(disc.defects(candidate.trajectory.x))
-        return self._reduced(z, eta, lambda_, solver, log=False)
+        return self._reduced(z, eta, lambda_, solver, "correction")
 
     def _track_rejections(self, z: Trajectory) -> None:
         """Count rejected steps in a row (SCvx hands back the same iterate after a rejection)."""
@@ -267,16 +270,16 @@ class TscvxProblem(PDGProblem):
         self.full_mode = True
         self.log.fallback, self.log.fallback_reason = "full", reason
 
-    def _full(self, cand: Candidate) -> Candidate:
+    def _full(self, cand: Candidate, mode: str = "full") -> Candidate:
         self.tau_r = 0.0
-        self.log.modes.append("full")
+        self.log.modes.append(mode)
         self.log.rows_kept.append(len(self.scales))
         self.log.conic_rows.append(self.reduced.layout.n_rows)
         self.log.repairs.append(0)
         return cand
 
     def _reduced(
-        self, z: Trajectory, eta: float, lambda_: float, solver: str, log: bool = True
+        self, z: Trajectory, eta: float, lambda_: float, solver: str, mode: str = "reduced"
     ) -> Candidate:
         """Solve with ``self._keep``, adding left-out rows the candidate violates."""
         weight = self.config.prox_weight / eta**2
@@ -294,18 +297,15 @@ class TscvxProblem(PDGProblem):
                 self._switch_to_full(f"left-out rows still violated after {repairs} repairs")
                 full = super()._solve(eta, lambda_, solver)
                 cand = dataclasses.replace(full, solver_time=full.solver_time + solver_time)
-                return self._full(cand) if log else cand
+                return self._full(cand, f"full {mode}" if mode != "reduced" else "full")
             self._keep = self._keep | missing
             keep_box = keep_box or box_left
             repairs += 1
-        if log:
-            self.log.modes.append("reduced")
-            self.log.rows_kept.append(int(self._keep.sum()))
-            size = self.reduced.last_size
-            self.log.conic_rows.append(size.rows if size is not None else 0)
-            self.log.repairs.append(repairs)
-        else:
-            self.log.repairs[-1] += repairs
+        self.log.modes.append(mode)
+        self.log.rows_kept.append(int(self._keep.sum()))
+        size = self.reduced.last_size
+        self.log.conic_rows.append(size.rows if size is not None else 0)
+        self.log.repairs.append(repairs)
         return dataclasses.replace(candidate(sol), solver_time=solver_time)
 
     def _left_out_violations(

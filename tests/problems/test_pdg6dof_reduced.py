@@ -1,0 +1,109 @@
+"""The reduced 6-DoF subproblem: conic rows of each (name, node) row, and the full-rows solve."""
+
+import numpy as np
+import pytest
+
+from scpformer.problems.pdg6dof import constraints as con
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.problem import SOFT_BOX_FACTOR, PDGProblem, PDGSolverConfig
+from scpformer.problems.pdg6dof.reduced import ReducedSubproblem
+from scpformer.scp.solution import Trajectory
+
+N = 50
+
+
+@pytest.fixture(scope="module")
+def linearized():
+    """A subproblem linearized about a perturbed straight-line guess, trust radius 2."""
+    instance = PDGInstance()
+    problem = PDGProblem(instance, PDGSolverConfig())
+    guess = problem.initial_guess()
+    rng = np.random.default_rng(3)
+    u = guess.u + rng.normal(scale=0.3, size=guess.u.shape)
+    x = guess.x + rng.normal(scale=0.05, size=guess.x.shape)
+    x[:, 6:10] /= np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
+    z = Trajectory(x=x, u=u, p=guess.p)
+    evaluation = problem.evaluate(z)
+    eta, weight = 2.0, problem.config.prox_weight / 4.0
+    sub = problem.subproblem
+    sub.set_instance(instance)
+    sub.set_linearization(evaluation.linearization, z.x, z.u, float(z.p[0]))
+    sub.set_trust_region(eta, 10.0, SOFT_BOX_FACTOR * eta, weight)
+    return problem, z, evaluation, ReducedSubproblem(sub)
+
+
+def _conic_point(reduced, data, z):
+    """Conic primal vector of (x, u, t_f) with every norm's epigraph variable at its norm."""
+    lay = reduced.layout
+    point = np.zeros(data["A"].shape[1])
+    start = 0
+    for i in range(len(reduced.sub.state_groups)):
+        offset, shape = lay.variables[f"x{i}"]
+        width = shape[1]
+        point[offset : offset + z.x.shape[0] * width] = z.x[:, start : start + width].ravel("F")
+        start += width
+    offset, _ = lay.variables["u"]
+    point[offset : offset + z.u.size] = z.u.ravel("F")
+    point[lay.variables["sigma"][0]] = z.p[0]
+    A = data["A"].tocsr()
+    slack = data["b"] - A @ point
+    first = lay.n_zero + lay.n_nonneg + np.concatenate([[0], np.cumsum(lay.soc_sizes)])
+    for row, size in zip(first[:-1], lay.soc_sizes, strict=True):
+        (column,) = A[[row]].indices  # the first row of |v| <= t holds t alone
+        point[column] = np.linalg.norm(slack[row + 1 : row + size]) / abs(A[row, column])
+    return point
+
+
+def test_each_name_node_row_maps_to_the_conic_rows_of_that_constraint_at_that_node(linearized):
+    # Linearized about z and evaluated at z, the slack b - A x of the nonnegative row of
+    # (name, k) is -g(name, k) exactly (thrust_min: the linearization is exact at u_ref).
+    problem, z, _, reduced = linearized
+    data = reduced.conic_data()
+    slack = data["b"] - data["A"].tocsr() @ _conic_point(reduced, data, z)
+    lay = reduced.layout
+    values = con.constraint_values(problem.instance, z.x, z.u).reshape(-1)
+    for flag, (name, node) in enumerate(con.constraint_index(N)):
+        rows = lay.rows_of(flag)
+        nonneg = rows[(rows >= lay.n_zero) & (rows < lay.n_zero + lay.n_nonneg)]
+        assert nonneg.size == 1, (name, node)
+        assert slack[nonneg[0]] == pytest.approx(-values[flag], abs=1e-9), (name, node)
+        cone_rows = rows.size - 1
+        assert cone_rows == {"mass": 0, "thrust_min": 0, "glideslope": 3, "tilt": 3}.get(name, 4)
+
+
+def test_the_thrust_cone_is_kept_while_thrust_max_or_gimbal_is_kept(linearized):
+    lay = linearized[3].layout
+    thrust_max, gimbal = (con.CONSTRAINT_NAMES.index(n) * N + 7 for n in ("thrust_max", "gimbal"))
+    shared = np.intersect1d(lay.rows_of(thrust_max), lay.rows_of(gimbal))
+    assert shared.size == 4
+    for kept in (thrust_max, gimbal):
+        keep = np.zeros(7 * N, dtype=bool)
+        keep[kept] = True
+        assert lay.kept_rows(keep)[shared].all()
+    assert not lay.kept_rows(np.zeros(7 * N, dtype=bool))[shared].any()
+
+
+def test_reduced_solve_with_every_row_equals_the_full_subproblem(linearized):
+    problem, z, evaluation, reduced = linearized
+    full = problem.solve_subproblem(z, evaluation, 2.0, 10.0, "clarabel")
+    sol = reduced.solve(np.ones(7 * N, dtype=bool), 10.0, keep_box=True)
+    assert sol.status == "optimal"
+    np.testing.assert_allclose(sol.x, full.trajectory.x, atol=1e-6)
+    np.testing.assert_allclose(sol.u, full.trajectory.u, atol=1e-6)
+    assert sol.sigma == pytest.approx(full.trajectory.p[0], abs=1e-6)
+    assert sol.linear_cost == pytest.approx(full.linear_cost, abs=1e-6)
+    assert reduced.last_size.rows == reduced.layout.n_rows
+
+
+def test_leaving_rows_out_gives_fewer_rows_cones_and_columns(linearized):
+    reduced = linearized[3]
+    reduced.solve(np.ones(7 * N, dtype=bool), 10.0)
+    full = reduced.last_size
+    keep = np.zeros(7 * N, dtype=bool)
+    keep[:N] = True  # the mass rows only
+    sol = reduced.solve(keep, 10.0, keep_box=False)
+    assert sol.status == "optimal"
+    small = reduced.last_size
+    assert small.cones == 0 < full.cones
+    assert small.rows < full.rows - 6 * N - 700  # rows, cones and the safeguard box
+    assert small.columns == full.columns - 4 * N  # the four norms' epigraph variables

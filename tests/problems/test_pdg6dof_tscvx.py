@@ -1,0 +1,143 @@
+"""T-SCvx (Algorithm 2): oracle predictions reach the cold optimum; wrong ones fall back."""
+
+import numpy as np
+import pytest
+
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.problem import solve
+from scpformer.problems.pdg6dof.tscvx import (
+    TscvxParameters,
+    consistent_guess,
+    eq22_update,
+)
+from scpformer.scp.scvx import SCvxParameters
+from scpformer.scp.solution import Status
+from scpformer.warmstart.tscvx import TscvxWarmStart
+
+N = 50
+
+
+class OraclePredictor:
+    """The predictor API answering with a cold solve: its flags per iteration, its optimum."""
+
+    n_nodes = N
+
+    def __init__(self, solution, flags=None, guess=None):
+        self.solution, self.flags, self.guess = solution, flags, guess
+
+    def predict_tight(self, theta, k):
+        if self.flags is not None:
+            return self.flags
+        history = self.solution.history
+        return history[min(int(k), len(history)) - 1].tight_flags
+
+    def predict_solution(self, theta):
+        if self.guess is not None:
+            return self.guess
+        z = self.solution.trajectory
+        return z.x, z.u, float(z.p[0])
+
+
+@pytest.fixture(scope="module")
+def cold():
+    return solve(PDGInstance())
+
+
+def _gap(solution, cold):
+    return abs(solution.cost - cold.cost) / (PDGInstance().m0 + cold.cost)
+
+
+@pytest.mark.slow
+def test_oracle_rows_reach_the_cold_optimum_with_reduced_subproblems(cold):
+    solution = solve(PDGInstance(), guess=TscvxWarmStart(OraclePredictor(cold)))
+    assert solution.status is Status.CONVERGED, solution.message
+    assert solution.verification.passed
+    assert _gap(solution, cold) <= 5e-3
+    log = solution.extras["tscvx"]
+    assert log["fallback"] is None
+    assert set(log["modes"]) <= {"reduced", "correction"}
+    assert max(log["rows_kept"]) < 7 * N and len(log["rows_kept"]) == solution.iterations
+    assert solution.extras["warmstart"]["accepted"]
+
+
+@pytest.mark.slow
+def test_all_rows_dropped_still_converge_to_the_optimum_through_repairs(cold):
+    # From a guess away from the optimum the steps cross rows that were neither predicted
+    # nor near-active: they are added back (repairs) or the run goes on with the full rows.
+    guess = OraclePredictor(cold).predict_solution(None)
+    x, u, tf = guess[0].copy(), guess[1] * 1.1, guess[2] * 0.95
+    predictor = OraclePredictor(cold, flags=np.zeros(7 * N, dtype=bool), guess=(x, u, tf))
+    params = TscvxParameters(margin=0.0)
+    solution = solve(PDGInstance(), guess=TscvxWarmStart(predictor, params))
+    assert solution.status is Status.CONVERGED, solution.message
+    assert _gap(solution, cold) <= 5e-3
+    log = solution.extras["tscvx"]
+    assert sum(log["repairs"]) > 0 or log["fallback"] is not None
+
+
+@pytest.mark.slow
+def test_a_garbage_solution_guess_falls_back_to_the_straight_line(cold):
+    rng = np.random.default_rng(0)
+    garbage = (rng.normal(size=(N, 14)) * 5, rng.normal(size=(N, 3)) * 5, 30.0)
+    predictor = OraclePredictor(cold, flags=np.zeros(7 * N, dtype=bool), guess=garbage)
+    solution = solve(PDGInstance(), guess=TscvxWarmStart(predictor))
+    record = solution.extras["warmstart"]
+    assert not record["accepted"] and record["used"] == "straight_line"
+    assert solution.status is Status.CONVERGED, solution.message
+    assert _gap(solution, cold) <= 5e-3
+
+
+def test_a_nan_prediction_is_replaced_by_the_straight_line():
+    nan = (np.full((N, 14), np.nan), np.zeros((N, 3)), 5.0)
+    predictor = OraclePredictor(None, guess=nan)
+    result = TscvxWarmStart(predictor).guess(PDGInstance())
+    assert not result.record.accepted and "NaN" in result.record.reason
+    assert np.isfinite(result.trajectory.x).all()
+
+
+def test_consistent_guess_normalizes_quaternions_and_clips_to_the_bounds():
+    instance = PDGInstance()
+    c = instance.constants
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(N, 14))
+    x[:, 13] = np.linspace(4.0, 1.0, N)
+    u = rng.normal(size=(N, 3)) * 10
+    z = consistent_guess(instance, x, u, 100.0, N)
+    np.testing.assert_allclose(np.linalg.norm(z.x[:, 6:10], axis=1), 1.0)
+    np.testing.assert_array_equal(z.x[0], instance.x0)
+    assert z.x[:, 13].min() >= c.m_dry and z.x[:, 13].max() <= instance.m0
+    assert np.all(np.diff(z.x[:, 13]) <= 0.0)
+    thrust = np.linalg.norm(z.u, axis=1)
+    assert thrust.min() >= c.T_min - 1e-12 and thrust.max() <= c.T_max + 1e-12
+    assert z.p[0] == c.tf_max
+    with pytest.raises(ValueError, match="expected"):
+        consistent_guess(instance, x[:10], u, 5.0, N)
+
+
+@pytest.mark.parametrize(
+    ("rho", "tau_r", "expected", "accepted"),
+    [
+        (0.9, 0.0, 2.0, True),  # rho >= rho_2: beta^(1 - tau_r)
+        (0.9, 0.5, 2.0**0.5, True),
+        (0.5, 0.3, 1.0, True),  # rho_1 <= rho < rho_2: unchanged
+        (0.05, 0.5, 2.0**-0.5, True),  # rho < rho_1: alpha^-tau_r (floor 0)
+        (-1.0, 0.25, 2.0**-0.25, False),  # rejected
+    ],
+)
+def test_eq22_scales_growth_and_contraction_by_the_changed_fraction(rho, tau_r, expected, accepted):
+    eta, ok = eq22_update(1.0, rho, SCvxParameters(), tau_r, shrink_floor=0.0)
+    assert eta == pytest.approx(expected)
+    assert ok is accepted
+
+
+def test_eq22_contraction_exponent_has_a_floor():
+    eta, ok = eq22_update(1.0, -1.0, SCvxParameters(), 0.0, shrink_floor=1.0)
+    assert eta == pytest.approx(0.5) and not ok
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("margin", -1.0), ("shrink_floor", 2.0), ("max_repairs", 1.5)]
+)
+def test_bad_tscvx_parameters_are_refused_by_name(field, value):
+    with pytest.raises(ValueError, match=field):
+        TscvxParameters(**{field: value})
