@@ -1,0 +1,74 @@
+"""``scpformer solve pdg6dof --warmstart tscvx --model RUN``: T-SCvx from the command line."""
+
+from __future__ import annotations
+
+import pytest
+
+from scpformer.cli.main import main
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.problem import solve
+from scpformer.warmstart.tscvx import TscvxWarmStart
+
+
+class OraclePredictor:
+    """The predictor API answering with a cold solve's final flags and optimum."""
+
+    n_nodes = 50
+
+    def __init__(self, solution):
+        self.solution = solution
+
+    def predict_tight(self, theta, k):
+        return self.solution.history[-1].tight_flags
+
+    def predict_solution(self, theta):
+        z = self.solution.trajectory
+        return z.x, z.u, float(z.p[0])
+
+
+def _one_error_line(capsys) -> str:
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1
+    return lines[0]
+
+
+def test_tscvx_without_a_model_is_a_usage_error(capsys):
+    assert main(["solve", "pdg6dof", "--warmstart", "tscvx"]) == 2
+    assert "--warmstart tscvx needs --model" in _one_error_line(capsys)
+
+
+def test_a_missing_run_folder_is_a_one_line_error(tmp_path, capsys):
+    missing = tmp_path / "no_run"
+    assert main(["solve", "pdg6dof", "--warmstart", "tscvx", "--model", str(missing)]) == 2
+    line = _one_error_line(capsys)
+    assert line.startswith("scpformer: error: --model") and "no_run" in line
+
+
+def test_a_corrupt_run_folder_is_a_one_line_error(tmp_path, capsys):
+    run = tmp_path / "run"
+    (run / "tight").mkdir(parents=True)
+    (run / "tight" / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    assert main(["solve", "pdg6dof", "--warmstart", "tscvx", "--model", str(run)]) == 2
+    assert _one_error_line(capsys).startswith("scpformer: error: --model")
+
+
+def test_model_without_tscvx_is_refused(tmp_path, capsys):
+    assert main(["solve", "pdg6dof", "--model", str(tmp_path)]) == 2
+    assert "--warmstart tscvx only" in _one_error_line(capsys)
+
+
+@pytest.mark.slow
+def test_tscvx_solve_runs_algorithm_2_with_the_runs_predictor(tmp_path, monkeypatch, capsys):
+    predictor = OraclePredictor(solve(PDGInstance()))
+    loaded = {}
+
+    def from_run(cls, run_dir, device="cpu", **kwargs):
+        loaded["run"] = str(run_dir)
+        return cls(predictor, **kwargs)
+
+    monkeypatch.setattr(TscvxWarmStart, "from_run", classmethod(from_run))
+    status = main(["solve", "pdg6dof", "--warmstart", "tscvx", "--model", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert loaded["run"] == str(tmp_path)
+    assert "T-SCvx rows kept" in out and "converged" in out
