@@ -38,7 +38,7 @@ import scipy.sparse as sp
 
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.subproblem import PDGSubproblem, SubproblemSolution, failed_solution
-from scpformer.scp.conic import SOLVERS
+from scpformer.scp.conic import REUSE_OPTIONS, SOLVERS
 
 ALWAYS = -1  # owner of a conic row kept in every reduced problem
 BOX = -2  # owner of a row of the safeguard trust-region box
@@ -176,6 +176,9 @@ class ReducedSubproblem:
         self.sub = sub
         self.layout = layout or conic_layout(sub)
         self.last_size: ReducedSize | None = None
+        self._solver: object | None = None  # the Clarabel solver of the last solve
+        self._solver_key: tuple | None = None  # its kept rows and columns
+        self._cone_count = 0
 
     def conic_data(self) -> dict[str, object]:
         """The full conic data of the current parameter values (cvxpy's parameter map only)."""
@@ -187,8 +190,8 @@ class ReducedSubproblem:
 
         ``keep_box = False`` leaves out the safeguard box of the trust region (only sound
         with a soft trust region; the caller re-solves with it if the step leaves the box).
-        ``solve_time`` is the Clarabel call alone (setup and solve), ``wall_time`` includes
-        the parameter map, the slicing and the unpacking.
+        ``solve_time`` is the Clarabel call alone (setup or update, and solve); ``wall_time``
+        includes the parameter map, the slicing and the unpacking.
         """
         start = time.perf_counter()
         data = self.conic_data()
@@ -199,19 +202,19 @@ class ReducedSubproblem:
         cols = _used_columns(A, P, c)
         A = sp.csc_array(A[:, cols])
         P = sp.triu(P[cols][:, cols]).tocsc()
-        cones = self._cones(rows)
-        settings = clarabel.DefaultSettings()
-        settings.verbose = False
         t0 = time.perf_counter()
         try:
-            result = clarabel.DefaultSolver(P, c[cols], A, data["b"][rows], cones, settings).solve()
+            solver = self._clarabel(
+                (rows.tobytes(), cols.tobytes()), P, c[cols], A, data["b"][rows]
+            )
+            result = solver.solve()
         except Exception as err:  # a solver failure is a status (conic.py)
             return failed_solution(f"solver_error: {err}", time.perf_counter() - start, 0.0)
         solve_time = time.perf_counter() - t0
         self.last_size = ReducedSize(
             rows=int(rows.sum()),
             columns=int(cols.sum()),
-            cones=len(cones) - 2,
+            cones=int(self._cone_count),
             flags_kept=int(np.count_nonzero(keep)),
         )
         status = CLARABEL_STATUS.get(str(result.status), str(result.status))
@@ -220,6 +223,28 @@ class ReducedSubproblem:
         full = np.zeros(cols.size)
         full[cols] = np.asarray(result.x)
         return self._unpack(full, lambda_, status, solve_time, start)
+
+    def _clarabel(
+        self, key: tuple, P: sp.csc_array, q: np.ndarray, A: sp.csc_array, b: np.ndarray
+    ) -> object:
+        """A Clarabel solver holding this data: the previous one updated in place when the
+        kept rows and columns are the same (it keeps its symbolic factorization, as cvxpy's
+        ``reuse`` path does, :data:`scpformer.scp.conic.REUSE_OPTIONS`), else a new one."""
+        if self._solver is not None and self._solver_key == key:
+            try:
+                self._solver.update(P=P, q=q, A=A, b=b)
+                return self._solver
+            except Exception:  # a changed sparsity pattern: build a new solver
+                pass
+        rows = np.frombuffer(key[0], dtype=bool)
+        cones = self._cones(rows)
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        for name, value in REUSE_OPTIONS["clarabel"].items():
+            setattr(settings, name, value)
+        self._solver = clarabel.DefaultSolver(P, q, A, b, cones, settings)
+        self._solver_key, self._cone_count = key, len(cones) - 2
+        return self._solver
 
     def _cones(self, rows: np.ndarray) -> list[object]:
         lay = self.layout
