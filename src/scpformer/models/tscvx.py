@@ -49,6 +49,7 @@ import torch
 from torch import Tensor, nn
 
 from scpformer.data.splits import Splits
+from scpformer.models.normalization import _per_step_floor
 
 N_THETA = 16  # parameters of theta (THETA_NAMES)
 N_CONSTRAINT_NAMES = 7  # rows per node (CONSTRAINT_NAMES)
@@ -274,14 +275,22 @@ class TscvxNormalization:
 
     @classmethod
     def from_splits(cls, splits: Splits) -> TscvxNormalization:
-        """The statistics ``dataset split`` stored (training split, per element)."""
+        """The statistics ``dataset split`` stored (training split, per element).
+
+        The per-node std of x and u is floored at ``STEP_STD_FLOOR`` (0.1) times the
+        element's std over all nodes, as ART's per-step statistics are
+        (:func:`scpformer.models.normalization._per_step_floor`): some nodes are nearly
+        deterministic (the final state, the thrust at the last node), and a ~0 std would let
+        them dominate the standardized MSE and turn tiny errors into large ones.
+        """
         missing = sorted({"theta", "x", "u", "tf"} - set(splits.stats))
         if missing:
             raise ValueError(f"the splits hold no training statistics of {missing}")
         s = splits.stats
         return cls(
             theta_mean=s["theta"].mean, theta_std=s["theta"].std,
-            x_mean=s["x"].mean, x_std=s["x"].std, u_mean=s["u"].mean, u_std=s["u"].std,
+            x_mean=s["x"].mean, x_std=_per_step_floor(s["x"].mean, s["x"].std),
+            u_mean=s["u"].mean, u_std=_per_step_floor(s["u"].mean, s["u"].std),
             tf_mean=s["tf"].mean, tf_std=s["tf"].std,
         )  # fmt: skip
 
