@@ -145,9 +145,7 @@ def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
         default="validation",
         help="split evaluated and written to RUN at the end (validation)",
     )
-    parser.add_argument(
-        "--threads", type=int, default=None, help="torch threads (torch's default)"
-    )
+    parser.add_argument("--threads", type=int, default=None, help="torch threads (torch's default)")
     parser.add_argument(
         "--resume", action="store_true", help="continue the run in --out from its checkpoints"
     )
@@ -189,5 +187,6 @@ def run_train_tscvx(args: argparse.Namespace) -> int:
         )
     if result.metrics:
         print(format_metrics(result.metrics))
-    print(f"files: config.json, tight/, solution/, metrics_{result.report_split}.json in {result.run}")
+    split = result.report_split
+    print(f"files: config.json, tight/, solution/, metrics_{split}.json in {result.run}")
     return 0

@@ -83,7 +83,9 @@ class EncoderSizes:
             if value < 1:
                 raise ValueError(f"{name} must be at least 1, got {value}")
         if self.d_model % self.n_head:
-            raise ValueError(f"d_model ({self.d_model}) must be divisible by n_head ({self.n_head})")
+            raise ValueError(
+                f"d_model ({self.d_model}) must be divisible by n_head ({self.n_head})"
+            )
         if not isinstance(self.dropout, int | float) or not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"dropout must be in [0, 1), got {self.dropout!r}")
         if self.tokens not in TOKENIZATIONS:
@@ -168,9 +170,7 @@ class TokenEncoder(nn.Module):
         layer = nn.TransformerEncoderLayer(
             d, sizes.n_head, sizes.d_ff, sizes.dropout, batch_first=True
         )
-        self.encoder = nn.TransformerEncoder(
-            layer, sizes.n_layer, enable_nested_tensor=False
-        )
+        self.encoder = nn.TransformerEncoder(layer, sizes.n_layer, enable_nested_tensor=False)
         self.decode = nn.Linear(d, n_outputs)
         if self.tokens == "inputs":  # token embeddings as nn.Embedding's: N(0, 1)
             nn.init.normal_(self.value_weight)

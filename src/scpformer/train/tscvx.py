@@ -52,14 +52,13 @@ from torch.nn import functional
 
 from scpformer import __version__
 from scpformer.data.errors import DatasetError
-from scpformer.data.splits import SPLITS_NAME, load_splits
+from scpformer.data.splits import SPLIT_NAMES, SPLITS_NAME, load_splits
 from scpformer.data.storage import atomic_write_text, file_sha256
 from scpformer.data.torch_views import SolutionDataset
 from scpformer.models.tscvx import (
     FAMILY,
     SOLUTION_KIND,
     TIGHT_KIND,
-    TSCVX_MODELS,
     TSCVX_PRESETS,
     TscvxNormalization,
     build_model,
@@ -474,8 +473,12 @@ def _fit_fold(
     def save(state: FitState, training_state: dict[str, Any]) -> None:
         if not ctx.world.is_main:
             return
-        extra = training_state | {"preset": ctx.preset, "train_config": config.to_dict(),
-                                  "splits_digest": splits_digest, "pos_weight": pos_weight}
+        extra = training_state | {
+            "preset": ctx.preset,
+            "train_config": config.to_dict(),
+            "splits_digest": splits_digest,
+            "pos_weight": pos_weight,
+        }
         fields = dict(model=net, kind=kind, config=model_config, normalization=ctx.norm,
                       frame=None, family=FAMILY, manifest_digest=digest, seed=config.seed,
                       metrics=state.metrics(), n_steps=model_config.n_nodes)  # fmt: skip
@@ -511,6 +514,22 @@ def _model_config(kind: str, ctx: _RunContext) -> Any:
 def _write_run_config(
     out: Path, ctx: _RunContext, results: dict[str, NetworkResult], configs: dict[str, Any]
 ) -> None:
+    """Write ``out/config.json``; entries of networks trained by another launch into the same
+    run (``--networks tight`` and ``--networks solution`` side by side) are kept."""
+    path = out / CONFIG_NAME
+    earlier = json.loads(path.read_text()).get("networks", {}) if path.is_file() else {}
+    networks = {
+        name: {
+            "kind": r.kind,
+            "parameters": r.parameters,
+            "train_items": r.train_items,
+            "validation_items": r.validation_items,
+            "train_seconds_this_launch": r.seconds,
+            "best_val_loss": [s.best_val_loss for s in r.states],
+            "train": configs[name].to_dict(),
+        }
+        for name, r in results.items()
+    }
     description = {
         "preset": ctx.preset,
         "data": str(ctx.data.resolve()),
@@ -518,25 +537,14 @@ def _write_run_config(
         "manifest_digest": manifest_digest(ctx.data),
         "splits_digest": file_sha256(ctx.data / SPLITS_NAME),
         "folds": len(ctx.masks),
-        "samples": {s: int(np.sum(ctx.arrays.split == s)) for s in ("train", "validation", "test")},
-        "networks": {
-            name: {
-                "kind": r.kind,
-                "parameters": r.parameters,
-                "train_items": r.train_items,
-                "validation_items": r.validation_items,
-                "train_seconds_this_launch": r.seconds,
-                "best_val_loss": [s.best_val_loss for s in r.states],
-                "train": configs[name].to_dict(),
-            }
-            for name, r in results.items()
-        },
+        "samples": {s: int(np.sum(ctx.arrays.split == s)) for s in SPLIT_NAMES},
+        "networks": earlier | networks,
         "device": str(ctx.device),
         "world_size": ctx.world.size,
         "package_version": __version__,
     }
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / CONFIG_NAME, json.dumps(description, indent=2, default=str) + "\n")
+    atomic_write_text(path, json.dumps(description, indent=2, default=str) + "\n")
 
 
 # ======================================================================================

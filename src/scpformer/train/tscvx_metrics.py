@@ -150,7 +150,7 @@ def solution_metrics(
         "mse_tf": float(err2[:, -1].mean()),
         "rmse_physical": rmse,  # [U_L], [U_L/U_T], [-], [rad/U_T], [U_M], thrust, [U_T]
         "final_mass_abs_error_mean": float(np.mean(np.abs(x[:, -1, 13] - x_true[:, -1, 13]))),
-        "samples": int(len(truth_std)),
+        "samples": len(truth_std),
     }
 
 
@@ -158,8 +158,9 @@ def format_tight(metrics: dict[str, Any]) -> list[str]:
     """Printable lines: overall accuracy beside the baselines, then one line per name."""
     o = metrics["overall"]
     lines = [
-        f"tight: accuracy {100 * o['accuracy']:.2f} % (all zeros {100 * o['all_zeros_accuracy']:.2f}"
-        f" %, all ones {100 * o['all_ones_accuracy']:.2f} %), precision {o['precision']:.3f}, "
+        f"tight: accuracy {100 * o['accuracy']:.2f} % (all zeros "
+        f"{100 * o['all_zeros_accuracy']:.2f} %, all ones {100 * o['all_ones_accuracy']:.2f} %), "
+        f"precision {o['precision']:.3f}, "
         f"recall {o['recall']:.3f}, F1 {o['f1']:.3f}; every tight row predicted in "
         f"{100 * metrics['covered']:.1f} % of {metrics['items']} items",
         f"  {'name':<11} {'tight %':>8} {'pred %':>8} {'precision':>9} {'recall':>7} "
