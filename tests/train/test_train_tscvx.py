@@ -14,10 +14,9 @@ from scpformer.data.errors import DatasetError  # noqa: E402
 from scpformer.data.generate import GenerateConfig, generate  # noqa: E402
 from scpformer.data.splits import SplitConfig, make_splits  # noqa: E402
 from scpformer.data.torch_views import SolutionDataset, TightFlagsDataset  # noqa: E402
-from scpformer.models.tscvx import load_tscvx_predictor  # noqa: E402
+from scpformer.models.tscvx import TSCVX_MODELS, load_tscvx_predictor  # noqa: E402
 from scpformer.train.checkpoint import CheckpointError, load_checkpoint  # noqa: E402
 from scpformer.train.tscvx import (  # noqa: E402
-    TSCVX_MODELS,
     evaluate_tscvx,
     fold_masks,
     positive_weight,

@@ -67,7 +67,7 @@ from scpformer.models.tscvx import (
     preset,
 )
 from scpformer.train import distributed
-from scpformer.train.art import carve_validation
+from scpformer.train.art import BEST_NAME, CONFIG_NAME, carve_validation
 from scpformer.train.checkpoint import (
     CHECKPOINT_NAME,
     from_plain,
@@ -87,8 +87,6 @@ from scpformer.train.tscvx_metrics import (
 )
 
 NETWORKS = {"tight": TIGHT_KIND, "solution": SOLUTION_KIND}  # run sub-folder -> model kind
-CONFIG_NAME = "config.json"
-BEST_NAME = "best.pt"
 CV_NAME = "cv.json"
 
 # Training values per preset. paper: Sec. III.E.3 (batch 128, 4000 warm-up steps, two
