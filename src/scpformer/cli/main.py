@@ -9,6 +9,7 @@ import sys
 from scpformer import __version__
 from scpformer.cli import (
     bench_art,
+    bench_tscvx,
     data,
     experiment,
     pdg6dof,
@@ -37,6 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     robust_rendezvous.add_solve_parser(solve_families)
     robust_rendezvous.add_bench_parser(bench_families)
     bench_art.add_bench_parser(bench_families)
+    bench_tscvx.add_bench_parser(bench_families)
     data.add_generate_parser(commands)
     data.add_dataset_parser(commands)
     train.add_train_parser(commands)

@@ -28,6 +28,7 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
         parser = models.add_parser(kind, help=_HELP[kind], description=_HELP[kind])
         add_sequence_arguments(parser)
         parser.set_defaults(handler=run_train, kind=kind)
+    add_tscvx_parser(models)
 
 
 def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
@@ -98,3 +99,94 @@ def summary(result) -> str:
         ]
     lines.append(f"files: checkpoint.pt best.pt metrics.csv loss.png config.json in {result.run}")
     return "\n".join(lines)
+
+
+# -- T-SCvx ---------------------------------------------------------------------------------
+_TSCVX_HELP = (
+    "the T-SCvx networks: tight-constraint classifier f2(theta, k) and solution regressor "
+    "f1(theta) on a split pdg6dof dataset (T-SCvx paper Sec. III.D-E)"
+)
+
+
+def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
+    """``train tscvx``: both networks into RUN/tight and RUN/solution."""
+    parser = models.add_parser("tscvx", help=_TSCVX_HELP, description=_TSCVX_HELP)
+    parser.add_argument("--data", type=Path, required=True, help="pdg6dof dataset folder (split)")
+    parser.add_argument("--out", type=Path, required=True, help="run folder RUN")
+    parser.add_argument(
+        "--preset",
+        choices=("small", "paper"),
+        default="small",
+        help="network sizes, training values, epochs and folds: 'paper' (Sec. IV.A, III.E.3: "
+        "384/768 dims, 2 heads, 4 layers, 2 epochs, 3 folds) or 'small' (default)",
+    )
+    parser.add_argument(
+        "--networks",
+        nargs="+",
+        choices=("tight", "solution"),
+        default=("tight", "solution"),
+        help="which networks to train (both)",
+    )
+    parser.add_argument(
+        "--folds", type=int, default=None, help="K-fold over train+validation (preset's: 3/1)"
+    )
+    parser.add_argument(
+        "--solution-epochs", type=int, default=None, help="epochs of f1 (--epochs is f2's)"
+    )
+    parser.add_argument(
+        "--tokens",
+        choices=("single", "inputs"),
+        default=None,
+        help="tokenization of both networks (preset's: single)",
+    )
+    parser.add_argument(
+        "--report-split",
+        choices=("validation", "test"),
+        default="validation",
+        help="split evaluated and written to RUN at the end (validation)",
+    )
+    parser.add_argument("--threads", type=int, default=None, help="torch threads (torch's default)")
+    parser.add_argument(
+        "--resume", action="store_true", help="continue the run in --out from its checkpoints"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_dataclass_arguments(
+        parser, TrainConfig, title="training (default: the preset's values; paper values shown)"
+    )
+    parser.set_defaults(handler=run_train_tscvx)
+
+
+def run_train_tscvx(args: argparse.Namespace) -> int:
+    from scpformer.train.tscvx import format_metrics, train_tscvx
+
+    if args.solution_epochs is not None and args.solution_epochs < 1:
+        raise ValueError(f"--solution-epochs must be positive, got {args.solution_epochs}")
+    result = train_tscvx(
+        data=args.data,
+        out=args.out,
+        preset_name=args.preset,
+        networks=tuple(args.networks),
+        folds=args.folds,
+        overrides=overrides(args, TrainConfig),
+        solution_epochs=args.solution_epochs,
+        model_overrides={"tokens": args.tokens} if args.tokens else None,
+        resume=args.resume,
+        report_split=args.report_split,
+        threads=args.threads,
+        progress=not args.no_progress,
+    )
+    if not result.world.is_main:
+        return 0
+    for name, net in result.networks.items():
+        state = net.states[-1]
+        print(
+            f"{name}: {net.parameters} parameters, {len(net.states)} fold(s), "
+            f"{net.train_items} / {net.validation_items} training / validation items, "
+            f"{net.seconds:.1f} s; last fold: {state.epoch} epoch(s), validation loss "
+            f"{state.best_val_loss:.4g} (best, epoch {state.best_epoch})"
+        )
+    if result.metrics:
+        print(format_metrics(result.metrics))
+    split = result.report_split
+    print(f"files: config.json, tight/, solution/, metrics_{split}.json in {result.run}")
+    return 0

@@ -1,0 +1,116 @@
+"""``scpformer bench tscvx``: inference time of the T-SCvx networks through the predictor.
+
+Times the calls the solver makes (:class:`scpformer.models.tscvx.TscvxPredictor`, raw theta
+in, numpy out, standardization included): ``predict_tight(theta, k)`` and
+``predict_solution(theta)`` at batch 1, and the throughput at ``--batch``. Each number is the
+median over ``--repeats`` calls after ``--warmup`` untimed ones, on ``--threads`` torch threads
+(one by default, as the issue's <= 1 ms goal states; the T-SCvx paper reports 4.6-4.9 ms on
+its hardware). Random weights of a preset unless ``--model`` gives a trained run. torch is
+imported when the command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+
+def add_bench_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "tscvx",
+        help="time T-SCvx network inference (tight flags and solution) at batch 1",
+        description="Time the T-SCvx predictor's calls (raw theta in, numpy out) at batch 1 and "
+        "at --batch. Random weights of a preset unless --model gives a trained run.",
+    )
+    parser.add_argument(
+        "--preset", choices=("small", "paper"), default="small", help="sizes of random nets"
+    )
+    parser.add_argument("--tokens", choices=("single", "inputs"), default=None,
+                        help="tokenization of random nets (preset's)")  # fmt: skip
+    parser.add_argument("--model", type=Path, help="trained run folder (RUN/tight, RUN/solution)")
+    parser.add_argument("--repeats", type=int, default=500, help="timed calls per case (500)")
+    parser.add_argument("--warmup", type=int, default=20, help="untimed calls first (20)")
+    parser.add_argument("--batch", type=int, default=64, help="batch of the throughput case (64)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (1)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of theta and weights (0)")
+    parser.set_defaults(handler=run_bench)
+
+
+def random_predictor(preset_name: str, tokens: str | None, seed: int):
+    """A predictor with freshly initialized networks and unit standardization (N = 50)."""
+    import torch
+
+    from scpformer.models.tscvx import (
+        SOLUTION_KIND,
+        TIGHT_KIND,
+        TscvxNormalization,
+        TscvxPredictor,
+        build_model,
+        preset,
+    )
+
+    torch.manual_seed(seed)
+    extra = {"tokens": tokens} if tokens else {}
+    tight = build_model(TIGHT_KIND, preset(TIGHT_KIND, preset_name, **extra))
+    solution = build_model(SOLUTION_KIND, preset(SOLUTION_KIND, preset_name, **extra))
+    n = tight.config.n_nodes
+    norm = TscvxNormalization(
+        theta_mean=np.zeros(16), theta_std=np.ones(16), x_mean=np.zeros((n, 14)),
+        x_std=np.ones((n, 14)), u_mean=np.zeros((n, 3)), u_std=np.ones((n, 3)),
+        tf_mean=0.0, tf_std=1.0,
+    )  # fmt: skip
+    return TscvxPredictor(tight, solution, norm)
+
+
+def median_seconds(call: Callable[[], object], repeats: int, warmup: int) -> float:
+    """Median wall time of ``call`` over ``repeats`` runs after ``warmup`` untimed ones."""
+    for _ in range(warmup):
+        call()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        call()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    import torch
+
+    from scpformer.models.tscvx import load_tscvx_predictor
+
+    for name in ("repeats", "batch", "threads"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name} must be positive, got {getattr(args, name)}")
+    torch.set_num_threads(args.threads)
+    if args.model is not None:
+        predictor = load_tscvx_predictor(args.model)
+        source = str(args.model)
+    else:
+        predictor = random_predictor(args.preset, args.tokens, args.seed)
+        source = f"random {args.preset} weights"
+    rng = np.random.default_rng(args.seed)
+    mean, std = predictor.normalization.theta_mean, predictor.normalization.theta_std
+    theta = mean + std * rng.standard_normal((args.batch, 16))
+    ks = rng.integers(1, 20, size=args.batch)
+    cases = {
+        "predict_tight, batch 1": lambda: predictor.predict_tight(theta[0], 3),
+        "predict_solution, batch 1": lambda: predictor.predict_solution(theta[0]),
+        f"predict_tight, batch {args.batch}": lambda: predictor.predict_tight(theta, ks),
+        f"predict_solution, batch {args.batch}": lambda: predictor.predict_solution(theta),
+    }
+    params = {
+        "tight": sum(p.numel() for p in predictor.tight.parameters()),
+        "solution": sum(p.numel() for p in predictor.solution.parameters()),
+    }
+    print(f"T-SCvx inference ({source}; f2 {params['tight']} and f1 {params['solution']} "
+          f"parameters, {args.threads} thread(s), median of {args.repeats} calls)")  # fmt: skip
+    for label, call in cases.items():
+        seconds = median_seconds(call, args.repeats, args.warmup)
+        print(f"  {label:<28} {1e3 * seconds:8.3f} ms")
+    return 0

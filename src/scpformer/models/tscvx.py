@@ -1,0 +1,484 @@
+"""The T-SCvx networks (T-SCvx paper Sec. III.C-D, Table 3) and the predictor the solver calls.
+
+Notation
+--------
+theta (16,)   instance parameters in :data:`scpformer.data.pdg6dof_family.THETA_NAMES` order
+k             SCvx iteration, 1-based (Algorithm 2, step 1: tau = f2(theta, k + 1))
+N             temporal nodes; R = 7 N inequality rows, name-major
+              (:func:`scpformer.problems.pdg6dof.constraints.constraint_index`)
+f2            :class:`TightClassifier`, (theta, k) -> one logit per row (B, R)
+f1            :class:`SolutionRegressor`, theta -> standardized (x, u, t_f), (B, 17 N + 1):
+              ``x.reshape(14 N)``, then ``u.reshape(3 N)``, then ``t_f``
+
+Both are the transformer encoder of Sec. III.D.1: a linear encoder to the embedding width, a
+learned position encoding, ``torch.nn.TransformerEncoder`` layers (multi-head attention of
+Eq. 23, feed-forward, dropout, LayerNorm) and a linear decoder. How the inputs become tokens
+is a configuration field (``tokens``):
+
+* ``single`` -- the whole input vector is one token (the paper's layout: its input size 17,
+  output size 12 N; with PyTorch's default feed-forward width 2048, the paper's classifier
+  sizes give Table 3's 8.91 M parameters). Attention over one token is a linear map, so the
+  network is a residual MLP; the cheapest to train and to run.
+* ``inputs`` -- one token per input scalar (``value * w_i + b_i``, the learned position
+  encoding being ``b_i``) plus one learned read-out token whose output is decoded; attention
+  then mixes the parameters. About (inputs + 1) times the compute of ``single``.
+
+The iteration k enters the classifier as a 17th input, ``2 (k - 1) / (iter_max - 1) - 1``
+(-1 at the first iteration, +1 at ``iter_max``, the dataset's iteration limit).
+
+Usage::
+
+    predictor = load_tscvx_predictor(run_dir)  # RUN/tight, RUN/solution
+    flags = predictor.predict_tight(theta, k)  # (R,) bool, theta raw (16,)
+    x, u, tf = predictor.predict_solution(theta)  # (N, 14), (N, 3), float
+
+``TSCVX_PRESETS['small']`` was chosen by measuring on this machine; see its comment.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from scpformer.data.splits import Splits
+from scpformer.models.normalization import _per_step_floor
+
+N_THETA = 16  # parameters of theta (THETA_NAMES)
+N_CONSTRAINT_NAMES = 7  # rows per node (CONSTRAINT_NAMES)
+STATE_DIM, CONTROL_DIM = 14, 3  # x and u per node
+TOKENIZATIONS = ("single", "inputs")
+TIGHT_KIND, SOLUTION_KIND = "tscvx-tight", "tscvx-solution"
+MODEL_KINDS = (TIGHT_KIND, SOLUTION_KIND)
+FAMILY = "pdg6dof"
+
+
+# ======================================================================================
+# configuration
+# ======================================================================================
+@dataclass(frozen=True, kw_only=True)
+class EncoderSizes:
+    """Sizes shared by both networks (Sec. III.D.1; Sec. IV.A for the paper's values)."""
+
+    d_model: int = 384  # embedding width of the encoder layers
+    n_head: int = 2  # attention heads (Eq. 23)
+    n_layer: int = 4  # transformer encoder layers
+    d_ff: int = 2048  # feed-forward width (PyTorch's default; not given in the paper)
+    dropout: float = 0.1  # dropout in the encoder layers (training only)
+    tokens: str = "single"  # "single" (whole input one token) or "inputs" (one per scalar)
+    n_nodes: int = 50  # N, temporal nodes (Table 1)
+
+    def __post_init__(self) -> None:
+        for name in ("d_model", "n_head", "n_layer", "d_ff", "n_nodes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+            if value < 1:
+                raise ValueError(f"{name} must be at least 1, got {value}")
+        if self.d_model % self.n_head:
+            raise ValueError(
+                f"d_model ({self.d_model}) must be divisible by n_head ({self.n_head})"
+            )
+        if not isinstance(self.dropout, int | float) or not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"dropout must be in [0, 1), got {self.dropout!r}")
+        if self.tokens not in TOKENIZATIONS:
+            raise ValueError(f"tokens must be one of {TOKENIZATIONS}, got {self.tokens!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready fields (``type(config)(**config.to_dict())`` rebuilds it)."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TightConfig(EncoderSizes):
+    """f2 (Sec. IV.A): 384 dimensions, 2 heads, 4 layers, dropout 0.1."""
+
+    iter_max: int = 20  # k_max, SCvx iteration limit of the training data (Sec. IV.A: 20)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if isinstance(self.iter_max, bool) or not isinstance(self.iter_max, int):
+            raise TypeError(f"iter_max must be an int, got {type(self.iter_max).__name__}")
+        if self.iter_max < 2:
+            raise ValueError(f"iter_max must be at least 2, got {self.iter_max}")
+
+    @property
+    def n_rows(self) -> int:
+        """R = 7 N."""
+        return N_CONSTRAINT_NAMES * self.n_nodes
+
+
+@dataclass(frozen=True, kw_only=True)
+class SolutionConfig(EncoderSizes):
+    """f1 (Sec. IV.A): 768 dimensions, 2 heads, 4 layers, dropout 0.1."""
+
+    d_model: int = 768  # embedding width (larger than f2's: output 17 N + 1)
+
+    @property
+    def n_outputs(self) -> int:
+        """17 N + 1: x (14 N), u (3 N), t_f."""
+        return (STATE_DIM + CONTROL_DIM) * self.n_nodes + 1
+
+
+@dataclass(frozen=True, kw_only=True)
+class TscvxPreset:
+    """Both networks' configurations."""
+
+    tight: TightConfig
+    solution: SolutionConfig
+
+
+TSCVX_PRESETS: dict[str, TscvxPreset] = {
+    # Sec. IV.A; PyTorch's default feed-forward width. With R = 7 N = 350 outputs f2 has
+    # 8.82 M parameters (Table 3: 8.91 M with the paper's 12 N outputs); f1 has 22.7 M
+    # (Table 3 says 9 M, which 768 dimensions and 4 layers cannot give: one 768-wide layer
+    # alone has 5.5 M).
+    "paper": TscvxPreset(tight=TightConfig(), solution=SolutionConfig()),
+    # small: see the measurements in docs (train/tscvx.py module docstring)
+    "small": TscvxPreset(
+        tight=TightConfig(d_model=64, n_head=2, n_layer=2, d_ff=128, dropout=0.1),
+        solution=SolutionConfig(d_model=128, n_head=2, n_layer=2, d_ff=256, dropout=0.1),
+    ),
+}
+
+
+# ======================================================================================
+# the networks
+# ======================================================================================
+class TokenEncoder(nn.Module):
+    """Linear encoder, learned position encoding, transformer encoder, linear decoder.
+
+    ``forward(features (B, n_inputs)) -> (B, n_outputs)`` (Sec. III.D.1).
+    """
+
+    def __init__(self, sizes: EncoderSizes, n_inputs: int, n_outputs: int) -> None:
+        super().__init__()
+        self.tokens, d = sizes.tokens, sizes.d_model
+        if self.tokens == "single":
+            self.encode = nn.Linear(n_inputs, d)
+            self.position = nn.Parameter(torch.zeros(1, 1, d))  # one token's position
+        else:
+            self.value_weight = nn.Parameter(torch.zeros(n_inputs, d))  # w_i
+            self.position = nn.Parameter(torch.zeros(1, n_inputs + 1, d))  # b_i and read-out
+        layer = nn.TransformerEncoderLayer(
+            d, sizes.n_head, sizes.d_ff, sizes.dropout, batch_first=True
+        )
+        self.encoder = nn.TransformerEncoder(layer, sizes.n_layer, enable_nested_tensor=False)
+        self.decode = nn.Linear(d, n_outputs)
+        if self.tokens == "inputs":  # token embeddings as nn.Embedding's: N(0, 1)
+            nn.init.normal_(self.value_weight)
+            nn.init.normal_(self.position)
+
+    def forward(self, features: Tensor) -> Tensor:
+        if self.tokens == "single":
+            tokens = self.encode(features)[:, None, :] + self.position  # (B, 1, d)
+        else:
+            values = features[:, :, None] * self.value_weight  # (B, n_inputs, d)
+            readout = torch.zeros_like(values[:, :1])  # (B, 1, d): the position alone
+            tokens = torch.cat([values, readout], dim=1) + self.position  # (B, n_inputs + 1, d)
+        hidden = self.encoder(tokens)  # (B, T, d)
+        return self.decode(hidden[:, -1])  # (B, n_outputs): last token (the only, or read-out)
+
+
+def iteration_feature(k: Tensor, iter_max: int) -> Tensor:
+    """k in 1..iter_max -> ``2 (k - 1) / (iter_max - 1) - 1`` in [-1, 1] (float)."""
+    return 2.0 * (k.to(torch.float32) - 1.0) / (iter_max - 1) - 1.0
+
+
+class TightClassifier(nn.Module):
+    """f2(theta, k): one tight-constraint logit per (name, node) row (Sec. III.C, III.D.1).
+
+    ``forward(theta_std (B, 16), k (B,) int64) -> logits (B, R)``; ``sigmoid(logit) > 0.5``
+    predicts the row tight at SCvx iteration k.
+    """
+
+    def __init__(self, config: TightConfig) -> None:
+        super().__init__()
+        if not isinstance(config, TightConfig):
+            raise TypeError(f"config must be a TightConfig, got {type(config).__name__}")
+        self.config = config
+        self.net = TokenEncoder(config, N_THETA + 1, config.n_rows)
+
+    def forward(self, theta_std: Tensor, k: Tensor) -> Tensor:
+        _check_theta(theta_std)
+        if k.shape != theta_std.shape[:1]:
+            raise ValueError(f"k must be (B,) = {tuple(theta_std.shape[:1])}, got {tuple(k.shape)}")
+        features = torch.cat([theta_std, iteration_feature(k, self.config.iter_max)[:, None]], 1)
+        return self.net(features)  # (B, R)
+
+
+class SolutionRegressor(nn.Module):
+    """f1(theta): the standardized solution (x, u, t_f) (Sec. III.D, Algorithm 2 step input).
+
+    ``forward(theta_std (B, 16)) -> (B, 17 N + 1)`` in the layout of the module docstring.
+    """
+
+    def __init__(self, config: SolutionConfig) -> None:
+        super().__init__()
+        if not isinstance(config, SolutionConfig):
+            raise TypeError(f"config must be a SolutionConfig, got {type(config).__name__}")
+        self.config = config
+        self.net = TokenEncoder(config, N_THETA, config.n_outputs)
+
+    def forward(self, theta_std: Tensor) -> Tensor:
+        _check_theta(theta_std)
+        return self.net(theta_std)  # (B, 17 N + 1)
+
+
+def _check_theta(theta: Tensor) -> None:
+    if theta.ndim != 2 or theta.shape[1] != N_THETA:
+        raise ValueError(f"theta must be (B, {N_THETA}), got {tuple(theta.shape)}")
+
+
+# ======================================================================================
+# standardization (training split statistics) and the models API of the checkpoints
+# ======================================================================================
+@dataclass(frozen=True, kw_only=True, eq=False)
+class TscvxNormalization:
+    """Per-element training-split mean and std of theta, x, u and t_f (Sec. III.E.3)."""
+
+    theta_mean: np.ndarray  # (16,)
+    theta_std: np.ndarray  # (16,)
+    x_mean: np.ndarray  # (N, 14)
+    x_std: np.ndarray  # (N, 14)
+    u_mean: np.ndarray  # (N, 3)
+    u_std: np.ndarray  # (N, 3)
+    tf_mean: float  # [U_T]
+    tf_std: float  # [U_T]
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = np.asarray(getattr(self, f.name), dtype=np.float64)
+            if f.name.startswith("tf"):
+                value = float(value)
+            object.__setattr__(self, f.name, value)
+        n = self.x_mean.shape[0] if self.x_mean.ndim == 2 else -1
+        shapes = {"theta": (N_THETA,), "x": (n, STATE_DIM), "u": (n, CONTROL_DIM)}
+        for key, shape in shapes.items():
+            for part in ("mean", "std"):
+                if getattr(self, f"{key}_{part}").shape != shape or n < 1:
+                    raise ValueError(f"{key}_{part} must be {shape} with N >= 1")
+        stds = [self.theta_std, self.x_std, self.u_std, np.array(self.tf_std)]
+        if any(np.any(~(s > 0.0)) for s in stds):
+            raise ValueError("standard deviations must be positive")
+
+    @property
+    def n_nodes(self) -> int:
+        return self.x_mean.shape[0]
+
+    @classmethod
+    def from_splits(cls, splits: Splits) -> TscvxNormalization:
+        """The statistics ``dataset split`` stored (training split, per element).
+
+        The per-node std of x and u is floored at ``STEP_STD_FLOOR`` (0.1) times the
+        element's std over all nodes, as ART's per-step statistics are
+        (:func:`scpformer.models.normalization._per_step_floor`): some nodes are nearly
+        deterministic (the final state, the thrust at the last node), and a ~0 std would let
+        them dominate the standardized MSE and turn tiny errors into large ones.
+        """
+        missing = sorted({"theta", "x", "u", "tf"} - set(splits.stats))
+        if missing:
+            raise ValueError(f"the splits hold no training statistics of {missing}")
+        s = splits.stats
+        return cls(
+            theta_mean=s["theta"].mean, theta_std=s["theta"].std,
+            x_mean=s["x"].mean, x_std=_per_step_floor(s["x"].mean, s["x"].std),
+            u_mean=s["u"].mean, u_std=_per_step_floor(s["u"].mean, s["u"].std),
+            tf_mean=s["tf"].mean, tf_std=s["tf"].std,
+        )  # fmt: skip
+
+    def encode_theta(self, theta: np.ndarray) -> np.ndarray:
+        """Raw theta (..., 16) -> standardized."""
+        return (theta - self.theta_mean) / self.theta_std
+
+    def encode_solution(self, x: np.ndarray, u: np.ndarray, tf: np.ndarray) -> np.ndarray:
+        """(x (B, N, 14), u (B, N, 3), tf (B,)) -> standardized vector (B, 17 N + 1)."""
+        b = len(tf)
+        parts = [
+            ((x - self.x_mean) / self.x_std).reshape(b, -1),
+            ((u - self.u_mean) / self.u_std).reshape(b, -1),
+            ((np.asarray(tf) - self.tf_mean) / self.tf_std)[:, None],
+        ]
+        return np.concatenate(parts, axis=1)
+
+    def decode_solution(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Inverse of :meth:`encode_solution`: (B, 17 N + 1) -> x, u, tf (physical)."""
+        n, b = self.n_nodes, z.shape[0]
+        x = z[:, : STATE_DIM * n].reshape(b, n, STATE_DIM) * self.x_std + self.x_mean
+        u = z[:, STATE_DIM * n : -1].reshape(b, n, CONTROL_DIM) * self.u_std + self.u_mean
+        return x, u, z[:, -1] * self.tf_std + self.tf_mean
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TscvxNormalization:
+        known = {f.name for f in dataclasses.fields(cls)}
+        if set(data) != known:
+            raise ValueError(f"normalization dict must have keys {sorted(known)}")
+        return cls(**data)
+
+
+def preset(kind: str, name: str, **overrides: Any) -> TightConfig | SolutionConfig:
+    """The ``name`` preset's configuration of network ``kind`` (``tscvx-tight|solution``)."""
+    _check_kind(kind)
+    if name not in TSCVX_PRESETS:
+        raise ValueError(f"preset must be one of {tuple(TSCVX_PRESETS)}, got {name!r}")
+    base = TSCVX_PRESETS[name]
+    config = base.tight if kind == TIGHT_KIND else base.solution
+    return config_from_dict(kind, config.to_dict() | overrides)
+
+
+def config_from_dict(kind: str, data: Mapping[str, Any]) -> TightConfig | SolutionConfig:
+    """The configuration of ``kind`` from ``to_dict()`` output (unknown keys: ValueError)."""
+    _check_kind(kind)
+    cls = TightConfig if kind == TIGHT_KIND else SolutionConfig
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} field(s) {unknown}; known: {sorted(known)}")
+    return cls(**data)
+
+
+def build_model(kind: str, config: TightConfig | SolutionConfig) -> nn.Module:
+    """A freshly initialized network of ``kind``."""
+    _check_kind(kind)
+    return TightClassifier(config) if kind == TIGHT_KIND else SolutionRegressor(config)
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in MODEL_KINDS:
+        raise ValueError(f"kind must be one of {MODEL_KINDS}, got {kind!r}")
+
+
+# The models API (scpformer.train.models_api) that training and checkpoints use for T-SCvx.
+TSCVX_MODELS = SimpleNamespace(
+    build_model=build_model,
+    preset=preset,
+    config_from_dict=config_from_dict,
+    ArtNormalization=TscvxNormalization,  # the API's name for "the checkpoint's normalization"
+    TRAIN_DEFAULTS=None,
+    MODEL_KINDS=MODEL_KINDS,
+)
+
+
+# ======================================================================================
+# the predictor (the solver's API)
+# ======================================================================================
+class TscvxPredictor:
+    """Both trained networks behind raw-theta numpy calls (the T-SCvx contract).
+
+    Parameters
+    ----------
+    tight, solution
+        The trained f2 and f1 (eval mode).
+    normalization
+        Training-split statistics that standardize theta and de-standardize the solution.
+    threshold
+        Probability above which :meth:`predict_tight` calls a row tight.
+    device
+        Where the networks run.
+    """
+
+    def __init__(
+        self,
+        tight: TightClassifier,
+        solution: SolutionRegressor,
+        normalization: TscvxNormalization,
+        *,
+        threshold: float = 0.5,
+        device: str | torch.device = "cpu",
+    ) -> None:
+        if not 0.0 < threshold < 1.0:
+            raise ValueError(f"threshold must be in (0, 1), got {threshold!r}")
+        n = {tight.config.n_nodes, solution.config.n_nodes, normalization.n_nodes}
+        if len(n) != 1:
+            raise ValueError(f"the networks and the normalization disagree on N: {sorted(n)}")
+        self.device = torch.device(device)
+        self.tight = tight.to(self.device).eval()
+        self.solution = solution.to(self.device).eval()
+        self.normalization = normalization
+        self.threshold = float(threshold)
+        self.n_nodes = normalization.n_nodes  # N
+        self.n_rows = tight.config.n_rows  # R = 7 N
+
+    def _theta(self, theta: np.ndarray) -> tuple[Tensor, bool]:
+        """Standardized (B, 16) float32 tensor, and whether ``theta`` was one vector."""
+        theta = np.asarray(theta, dtype=np.float64)
+        single = theta.ndim == 1
+        if theta.ndim not in (1, 2) or theta.shape[-1] != N_THETA:
+            raise ValueError(f"theta must be ({N_THETA},) or (B, {N_THETA}), got {theta.shape}")
+        if not np.all(np.isfinite(theta)):
+            raise ValueError("theta must be finite (it holds NaN or inf)")
+        z = self.normalization.encode_theta(np.atleast_2d(theta))
+        return torch.as_tensor(z, dtype=torch.float32, device=self.device), single
+
+    def _k(self, k: int | np.ndarray, batch: int, single: bool) -> Tensor:
+        k_array = np.asarray(k)
+        if k_array.dtype.kind not in "iu":
+            raise TypeError(f"k must be an int or an integer array, got {k_array.dtype}")
+        if k_array.ndim == 0:
+            k_array = np.full(batch, int(k_array))
+        elif single or k_array.shape != (batch,):
+            raise ValueError(f"k must be an int or ({batch},) for this theta, got {k_array.shape}")
+        if np.any(k_array < 1):
+            raise ValueError(f"k must be >= 1 (1-based SCvx iteration), got min {k_array.min()}")
+        return torch.as_tensor(k_array, dtype=torch.int64, device=self.device)
+
+    @torch.inference_mode()
+    def predict_tight_proba(self, theta: np.ndarray, k: int | np.ndarray) -> np.ndarray:
+        """P(row tight at iteration k): (R,) for theta (16,), (B, R) for theta (B, 16)."""
+        z, single = self._theta(theta)
+        logits = self.tight(z, self._k(k, len(z), single))  # (B, R)
+        proba = torch.sigmoid(logits).cpu().numpy().astype(np.float64)
+        return proba[0] if single else proba
+
+    def predict_tight(
+        self, theta: np.ndarray, k: int | np.ndarray, threshold: float | None = None
+    ) -> np.ndarray:
+        """Predicted tight flags (bool), shaped as :meth:`predict_tight_proba`."""
+        cut = self.threshold if threshold is None else threshold
+        return self.predict_tight_proba(theta, k) > cut
+
+    @torch.inference_mode()
+    def predict_solution(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, Any]:
+        """(x (N, 14), u (N, 3), tf float) for theta (16,); (B, N, 14), (B, N, 3), (B,) for
+        theta (B, 16). The quaternion is not normalized."""
+        z, single = self._theta(theta)
+        out = self.solution(z).cpu().numpy().astype(np.float64)
+        x, u, tf = self.normalization.decode_solution(out)
+        return (x[0], u[0], float(tf[0])) if single else (x, u, tf)
+
+
+def load_tscvx_predictor(
+    run_dir: Path | str, device: str | torch.device = "cpu", *, threshold: float = 0.5
+) -> TscvxPredictor:
+    """The predictor of run folder ``run_dir`` (``RUN/tight`` and ``RUN/solution``).
+
+    Raises
+    ------
+    CheckpointError
+        (a ValueError) when a checkpoint is missing, unreadable, or of another model kind or
+        family.
+    """
+    from scpformer.train.checkpoint import load_checkpoint
+
+    run = Path(run_dir)
+    loaded = {
+        kind: load_checkpoint(run / folder, kind=kind, family=FAMILY, models=TSCVX_MODELS)
+        for kind, folder in ((TIGHT_KIND, "tight"), (SOLUTION_KIND, "solution"))
+    }
+    return TscvxPredictor(
+        loaded[TIGHT_KIND].model,
+        loaded[SOLUTION_KIND].model,
+        loaded[SOLUTION_KIND].normalization,
+        threshold=threshold,
+        device=device,
+    )

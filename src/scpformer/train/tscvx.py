@@ -1,0 +1,597 @@
+"""``scpformer train tscvx``: the T-SCvx networks f2 and f1 (T-SCvx paper Sec. III.E.3).
+
+* **Data, read once.** The solved samples of a ``pdg6dof`` dataset (``dataset augment`` then
+  ``dataset split``: splits grouped by base instance, so the eight rotations of one instance
+  never straddle splits) are read in one pass over the shards into memory
+  (:func:`read_tscvx`); the items are those of the :class:`TightFlagsDataset` and
+  :class:`SolutionDataset` views (checked item by item in the tests).
+* **Standardization** of theta and of (x, u, t_f): the training split's per-element mean and
+  std that ``dataset split`` stored (Sec. III.E.3), kept in both checkpoints.
+* **Losses.** f2: binary cross-entropy on the logits with a positive-class weight
+  ``(1 - p) / p``, ``p`` the tight share of the fold's training rows (the tight rows are a
+  few percent); f1: mean squared error of the standardized outputs.
+* **Validation and K-fold.** ``folds=1`` (the default of the ``small`` preset): the dataset's
+  validation split, or, when it is empty, ``validation_fraction`` of the training instances
+  set aside (grouped). ``folds=K >= 2`` (``paper``: K = 3, Sec. III.E.3): the training and
+  validation splits are pooled, their base instances cut into K seeded folds; fold i trains a
+  fresh network on the other K - 1 folds and validates on fold i, in ``NET/fold<i>/``;
+  ``NET/cv.json`` holds every fold's validation loss and the delivered network is the last
+  fold's (Table 3 reports "the third fold"), copied to ``NET/checkpoint.pt``. The
+  standardization stays the one of the dataset's training split. The test split is read
+  only by :func:`evaluate_tscvx`.
+* **Loop.** :func:`scpformer.train.loop.fit` (AdamW, linear warm-up, batch 128, clipping,
+  DDP under torchrun, exact ``--resume``), a checkpoint per epoch in the ART format with the
+  kind ``tscvx-tight`` / ``tscvx-solution``.
+
+Run folder::
+
+    RUN/config.json                      what was trained on, how, parameter counts
+    RUN/tight/checkpoint.pt, best.pt     f2 (last and best validation epoch)
+    RUN/tight/metrics.csv, loss.png      per-epoch losses (and fold<i>/ with folds >= 2)
+    RUN/solution/...                     f1, the same files
+    RUN/metrics_<split>.json, tight_<split>.csv   evaluate_tscvx on a split
+
+The ``small`` preset (``scpformer.models.tscvx.TSCVX_PRESETS``) and its epochs were chosen
+by measuring on this machine; see TSCVX_TRAIN_DEFAULTS.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+from torch.nn import functional
+
+from scpformer import __version__
+from scpformer.data.errors import DatasetError
+from scpformer.data.splits import SPLIT_NAMES, SPLITS_NAME, load_splits
+from scpformer.data.storage import atomic_write_text, file_sha256
+from scpformer.data.torch_views import SolutionDataset
+from scpformer.models.tscvx import (
+    FAMILY,
+    SOLUTION_KIND,
+    TIGHT_KIND,
+    TSCVX_PRESETS,
+    TscvxNormalization,
+    build_model,
+    config_from_dict,
+    load_tscvx_predictor,
+    preset,
+)
+from scpformer.train import distributed
+from scpformer.train.art import BEST_NAME, CONFIG_NAME, carve_validation
+from scpformer.train.checkpoint import (
+    CHECKPOINT_NAME,
+    from_plain,
+    manifest_digest,
+    read_checkpoint,
+    save_checkpoint,
+)
+from scpformer.train.config import TrainConfig, train_config
+from scpformer.train.loop import FitState, TensorData, fit, seed_everything
+from scpformer.train.metrics import plot_losses, write_metrics
+from scpformer.train.tscvx_metrics import (
+    format_solution,
+    format_tight,
+    solution_metrics,
+    tight_metrics,
+    write_metrics_files,
+)
+
+NETWORKS = {"tight": TIGHT_KIND, "solution": SOLUTION_KIND}  # run sub-folder -> model kind
+CV_NAME = "cv.json"
+
+# Training values per preset. paper: Sec. III.E.3 (batch 128, 4000 warm-up steps, two
+# epochs, K = 3); its learning rate is not given. small: measured here (see module docstring).
+TSCVX_TRAIN_DEFAULTS: dict[str, dict[str, Any]] = {
+    "paper": {"batch_size": 128, "accumulation": 1, "warmup_steps": 4000, "lr": 1e-4,
+              "schedule": "constant"},
+    "small": {"batch_size": 128, "accumulation": 1, "warmup_steps": 200, "lr": 1e-3,
+              "schedule": "cosine"},
+}  # fmt: skip
+TSCVX_EPOCHS = {  # (f2, f1) epochs per preset; f1 sees ~1/iterations as many items per epoch
+    "paper": (2, 2),
+    "small": (4, 60),
+}
+TSCVX_FOLDS = {"paper": 3, "small": 1}
+
+
+# ======================================================================================
+# data
+# ======================================================================================
+@dataclass(frozen=True)
+class TscvxArrays:
+    """Raw arrays of solved samples (one row per sample), read once from the shards."""
+
+    theta: np.ndarray  # (n, 16)
+    x: np.ndarray  # (n, N, 14)
+    u: np.ndarray  # (n, N, 3)
+    tf: np.ndarray  # (n,)
+    iterations: np.ndarray  # (n,) SCvx iterations with flags
+    flags: np.ndarray  # (n, iter_max, R) bool
+    base_index: np.ndarray  # (n,) split group
+    split: np.ndarray  # (n,) "train", "validation" or "test"
+
+    def subset(self, mask: np.ndarray) -> TscvxArrays:
+        return TscvxArrays(*(getattr(self, f.name)[mask] for f in dataclasses.fields(self)))
+
+    def __len__(self) -> int:
+        return len(self.tf)
+
+    @property
+    def iter_max(self) -> int:
+        return self.flags.shape[1]
+
+    def tight_items(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, k): one item per (sample, iteration k = 1..iterations), sample-major."""
+        rows = np.repeat(np.arange(len(self)), self.iterations)
+        starts = np.cumsum(self.iterations) - self.iterations
+        k = np.arange(len(rows)) - np.repeat(starts, self.iterations) + 1
+        return rows, k.astype(np.int64)
+
+
+def read_tscvx(folder: Path | str) -> tuple[TscvxArrays, TscvxNormalization]:
+    """Every solved sample of a split ``pdg6dof`` dataset, and its training statistics.
+
+    Raises
+    ------
+    DatasetError
+        Not a ``pdg6dof`` dataset, no splits, or no solved sample.
+    """
+    view = SolutionDataset(folder, None, normalize=False)  # family, status and splits checks
+    splits = load_splits(folder)
+    positions = view.positions
+    if len(positions) == 0:
+        raise DatasetError(f"{folder} holds no solved sample")
+    split = np.full(len(view.samples), "", dtype=object)
+    for name, indices in splits.indices.items():
+        split[indices] = name
+    column = view.samples.column
+    arrays = TscvxArrays(
+        theta=column("theta")[positions],
+        x=column("x")[positions],
+        u=column("u")[positions],
+        tf=column("tf")[positions],
+        iterations=column("iterations")[positions].astype(np.int64),
+        flags=column("tight_flags")[positions],
+        base_index=column("base_index")[positions],
+        split=split[positions].astype(str),
+    )
+    view.samples.close()
+    return arrays, TscvxNormalization.from_splits(splits)
+
+
+def tight_tensors(arrays: TscvxArrays, norm: TscvxNormalization) -> TensorData:
+    """f2's items: ``theta`` (float32, standardized), ``k`` (int64), ``flags`` (uint8)."""
+    rows, k = arrays.tight_items()
+    flags = arrays.flags[rows, k - 1]  # (items, R)
+    return TensorData({
+        "theta": _float32(norm.encode_theta(arrays.theta)[rows]),
+        "k": torch.from_numpy(k),
+        "flags": torch.from_numpy(flags.astype(np.uint8)),
+    })  # fmt: skip
+
+
+def solution_tensors(arrays: TscvxArrays, norm: TscvxNormalization) -> TensorData:
+    """f1's items: ``theta`` and ``target`` (standardized x, u, t_f), float32."""
+    return TensorData({
+        "theta": _float32(norm.encode_theta(arrays.theta)),
+        "target": _float32(norm.encode_solution(arrays.x, arrays.u, arrays.tf)),
+    })  # fmt: skip
+
+
+def _float32(value: np.ndarray) -> Tensor:
+    return torch.from_numpy(np.ascontiguousarray(value, dtype=np.float32))
+
+
+def fold_masks(
+    arrays: TscvxArrays, folds: int, validation_fraction: float, seed: int
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(train, validation) sample masks per fold, grouped by base instance (module docstring)."""
+    in_train, in_val = arrays.split == "train", arrays.split == "validation"
+    if folds == 1:
+        if in_val.any():
+            return [(in_train, in_val)]
+        keep, held = carve_validation(arrays.base_index[in_train], validation_fraction, seed)
+        train, val = in_train.copy(), in_train.copy()
+        train[in_train], val[in_train] = keep, held
+        return [(train, val)]
+    pool = in_train | in_val
+    groups = np.unique(arrays.base_index[pool])
+    if len(groups) < folds:
+        raise DatasetError(f"{folds} folds need at least {folds} base instances, got {len(groups)}")
+    chunks = np.array_split(np.random.default_rng(seed).permutation(groups), folds)
+    out = []
+    for chunk in chunks:
+        val = pool & np.isin(arrays.base_index, chunk)
+        out.append((pool & ~val, val))
+    return out
+
+
+# ======================================================================================
+# training objectives (model(batch) -> (pred, loss) for the loop)
+# ======================================================================================
+class TightObjective(nn.Module):
+    """f2 with its loss: BCE on the logits, tight rows weighted by ``pos_weight``."""
+
+    def __init__(self, net: nn.Module, pos_weight: float) -> None:
+        super().__init__()
+        self.net = net
+        self.register_buffer("pos_weight", torch.tensor(float(pos_weight)))
+
+    def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
+        logits = self.net(batch["theta"], batch["k"])  # (B, R)
+        loss = functional.binary_cross_entropy_with_logits(
+            logits, batch["flags"].float(), pos_weight=self.pos_weight
+        )
+        return logits, loss
+
+
+class SolutionObjective(nn.Module):
+    """f1 with its loss: MSE of the standardized (x, u, t_f)."""
+
+    def __init__(self, net: nn.Module) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
+        pred = self.net(batch["theta"])  # (B, 17 N + 1)
+        return pred, functional.mse_loss(pred, batch["target"])
+
+
+def positive_weight(flags: Tensor) -> float:
+    """``(1 - p) / p`` with ``p`` the share of tight rows (1 when there are none or all)."""
+    p = float(flags.float().mean()) if flags.numel() else 0.0
+    return (1.0 - p) / p if 0.0 < p < 1.0 else 1.0
+
+
+# ======================================================================================
+# a run
+# ======================================================================================
+@dataclass(frozen=True, kw_only=True)
+class NetworkResult:
+    """What training one network did."""
+
+    kind: str
+    folder: Path
+    states: tuple[FitState, ...]  # one per fold
+    parameters: int
+    seconds: float  # wall time of this launch's training (all folds, without evaluation)
+    train_items: int  # of the delivered (last) fold
+    validation_items: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class TscvxRunResult:
+    """What :func:`train_tscvx` did."""
+
+    run: Path
+    networks: dict[str, NetworkResult]
+    metrics: dict[str, Any]  # evaluate_tscvx on ``report_split`` (empty if not main process)
+    report_split: str
+    world: distributed.World
+
+
+def train_tscvx(
+    *,
+    data: Path | str,
+    out: Path | str,
+    preset_name: str = "small",
+    networks: tuple[str, ...] = ("tight", "solution"),
+    folds: int | None = None,
+    overrides: dict[str, Any] | None = None,
+    solution_epochs: int | None = None,
+    model_overrides: dict[str, Any] | None = None,
+    resume: bool = False,
+    report_split: str = "validation",
+    threads: int | None = None,
+    progress: bool = True,
+) -> TscvxRunResult:
+    """Train (or resume) f2 and f1 on the ``pdg6dof`` dataset ``data`` into run folder ``out``.
+
+    Parameters
+    ----------
+    data, out
+        Split dataset folder and run folder.
+    preset_name
+        ``small`` or ``paper`` (networks, training values, epochs, folds).
+    networks
+        Which of ``tight`` and ``solution`` to train.
+    folds
+        K of the K-fold procedure (default: the preset's; 1 = one validation split).
+    overrides
+        :class:`TrainConfig` fields (None ignored); ``epochs`` is f2's.
+    solution_epochs
+        f1's epochs (default: the preset's).
+    model_overrides
+        Fields of both network configurations (e.g. ``{"tokens": "inputs"}``).
+    resume
+        Continue the networks' runs from their checkpoints (only epochs and device may change).
+    report_split
+        Split evaluated at the end (``validation`` or ``test``), written to RUN.
+    threads
+        torch threads (default: torch's). On a loaded shared machine one thread per process
+        trains several times faster than two (threads wait for each other's cores).
+
+    Raises
+    ------
+    ValueError
+        Bad arguments, unusable data (``DatasetError``), an existing run without ``resume``.
+    """
+    if preset_name not in TSCVX_PRESETS:
+        raise ValueError(f"preset must be one of {tuple(TSCVX_PRESETS)}, got {preset_name!r}")
+    unknown = sorted(set(networks) - set(NETWORKS))
+    if unknown or not networks:
+        raise ValueError(f"networks must be a non-empty subset of {tuple(NETWORKS)}")
+    folds = TSCVX_FOLDS[preset_name] if folds is None else folds
+    if isinstance(folds, bool) or not isinstance(folds, int) or folds < 1:
+        raise ValueError(f"folds must be a positive integer, got {folds!r}")
+    if report_split not in ("validation", "test"):
+        raise ValueError(f"report_split must be validation or test, got {report_split!r}")
+    if threads is not None:
+        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+            raise ValueError(f"threads must be a positive integer, got {threads!r}")
+        torch.set_num_threads(threads)
+    out, data = Path(out), Path(data)
+    overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
+    epochs = TSCVX_EPOCHS[preset_name]
+    configs = {
+        "tight": train_config(preset_name, model_defaults=TSCVX_TRAIN_DEFAULTS,
+                              **{"epochs": epochs[0], **overrides}),
+        "solution": train_config(preset_name, model_defaults=TSCVX_TRAIN_DEFAULTS,
+                                 **{**overrides, "epochs": solution_epochs or epochs[1]}),
+    }  # fmt: skip
+    for name in networks:
+        _check_new_or_resume(out / name, resume)
+    world, device = distributed.start(configs["tight"].device)
+    try:
+        arrays, norm = read_tscvx(data)
+        masks = fold_masks(arrays, folds, configs["tight"].validation_fraction,
+                           configs["tight"].seed)  # fmt: skip
+        context = _RunContext(data=data, arrays=arrays, norm=norm, masks=masks,
+                              preset=preset_name, model_overrides=dict(model_overrides or {}),
+                              world=world, device=device, progress=progress)  # fmt: skip
+        results = {name: _train_network(context, name, out / name, configs[name], resume)
+                   for name in networks}  # fmt: skip
+        if world.is_main:
+            _write_run_config(out, context, results, configs)
+        distributed.barrier(world)
+        metrics = {}
+        if world.is_main and all((out / name / CHECKPOINT_NAME).is_file() for name in NETWORKS):
+            metrics = evaluate_tscvx(out, data, split=report_split, arrays=(arrays, norm))
+        return TscvxRunResult(run=out, networks=results, metrics=metrics,
+                              report_split=report_split, world=world)  # fmt: skip
+    finally:
+        distributed.stop(world)
+
+
+@dataclass(frozen=True, kw_only=True)
+class _RunContext:
+    data: Path
+    arrays: TscvxArrays
+    norm: TscvxNormalization
+    masks: list[tuple[np.ndarray, np.ndarray]]
+    preset: str
+    model_overrides: dict[str, Any]
+    world: distributed.World
+    device: torch.device
+    progress: bool
+
+
+def _check_new_or_resume(folder: Path, resume: bool) -> None:
+    if (folder / CHECKPOINT_NAME).is_file() and not resume:
+        raise ValueError(
+            f"{folder} already holds a training run: pass --resume to continue it, or another --out"
+        )
+
+
+def _fold_folder(folder: Path, fold: int, folds: int) -> Path:
+    return folder if folds == 1 else folder / f"fold{fold}"
+
+
+def _train_network(
+    ctx: _RunContext, name: str, folder: Path, config: TrainConfig, resume: bool
+) -> NetworkResult:
+    """Every fold of one network; the last fold's checkpoint becomes ``folder``'s."""
+    kind = NETWORKS[name]
+    start = time.perf_counter()
+    states, model_config, sizes = [], None, (0, 0)
+    for fold, (train_mask, val_mask) in enumerate(ctx.masks, start=1):
+        fold_dir = _fold_folder(folder, fold, len(ctx.masks))
+        tensors = tight_tensors if name == "tight" else solution_tensors
+        train = tensors(ctx.arrays.subset(train_mask), ctx.norm)
+        validation = tensors(ctx.arrays.subset(val_mask), ctx.norm)
+        if len(train) == 0 or len(validation) == 0:
+            raise DatasetError(f"fold {fold} has {len(train)} training and {len(validation)} "
+                               "validation items")  # fmt: skip
+        state, model_config = _fit_fold(ctx, kind, fold_dir, config, train, validation, resume)
+        states.append(state)
+        sizes = (len(train), len(validation))
+    if len(ctx.masks) > 1 and ctx.world.is_main:
+        shutil.copyfile(fold_dir / CHECKPOINT_NAME, folder / CHECKPOINT_NAME)
+        shutil.copyfile(fold_dir / BEST_NAME, folder / BEST_NAME)
+        losses = [s.best_val_loss for s in states]
+        cv = {"folds": len(states), "best_val_loss": losses, "mean": float(np.mean(losses)),
+              "std": float(np.std(losses)), "delivered": f"fold{len(states)}"}  # fmt: skip
+        atomic_write_text(folder / CV_NAME, json.dumps(cv, indent=2) + "\n")
+    return NetworkResult(
+        kind=kind,
+        folder=folder,
+        states=tuple(states),
+        parameters=sum(p.numel() for p in build_model(kind, model_config).parameters()),
+        seconds=time.perf_counter() - start,
+        train_items=sizes[0],
+        validation_items=sizes[1],
+    )
+
+
+def _fit_fold(
+    ctx: _RunContext,
+    kind: str,
+    folder: Path,
+    config: TrainConfig,
+    train: TensorData,
+    validation: TensorData,
+    resume: bool,
+) -> tuple[FitState, Any]:
+    """Train one network on one fold in ``folder`` (resuming its checkpoint when asked)."""
+    previous = None
+    if resume and (folder / CHECKPOINT_NAME).is_file():
+        previous = read_checkpoint(folder, kind=kind, family=FAMILY)
+        previous["extra"] = from_plain(previous["extra"])
+        config = _resumed_config(previous, ctx.preset, config)
+    seed_everything(config.seed)
+    if previous is not None:
+        model_config = config_from_dict(kind, from_plain(previous["config"]))
+    else:
+        model_config = _model_config(kind, ctx)
+    net = build_model(kind, model_config)
+    if previous is not None:
+        net.load_state_dict(previous["state_dict"])
+        if previous["extra"]["fit"]["epoch"] >= config.epochs:  # finished fold: keep it
+            return FitState.from_dict(previous["extra"]["fit"]), model_config
+    pos_weight = positive_weight(train.tensors["flags"]) if kind == TIGHT_KIND else None
+    objective = TightObjective(net, pos_weight) if kind == TIGHT_KIND else SolutionObjective(net)
+    digest = manifest_digest(ctx.data)
+    splits_digest = file_sha256(ctx.data / SPLITS_NAME)
+    if previous is not None and previous["extra"].get("splits_digest") != splits_digest:
+        raise ValueError(f"{folder} was trained on other data or splits than {ctx.data}")
+    torch.manual_seed(config.seed + ctx.world.rank)
+    if ctx.world.is_main:
+        folder.mkdir(parents=True, exist_ok=True)
+
+    def save(state: FitState, training_state: dict[str, Any]) -> None:
+        if not ctx.world.is_main:
+            return
+        extra = training_state | {
+            "preset": ctx.preset,
+            "train_config": config.to_dict(),
+            "splits_digest": splits_digest,
+            "pos_weight": pos_weight,
+        }
+        fields = dict(model=net, kind=kind, config=model_config, normalization=ctx.norm,
+                      frame=None, family=FAMILY, manifest_digest=digest, seed=config.seed,
+                      metrics=state.metrics(), n_steps=model_config.n_nodes)  # fmt: skip
+        save_checkpoint(folder, **fields, extra=extra)
+        if state.improved:
+            save_checkpoint(folder / BEST_NAME, **fields)
+        write_metrics(folder, state.history)
+        plot_losses(folder, state.history, title=f"{kind} ({ctx.preset})")
+
+    resume_state = None if previous is None else previous["extra"]
+    state = fit(objective, train, validation, config, device=ctx.device, world=ctx.world,
+                resume=resume_state, on_epoch=save, progress=ctx.progress)  # fmt: skip
+    return state, model_config
+
+
+def _resumed_config(previous: dict[str, Any], preset_name: str, config: TrainConfig) -> TrainConfig:
+    """The stored training configuration with this launch's epochs and device."""
+    stored_preset = previous["extra"]["preset"]
+    if stored_preset != preset_name:
+        raise ValueError(f"the run to resume used preset {stored_preset!r}, not {preset_name!r}")
+    stored = TrainConfig.from_dict(previous["extra"]["train_config"])
+    return dataclasses.replace(stored, epochs=config.epochs, device=config.device)
+
+
+def _model_config(kind: str, ctx: _RunContext) -> Any:
+    """The preset's configuration with the dataset's N (and iter_max for f2)."""
+    changes = dict(ctx.model_overrides) | {"n_nodes": ctx.norm.n_nodes}
+    if kind == TIGHT_KIND:
+        changes["iter_max"] = ctx.arrays.iter_max
+    return preset(kind, ctx.preset, **changes)
+
+
+def _write_run_config(
+    out: Path, ctx: _RunContext, results: dict[str, NetworkResult], configs: dict[str, Any]
+) -> None:
+    """Write ``out/config.json``; entries of networks trained by another launch into the same
+    run (``--networks tight`` and ``--networks solution`` side by side) are kept."""
+    path = out / CONFIG_NAME
+    earlier = json.loads(path.read_text()).get("networks", {}) if path.is_file() else {}
+    networks = {
+        name: {
+            "kind": r.kind,
+            "parameters": r.parameters,
+            "train_items": r.train_items,
+            "validation_items": r.validation_items,
+            "train_seconds_this_launch": r.seconds,
+            "best_val_loss": [s.best_val_loss for s in r.states],
+            "train": configs[name].to_dict(),
+        }
+        for name, r in results.items()
+    }
+    description = {
+        "preset": ctx.preset,
+        "data": str(ctx.data.resolve()),
+        "family": FAMILY,
+        "manifest_digest": manifest_digest(ctx.data),
+        "splits_digest": file_sha256(ctx.data / SPLITS_NAME),
+        "folds": len(ctx.masks),
+        "samples": {s: int(np.sum(ctx.arrays.split == s)) for s in SPLIT_NAMES},
+        "networks": earlier | networks,
+        "device": str(ctx.device),
+        "world_size": ctx.world.size,
+        "package_version": __version__,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(description, indent=2, default=str) + "\n")
+
+
+# ======================================================================================
+# evaluation
+# ======================================================================================
+def evaluate_tscvx(
+    run: Path | str,
+    data: Path | str,
+    *,
+    split: str = "test",
+    threshold: float = 0.5,
+    batch: int = 4096,
+    arrays: tuple[TscvxArrays, TscvxNormalization] | None = None,
+) -> dict[str, Any]:
+    """Metrics of run ``run``'s networks on ``split`` of ``data`` (see tscvx_metrics).
+
+    Writes ``run/metrics_<split>.json`` and ``run/tight_<split>.csv`` and returns
+    ``{"tight": ..., "solution": ..., "split": split, "threshold": threshold}``.
+    """
+    run = Path(run)
+    predictor = load_tscvx_predictor(run, threshold=threshold)
+    arrays, _ = read_tscvx(data) if arrays is None else arrays
+    chosen = arrays.subset(arrays.split == split)
+    if len(chosen) == 0:
+        raise DatasetError(f"the {split} split of {data} holds no solved sample")
+    rows, k = chosen.tight_items()
+    truth = chosen.flags[rows, k - 1]
+    predicted = np.concatenate([
+        predictor.predict_tight(chosen.theta[rows[a : a + batch]], k[a : a + batch])
+        for a in range(0, len(rows), batch)
+    ])  # fmt: skip
+    norm = predictor.normalization
+    x, u, tf = predictor.predict_solution(chosen.theta)
+    metrics = {
+        "split": split,
+        "threshold": threshold,
+        "tight": tight_metrics(truth, predicted),
+        "solution": solution_metrics(
+            norm.encode_solution(x, u, tf),
+            norm.encode_solution(chosen.x, chosen.u, chosen.tf),
+            (x, u, tf),
+            (chosen.x, chosen.u, chosen.tf),
+        ),
+    }
+    write_metrics_files(run, split, metrics)
+    return metrics
+
+
+def format_metrics(metrics: dict[str, Any]) -> str:
+    """Printable summary of :func:`evaluate_tscvx`'s result."""
+    lines = [f"on the {metrics['split']} split (threshold {metrics['threshold']}):"]
+    return "\n".join(lines + format_tight(metrics["tight"]) + format_solution(metrics["solution"]))
