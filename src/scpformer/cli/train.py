@@ -29,6 +29,7 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
         add_sequence_arguments(parser)
         parser.set_defaults(handler=run_train, kind=kind)
     add_tscvx_parser(models)
+    add_lookup_parsers(models)
 
 
 def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
@@ -189,4 +190,65 @@ def run_train_tscvx(args: argparse.Namespace) -> int:
         print(format_metrics(result.metrics))
     split = result.report_split
     print(f"files: config.json, tight/, solution/, metrics_{split}.json in {result.run}")
+
+
+# -- lookup-table baselines of T-SCvx (paper Sec. IV.C) -------------------------------------------
+LOOKUP_HELP = {
+    "kdtree": "k-d tree nearest-neighbour lookup table (T-SCvx paper Sec. IV.C, Tables 4-5)",
+    "interp": "linear-interpolation lookup table (T-SCvx paper Sec. IV.C, Tables 4-5)",
+}
+
+
+def add_lookup_parsers(models: argparse._SubParsersAction) -> None:
+    """``train kdtree|interp --data DIR --out RUN``: fit a lookup table on the training split."""
+    from scpformer.models.lookup import LOOKUP_PRESETS
+
+    for kind, help_text in LOOKUP_HELP.items():
+        preset = LOOKUP_PRESETS[kind]
+        parser = models.add_parser(kind, help=help_text, description=help_text)
+        parser.add_argument("--data", type=Path, required=True, help="dataset folder (split)")
+        parser.add_argument("--out", type=Path, required=True, help="run folder RUN")
+        group = parser.add_argument_group("lookup table")
+        group.add_argument(
+            "--n-components",
+            type=int,
+            default=preset.n_components,
+            help=f"PCA components of the standardized inputs (paper: 10; default: "
+            f"{preset.n_components})",
+        )
+        group.add_argument(
+            "--max-points",
+            type=int,
+            default=preset.max_points,
+            help=f"training points in the table, drawn at random; 0: all (paper: 100 for "
+            f"interpolation; default: {preset.max_points})",
+        )
+        group.add_argument("--seed", type=int, default=preset.seed, help="seed of the draw")
+        group.add_argument(
+            "--threshold",
+            type=float,
+            default=preset.threshold,
+            help=f"probability from which a row is predicted tight (default: {preset.threshold})",
+        )
+        parser.set_defaults(handler=run_train_lookup, kind=kind)
+
+
+def run_train_lookup(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from scpformer.models.lookup import LOOKUP_PRESETS, train_lookup
+
+    config = dataclasses.replace(
+        LOOKUP_PRESETS[args.kind],
+        n_components=args.n_components,
+        max_points=args.max_points,
+        seed=args.seed,
+        threshold=args.threshold,
+    )
+    predictor = train_lookup(args.kind, data=args.data, out=args.out, config=config)
+    parts = {name: getattr(predictor, name) for name in ("tight", "solution")}
+    for name, part in parts.items():
+        print(f"{name}: {len(part.table.points)} points in {part.inputs.dims} PCA dimensions")
+    print(f"table: {predictor.memory_bytes() / 1e6:.3f} MB; files: lookup.npz lookup.json in "
+          f"{args.out}")  # fmt: skip
     return 0
