@@ -35,6 +35,7 @@ class Experiment:
 
 _ART = "ART paper (art-rendezvous-transformer.txt)"
 _ROBUST = "robust ART paper (robust-art-chance-constrained.txt)"
+_TSCVX = "T-SCvx paper (t-scvx-6dof-powered-descent.txt)"
 EXPERIMENTS: dict[str, Experiment] = {
     e.name: e
     for e in (
@@ -93,6 +94,38 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.robust_studies",
             default_n=60,
             models="one ART run",
+        ),
+        Experiment(
+            name="tscvx-training",
+            reproduces=f"{_TSCVX} Table 3",
+            summary="T-SCvx networks: losses, test accuracy vs all-zeros/ones, precision/recall",
+            module="scpformer.experiments.tscvx_studies",
+            default_n=1,
+            models="one T-SCvx run (scpformer train tscvx)",
+        ),
+        Experiment(
+            name="tscvx-solve-time",
+            reproduces=f"{_TSCVX} Fig. 2",
+            summary="cold SCvx vs T-SCvx solve times, converged rates, propellant gaps",
+            module="scpformer.experiments.tscvx_studies",
+            default_n=100,
+            models="one T-SCvx run",
+        ),
+        Experiment(
+            name="tscvx-trajectory",
+            reproduces=f"{_TSCVX} Fig. 3",
+            summary="a T-SCvx solution and its predicted vs true tight rows",
+            module="scpformer.experiments.tscvx_studies",
+            default_n=1,
+            models="one T-SCvx run",
+        ),
+        Experiment(
+            name="tscvx-lookup",
+            reproduces=f"{_TSCVX} Tables 4-5, Fig. 4",
+            summary="networks vs k-d tree vs interpolation: time, MSE, OOD MSE, memory, solves",
+            module="scpformer.experiments.tscvx_studies",
+            default_n=60,
+            models="a T-SCvx run, a kdtree run and an interp run",
         ),
     )
 }
