@@ -61,9 +61,10 @@ def _add_pdg6dof_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--ranges",
         choices=sorted(RANGE_PRESETS),
-        default="table2",
-        help="sampling ranges of theta: Table 2 of the T-SCvx paper, or the nominal sub-range "
-        "where most instances are feasible (default: table2)",
+        default="feasible",
+        help="sampling ranges of theta: Table 2's parameters drawn consistently with the "
+        "constraints (feasible), Table 2 as an independent box (table2), or the nominal "
+        "sub-range (default: feasible)",
     )
     add_config_arguments(parser)
 

@@ -70,14 +70,18 @@ THETA_NAMES: tuple[str, ...] = (
     "omega0_z_deg",
     "m0",
 )
-RANGE_PRESETS = {"table2": SampleRanges.table2, "nominal": SampleRanges.nominal}
+RANGE_PRESETS = {
+    "feasible": SampleRanges.feasible,
+    "table2": SampleRanges.table2,
+    "nominal": SampleRanges.nominal,
+}
 
 
 @dataclass(frozen=True, kw_only=True)
 class PDG6DoFDataConfig:
-    """What a 6-DoF dataset samples and how it solves; defaults are Tables 1 and 2."""
+    """What a 6-DoF dataset samples and how it solves; defaults: Table 1, Table 2 made feasible."""
 
-    ranges: SampleRanges = field(default_factory=SampleRanges.table2)  # theta ranges (Table 2)
+    ranges: SampleRanges = field(default_factory=SampleRanges.feasible)  # consistent Table 2
     constants: VehicleConstants = field(default_factory=VehicleConstants)  # model (Table 1)
     solver: PDGSolverConfig = field(default_factory=PDGSolverConfig)  # SCvx settings (Table 1)
 

@@ -77,13 +77,25 @@ def cubic_final_time(instance: PDGInstance, n_grid: int = 200, n_t: int = 51) ->
     below ``T_max``; ``tf_max`` when none does. On the nominal instance it gives 4.81 (the
     converged t_f is 4.7-5.0), where a descent-time rule gave 14.6.
     """
+    tf, fuel = cubic_profile_fuel(instance, n_grid, n_t)
+    return float(tf[np.argmin(fuel)]) if np.isfinite(fuel).any() else float(tf[-1])
+
+
+def cubic_profile_fuel(
+    instance: PDGInstance, n_grid: int = 200, n_t: int = 51
+) -> tuple[np.ndarray, np.ndarray]:
+    """Final times on ``[tf_min, tf_max]`` (n_grid,) and the cubic profile's fuel at each.
+
+    Fuel is ``tf int_0^1 alpha m0 |a - g| + beta ds``; ``inf`` where the thrust
+    ``m0 |a - g|`` exceeds ``T_max``.
+    """
     c = instance.constants
     tf = np.linspace(c.tf_min, c.tf_max, n_grid)
     s = np.linspace(0.0, 1.0, n_t)
     thrust = instance.m0 * np.linalg.norm(cubic_acceleration(instance, tf, s) - c.g_I, axis=-1)
     fuel = tf * np.trapezoid(c.alpha_mdot * thrust + c.beta_mdot, s, axis=1)
     fuel[thrust.max(axis=1) > c.T_max] = np.inf
-    return float(tf[np.argmin(fuel)]) if np.isfinite(fuel).any() else float(c.tf_max)
+    return tf, fuel
 
 
 def slerp(q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray) -> np.ndarray:
