@@ -13,6 +13,7 @@ from scpformer.cli import (
     experiment,
     pdg6dof,
     rendezvous,
+    report,
     robust_rendezvous,
     train,
 )
@@ -41,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_dataset_parser(commands)
     train.add_train_parser(commands)
     experiment.add_experiment_parser(commands)
+    report.add_report_parser(commands)
     return parser
 
 
