@@ -11,6 +11,7 @@ from scpformer.cli import (
     bench_art,
     data,
     experiment,
+    export,
     pdg6dof,
     rendezvous,
     report,
@@ -43,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_train_parser(commands)
     experiment.add_experiment_parser(commands)
     report.add_report_parser(commands)
+    export.add_export_parser(commands)
     return parser
 
 
