@@ -12,7 +12,7 @@ rho_2`` (nonconvex: the lower bound), and burns propellant at ``m' = -alpha |T|`
 
 *Lossless convexification*: relax ``|T|`` to a slack ``Gamma`` with ``|T| <= Gamma``,
 ``rho_1 <= Gamma <= rho_2``, ``m' = -alpha Gamma``. For minimum fuel the relaxed optimum has
-``|T| = Gamma`` (their Theorem 2), so it solves the nonconvex problem.
+``|T| = Gamma`` (their main result), so it solves the nonconvex problem.
 
 *Change of variables*: ``u = T / m``, ``sigma = Gamma / m``, ``z = ln m`` make the dynamics
 linear: ``r'' = u + g``, ``z' = -alpha sigma``, ``|u| <= sigma``. The bounds become
@@ -21,8 +21,9 @@ upper one is not, and is replaced by its tangent at a reference ``z_ref``,
 ``sigma <= rho_2 e^{-z_ref} (1 - (z - z_ref))``, which lies below ``rho_2 e^{-z}`` (the
 exponential is convex): every solution is feasible for the true bound. Re-solving with
 ``z_ref`` = the last solution's ``z`` until it stops moving is a sequential convex program
-(a convex-concave procedure, each solve no worse than the last); the warm start provides the
-first ``z_ref``, by default Acikmese & Ploen's ``z_ref(t) = ln(m0 - alpha rho_2 t)``.
+(a convex-concave procedure: the last solution stays feasible, so the cost does not rise);
+the warm start provides the first ``z_ref``, by default Acikmese & Ploen's
+``z_ref(t) = ln(m0 - alpha rho_2 t)``.
 
 Discretization: ``u, sigma`` constant on each of the ``N`` intervals, which makes
 ``r_{k+1} = r_k + dt v_k + dt^2/2 (u_k + g)``, ``v_{k+1} = v_k + dt (u_k + g)``,
@@ -66,7 +67,8 @@ G0 = 9.80665  # standard gravity [m/s^2] (specific impulse to exhaust velocity)
 # ======================================================================================
 @dataclass(frozen=True, kw_only=True)
 class Vehicle:
-    """The lander of Acikmese & Ploen's example (Mars), SI units."""
+    """The lander of Acikmese & Ploen's numerical example (Mars), SI units; tf, the
+    glideslope angle and the sampled ranges are ours."""
 
     g: tuple[float, float, float] = (0.0, 0.0, -3.7114)  # gravity [m/s^2], z up
     m_dry: float = 1505.0  # dry mass [kg]
@@ -74,7 +76,7 @@ class Vehicle:
     T_bar: float = 3100.0  # thrust of one of the six engines [N]
     cant_deg: float = 27.0  # engine cant angle [deg]; net thrust 6 T_bar cos(cant)
     throttle: tuple[float, float] = (0.3, 0.8)  # rho_1, rho_2 as fractions of the net thrust
-    gamma_gs_deg: float = 30.0  # glideslope: elevation of r above the horizon >= gamma_gs [deg]
+    gamma_gs_deg: float = 30.0  # glideslope: elevation of r >= gamma_gs [deg] (our choice)
 
     @property
     def alpha(self) -> float:
