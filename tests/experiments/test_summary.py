@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import pytest
 
@@ -94,3 +95,11 @@ def test_a_corrupt_results_json_is_an_error_naming_the_file(tmp_path, text, mess
 def test_a_missing_results_folder_is_an_error_naming_it(tmp_path):
     with pytest.raises(ResultsError, match=r"--results .*nowhere: no such folder"):
         collect(tmp_path / "nowhere")
+
+
+def test_every_committed_result_folder_has_readable_results_json():
+    folder = Path(__file__).resolve().parents[2] / "docs" / "results"
+    results = collect(folder)
+    assert {r.experiment for r in results} >= {"art-warmstart", "art-forecast-scp"}
+    for result in results:
+        assert result.rows and result.command.startswith("scpformer experiment run")
