@@ -79,3 +79,5 @@ for name in robust-trajectory robust-posthoc; do
   run scpformer experiment run "$name" --model "$RUNS/art-robust-small" --data "$ROB" \
     --workers "$WORKERS" --seed "$SEED" $RAY_FLAG --out "$OUT/$name"
 done
+# one page: the paper's numbers beside ours for every experiment above
+run scpformer report --results "$OUT" --out "$(dirname "$OUT")/RESULTS.md"

@@ -12,8 +12,10 @@ from scpformer.cli import (
     bench_tscvx,
     data,
     experiment,
+    export,
     pdg6dof,
     rendezvous,
+    report,
     robust_rendezvous,
     train,
 )
@@ -43,6 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_dataset_parser(commands)
     train.add_train_parser(commands)
     experiment.add_experiment_parser(commands)
+    report.add_report_parser(commands)
+    export.add_export_parser(commands)
     return parser
 
 

@@ -4,13 +4,16 @@ A report holds, in order: what the run reproduces, the command that ran it, the 
 configuration, the commands that made its dataset and models, the table with the paper's
 number beside ours for every quantity the paper reports, the figures, and where our
 formulation differs from the paper's code.
+
+Beside ``report.md``, ``results.json`` holds the paper-vs-ours rows in machine-readable form
+(:meth:`Report.results`), which ``scpformer report`` gathers into ``docs/RESULTS.md``
+(:mod:`scpformer.experiments.summary`).
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +22,10 @@ from typing import Any
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from scpformer.data.storage import atomic_write_text
+
 REPORT_NAME = "report.md"
+RESULTS_JSON_NAME = "results.json"  # the comparison rows, machine-readable
 
 # Where our rendezvous formulation differs from the public ART code (every rendezvous report).
 RENDEZVOUS_DIFFERENCES: tuple[str, ...] = (
@@ -119,13 +125,37 @@ class Report:
         parts += [f"- {text}" for text in self.differences]
         return "\n".join(parts) + "\n"
 
+    def results(self) -> dict[str, Any]:
+        """The comparison rows as plain values (``results.json``).
+
+        ``{"experiment", "reproduces", "command", "provenance", "rows"}``, each row
+        ``{"paper_item", "metric", "paper", "ours", "note", "command"}``.
+        """
+        rows = [
+            {
+                "paper_item": self.reproduces,
+                "metric": c.quantity,
+                "paper": c.paper,
+                "ours": c.ours,
+                "note": c.note,
+                "command": self.command,
+            }
+            for c in self.comparisons
+        ]
+        return {
+            "experiment": self.name,
+            "reproduces": self.reproduces,
+            "command": self.command,
+            "provenance": list(self.provenance),
+            "rows": rows,
+        }
+
     def write(self, out: Path) -> Path:
-        """Write ``OUT/report.md`` atomically."""
-        path = Path(out) / REPORT_NAME
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(self.render())
-        os.replace(tmp, path)
-        return path
+        """Write ``OUT/report.md`` and ``OUT/results.json`` atomically; returns the report."""
+        out = Path(out)
+        atomic_write_text(out / RESULTS_JSON_NAME, json.dumps(self.results(), indent=1) + "\n")
+        atomic_write_text(out / REPORT_NAME, self.render())
+        return out / REPORT_NAME
 
 
 def new_figure(ncols: int = 2, width: float = 10.0, height: float = 4.0) -> tuple[Figure, Any]:

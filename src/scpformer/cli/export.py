@@ -1,0 +1,46 @@
+"""``scpformer export``: a training run's networks as ONNX, checked with onnxruntime."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from scpformer.cli.argtypes import positive
+
+
+def add_export_parser(commands: argparse._SubParsersAction) -> None:
+    """Register ``export`` on the top-level subparsers."""
+    export = commands.add_parser(
+        "export",
+        help="export a run's networks to ONNX and check them against PyTorch",
+        description="Export each network of a training run to ONNX (full-sequence forward, "
+        "dynamic batch and sequence axes), run it with onnxruntime and PyTorch on the same "
+        "inputs and fail when they differ by more than --tolerance. A run with sub-folders "
+        "(RUN/tight, RUN/solution) writes FILE with each sub-folder's name before .onnx.",
+    )
+    export.add_argument(
+        "--model", type=Path, required=True, metavar="RUN", help="training run folder or checkpoint"
+    )
+    export.add_argument("--onnx", type=Path, required=True, metavar="FILE", help="FILE.onnx")
+    export.add_argument(
+        "--tolerance",
+        type=float,
+        default=None,
+        help="largest |onnxruntime - PyTorch| accepted (default 1e-4)",
+    )
+    export.add_argument("--opset", type=positive, default=None, help="ONNX opset (default 17)")
+    export.set_defaults(handler=run_export)
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from scpformer.train.export import DEFAULT_OPSET, DEFAULT_TOLERANCE, export_run
+
+    tolerance = DEFAULT_TOLERANCE if args.tolerance is None else args.tolerance
+    opset = DEFAULT_OPSET if args.opset is None else args.opset
+    for result in export_run(args.model, args.onnx, tolerance=tolerance, opset=opset):
+        shapes = ", ".join(f"{k} {v}" for k, v in result.inputs.items())
+        print(
+            f"wrote {result.path} ({result.kind}): max |onnxruntime - PyTorch| = "
+            f"{result.max_abs_diff:.2g} on {shapes}"
+        )
+    return 0

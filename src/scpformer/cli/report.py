@@ -1,0 +1,39 @@
+"""``scpformer report``: gather every experiment's results into one page (docs/RESULTS.md)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_report_parser(commands: argparse._SubParsersAction) -> None:
+    """Register ``report`` on the top-level subparsers."""
+    report = commands.add_parser(
+        "report",
+        help="gather docs/results/*/results.json into docs/RESULTS.md",
+        description="Write one page with, per paper table and figure, the paper's number, "
+        "ours and the commands that reproduce ours.",
+    )
+    report.add_argument(
+        "--results",
+        type=Path,
+        default=Path("docs/results"),
+        metavar="DIR",
+        help="folder of experiment folders (default: docs/results)",
+    )
+    report.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/RESULTS.md"),
+        metavar="FILE",
+        help="the page to write (default: docs/RESULTS.md)",
+    )
+    report.set_defaults(handler=run_report)
+
+
+def run_report(args: argparse.Namespace) -> int:
+    from scpformer.experiments.summary import write_summary
+
+    path = write_summary(args.results, args.out)
+    print(f"wrote {path}")
+    return 0

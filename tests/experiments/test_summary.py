@@ -1,0 +1,105 @@
+import json
+from pathlib import Path
+
+import pytest
+
+from scpformer.cli.main import main
+from scpformer.experiments.report import Comparison, Report
+from scpformer.experiments.summary import ResultsError, collect, write_summary
+
+
+def fake_experiment(results, name, reproduces, rows, command="scpformer experiment run x"):
+    """A results folder as an experiment run writes it (report.md + results.json)."""
+    report = Report(
+        name=name,
+        reproduces=reproduces,
+        command=command,
+        settings={},
+        provenance=[f"scpformer generate rendezvous --n 10 --out /data/{name}"],
+        comparisons=[Comparison(quantity=q, paper=p, ours=o, note=n) for q, p, o, n in rows],
+    )
+    folder = results / name
+    folder.mkdir(parents=True)
+    return report.write(folder).parent
+
+
+def test_report_write_puts_the_comparison_rows_in_results_json(tmp_path):
+    folder = fake_experiment(tmp_path, "exp-a", "ART paper Table 9", [("cost", "1.0", "2.0", "n")])
+    data = json.loads((folder / "results.json").read_text())
+    assert data["experiment"] == "exp-a"
+    assert data["rows"] == [
+        {
+            "paper_item": "ART paper Table 9",
+            "metric": "cost",
+            "paper": "1.0",
+            "ours": "2.0",
+            "note": "n",
+            "command": "scpformer experiment run x",
+        }
+    ]
+
+
+def test_scpformer_report_tabulates_every_experiment_with_its_commands(tmp_path, capsys):
+    results = tmp_path / "results"
+    fake_experiment(
+        results, "exp-a", "ART paper Table 9", [("cost [m/s]", "0.25", "0.27", "n = 5")],
+        command="scpformer experiment run exp-a --n 5",
+    )  # fmt: skip
+    fake_experiment(
+        results, "exp-b", "robust ART paper Fig. 11",
+        [("rate [%]", "10", "12", ""), ("time [s]", "~2", "0.1", "mean")],
+        command="scpformer experiment run exp-b --n 7",
+    )  # fmt: skip
+    out = tmp_path / "docs" / "RESULTS.md"
+    out.parent.mkdir()
+    assert main(["report", "--results", str(results), "--out", str(out)]) == 0
+    text = out.read_text()
+    a, b = text.index("## ART paper Table 9 (`exp-a`)"), text.index("## robust ART paper Fig. 11")
+    assert a < b  # sorted by folder name
+    assert "| cost [m/s] | 0.25 | 0.27 | n = 5 |" in text[a:b]
+    assert "| rate [%] | 10 | 12 |  |\n| time [s] | ~2 | 0.1 | mean |" in text[b:]
+    assert "scpformer generate rendezvous --n 10 --out /data/exp-a\n" in text[a:b]
+    assert "scpformer experiment run exp-a --n 5\n```" in text[a:b]
+    assert "[../results/exp-b/report.md](../results/exp-b/report.md)" in text[b:]
+    assert "`scpformer experiment run art-warmstart`" in text  # a registry entry not run here
+    assert str(out) in capsys.readouterr().out
+
+
+def test_a_report_without_results_json_is_an_error_naming_the_file(tmp_path, capsys):
+    folder = fake_experiment(tmp_path, "exp-a", "Table 1", [("q", "1", "2", "")])
+    (folder / "results.json").unlink()
+    with pytest.raises(ResultsError, match=r"exp-a/results.json: missing"):
+        collect(tmp_path)
+    assert main(["report", "--results", str(tmp_path), "--out", str(tmp_path / "R.md")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "exp-a/results.json: missing" in err[0]
+    assert not (tmp_path / "R.md").exists()
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('{"rows": [', "not readable JSON"),
+        ('["rows"]', "expected an object with a list 'rows'"),
+        ('{"rows": [{"metric": "q", "paper": "1"}]}', "row 0 lacks paper_item, ours, command"),
+    ],
+)
+def test_a_corrupt_results_json_is_an_error_naming_the_file(tmp_path, text, message):
+    folder = fake_experiment(tmp_path, "exp-a", "Table 1", [("q", "1", "2", "")])
+    (folder / "results.json").write_text(text)
+    with pytest.raises(ResultsError, match=message) as info:
+        write_summary(tmp_path, tmp_path / "R.md")
+    assert str(folder / "results.json") in str(info.value)
+
+
+def test_a_missing_results_folder_is_an_error_naming_it(tmp_path):
+    with pytest.raises(ResultsError, match=r"--results .*nowhere: no such folder"):
+        collect(tmp_path / "nowhere")
+
+
+def test_every_committed_result_folder_has_readable_results_json():
+    folder = Path(__file__).resolve().parents[2] / "docs" / "results"
+    results = collect(folder)
+    assert {r.experiment for r in results} >= {"art-warmstart", "art-forecast-scp"}
+    for result in results:
+        assert result.rows and result.command.startswith("scpformer experiment run")
