@@ -119,6 +119,36 @@ _SEQUENCE = NetworkExport(
 EXPORTS: dict[str, NetworkExport] = {"art": _SEQUENCE, "gru": _SEQUENCE, "lstm": _SEQUENCE}
 
 
+def _tscvx_models() -> Any:
+    from scpformer.models.tscvx import TSCVX_MODELS
+
+    return TSCVX_MODELS
+
+
+def _theta_input(batch: int) -> Tensor:
+    return torch.randn(batch, 16)
+
+
+def _iteration_input(ckpt: Checkpoint, batch: int) -> Tensor:
+    return torch.randint(1, int(ckpt.config.iter_max) + 1, (batch,))
+
+
+EXPORTS["tscvx-tight"] = NetworkExport(  # f2(theta_std, k) -> logits (B, 7 N)
+    inputs=lambda ckpt, b, t: {"theta": _theta_input(b), "k": _iteration_input(ckpt, b)},
+    module=lambda model: model,
+    outputs=("logits",),
+    dynamic=lambda ckpt: {name: {0: "batch"} for name in ("theta", "k", "logits")},
+    models=_tscvx_models,
+)
+EXPORTS["tscvx-solution"] = NetworkExport(  # f1(theta_std) -> standardized (x, u, t_f)
+    inputs=lambda ckpt, b, t: {"theta": _theta_input(b)},
+    module=lambda model: model,
+    outputs=("solution",),
+    dynamic=lambda ckpt: {name: {0: "batch"} for name in ("theta", "solution")},
+    models=_tscvx_models,
+)
+
+
 @dataclass(frozen=True)
 class ExportResult:
     """One exported network and its check."""
