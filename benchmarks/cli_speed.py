@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -35,9 +36,16 @@ import numpy as np
 HERE = Path(__file__).resolve().parents[1]
 
 
-def _process(src: Path, *args: str) -> tuple[float, str]:
-    """Wall time [s] and stdout of ``python -m scpformer.cli.main ARGS`` importing ``src``."""
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _process(src: Path, *args: str) -> tuple[float, float, str]:
+    """Wall and CPU (user + system) time [s] and stdout of ``python -m scpformer.cli.main
+    ARGS`` importing ``src``."""
     env = {**os.environ, "PYTHONPATH": str(src)}
+    cpu = _children_cpu()
     start = time.perf_counter()
     done = subprocess.run(
         [sys.executable, "-m", "scpformer.cli.main", *args],
@@ -49,7 +57,7 @@ def _process(src: Path, *args: str) -> tuple[float, str]:
     wall = time.perf_counter() - start
     if done.returncode not in (0, 1):
         raise RuntimeError(f"scpformer {' '.join(args)} failed: {done.stderr.strip()}")
-    return wall, done.stdout
+    return wall, _children_cpu() - cpu, done.stdout
 
 
 def reported_solve_time(stdout: str) -> float:
@@ -62,27 +70,28 @@ def reported_solve_time(stdout: str) -> float:
 
 
 def process_times(trees: dict[str, Path], help_runs: int, solve_runs: int) -> None:
-    helps: dict[str, list[float]] = {name: [] for name in trees}
-    overheads: dict[str, list[float]] = {name: [] for name in trees}
-    walls: dict[str, list[float]] = {name: [] for name in trees}
+    """Print the medians of ``--help`` and of the solve overhead (wall and CPU) per tree."""
+    helps: dict[str, list[tuple[float, float]]] = {name: [] for name in trees}
+    solves: dict[str, list[tuple[float, float, float]]] = {name: [] for name in trees}
     bare = []
     for _ in range(help_runs):
         start = time.perf_counter()
         subprocess.run([sys.executable, "-c", "pass"], check=True)
         bare.append(time.perf_counter() - start)
         for name, src in trees.items():
-            helps[name].append(_process(src, "--help")[0])
+            helps[name].append(_process(src, "--help")[:2])
     for _ in range(solve_runs):
         for name, src in trees.items():
-            wall, out = _process(src, "solve", "rendezvous")
-            walls[name].append(wall)
-            overheads[name].append(wall - reported_solve_time(out))
-    print(f"python -c pass: {statistics.median(bare):.3f} s (median of {help_runs})")
+            wall, cpu, out = _process(src, "solve", "rendezvous")
+            solves[name].append((wall, wall - reported_solve_time(out), cpu))
+    print(f"python -c pass: {statistics.median(bare):.3f} s wall (median of {help_runs})")
     for name in trees:
+        help_wall, help_cpu = (statistics.median(v) for v in zip(*helps[name], strict=True))
+        wall, overhead, cpu = (statistics.median(v) for v in zip(*solves[name], strict=True))
         print(
-            f"{name:6s}  --help {statistics.median(helps[name]):.3f} s (median of {help_runs})"
-            f" | solve rendezvous: process {statistics.median(walls[name]):.3f} s, minus "
-            f"reported solve {statistics.median(overheads[name]):.3f} s (median of {solve_runs})"
+            f"{name:6s}  --help {help_wall:.3f} s wall, {help_cpu:.3f} s CPU "
+            f"(median of {help_runs}) | solve rendezvous: process {wall:.3f} s wall, "
+            f"{cpu:.3f} s CPU, minus the reported solve {overhead:.3f} s (median of {solve_runs})"
         )
 
 

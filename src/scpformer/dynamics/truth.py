@@ -189,9 +189,13 @@ def _fixed_arc(derivative: Callable[[list[float]], list[float]], t0: float, t1: 
     rows = [tableau[s, : s + 1] for s in range(n_all)]
     new_row = tableau[-1, : _STAGES + 1]
     hD = h * dop853.D
-    which = np.minimum(((t_eval - t0) / h).astype(int), steps - 1)
+    position = (t_eval - t0) / h  # sorted; output i lies in step which[i] at fraction theta
+    which = np.minimum(position.astype(int), steps - 1)
+    basis = _dense_basis(position - which)
+    first = np.searchsorted(which, np.arange(steps + 1))  # outputs of step n: first[n:n+2]
     out = np.empty((t_eval.size, y.size))
     Y = np.empty((n_all + 1, y.size))
+    F = np.empty((7, y.size))
     ys = np.empty((steps + 1, y.size))
     errs = np.empty((2, steps, y.size))
     ys[0] = Y[0] = y
@@ -204,13 +208,14 @@ def _fixed_arc(derivative: Callable[[list[float]], list[float]], t0: float, t1: 
         K = Y[1:]
         errs[0, n] = np.dot(dop853.E5, K[: _STAGES + 1])
         errs[1, n] = np.dot(dop853.E3, K[: _STAGES + 1])
-        inside = np.flatnonzero(which == n)
-        if inside.size:
+        if first[n + 1] > first[n]:
             for s in range(_STAGES + 1, n_all):
                 Y[s + 1] = derivative(np.dot(rows[s], Y[: s + 1]).tolist())
-            dy = y_new - Y[0]
-            F = np.vstack([dy, h * K[0] - dy, 2.0 * dy - h * (K[0] + K[_STAGES]), hD @ K])
-            out[inside] = Y[0] + _dense_basis((t_eval[inside] - (t0 + n * h)) / h) @ F
+            F[0] = y_new - Y[0]
+            F[1] = h * K[0] - F[0]
+            F[2] = 2.0 * F[0] - h * (K[0] + K[_STAGES])
+            F[3:] = np.dot(hD, K)
+            out[first[n] : first[n + 1]] = Y[0] + np.dot(basis[first[n] : first[n + 1]], F)
         Y[0] = y_new
         Y[1] = Y[_STAGES + 1]
     norms = _error_norms(h, errs[0], errs[1], ys[:-1], ys[1:], rtol, atol)
@@ -219,8 +224,9 @@ def _fixed_arc(derivative: Callable[[list[float]], list[float]], t0: float, t1: 
     return out, ys[-1].copy()
 
 
-def _adaptive_arc(rhs: Rhs, t0: float, t1: float, y: FloatArray, t_eval: FloatArray,
-                  rtol: float, atol: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _adaptive_arc(
+    rhs: Rhs, t0: float, t1: float, y: FloatArray, t_eval: FloatArray, rtol: float, atol: FloatArray
+) -> tuple[FloatArray, FloatArray]:
     """``solve_ivp`` (adaptive DOP853) over ``[t0, t1]``; states at ``t_eval`` and ``t1``."""
     sol = solve_ivp(rhs, (t0, t1), y, method="DOP853", t_eval=np.append(t_eval, t1), rtol=rtol,
                     atol=atol)  # fmt: skip
@@ -258,7 +264,7 @@ def _propagate_arcs(
     y_out = np.empty((t_out.size, 12))
     dv_eci = np.zeros((t_nodes.size, 3))
     t_end = max(t_nodes[-1], t_out.max())
-    kicks = [k for k in range(t_nodes.size) if np.any(dv[k] != 0.0)]
+    kicks = np.flatnonzero(np.any(dv != 0.0, axis=1)).tolist()
     starts = [(t_nodes[0], None)] + [(t_nodes[k], k) for k in kicks]
     if len(starts) > 1 and starts[1][0] == starts[0][0]:
         starts = starts[1:]  # impulse at the initial node
@@ -382,9 +388,7 @@ def propagate_relative(
         steps = max(1, math.ceil((t1 - t0) / step - 1e-9))
         for refinement in range(MAX_REFINEMENTS + 1):
             try:
-                return _fixed_arc(
-                    derivative, t0, t1, y0, t_eval, steps << refinement, rtol, atol
-                )
+                return _fixed_arc(derivative, t0, t1, y0, t_eval, steps << refinement, rtol, atol)
             except _StepRejected:
                 continue
         raise _StepRejected
