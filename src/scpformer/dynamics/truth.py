@@ -131,7 +131,7 @@ def _rhs_factory(j2: float) -> Rhs:
     return rhs
 
 
-class _StepRejected(Exception):
+class _StepRejectedError(Exception):
     """A fixed step failed the error check after every refinement."""
 
 
@@ -178,7 +178,7 @@ def _fixed_arc(derivative: Callable[[list[float]], list[float]], t0: float, t1: 
     """Integrate ``[t0, t1]`` in ``steps`` equal DOP853 steps; states at ``t_eval`` and ``t1``.
 
     Outputs come from the 7th-order continuous extension (three extra stages in the steps
-    that contain one). Raises :class:`_StepRejected` when a step's error estimate exceeds
+    that contain one). Raises :class:`_StepRejectedError` when a step's error estimate exceeds
     the tolerance. Row 0 of ``Y`` holds the step's initial state and row ``1 + s`` stage
     ``s``, so that every stage input is one product ``(1, h a_s) @ Y``.
     """
@@ -220,7 +220,7 @@ def _fixed_arc(derivative: Callable[[list[float]], list[float]], t0: float, t1: 
         Y[1] = Y[_STAGES + 1]
     norms = _error_norms(h, errs[0], errs[1], ys[:-1], ys[1:], rtol, atol)
     if not np.all(norms <= 1.0):  # also catches NaN
-        raise _StepRejected
+        raise _StepRejectedError
     return out, ys[-1].copy()
 
 
@@ -389,14 +389,14 @@ def propagate_relative(
         for refinement in range(MAX_REFINEMENTS + 1):
             try:
                 return _fixed_arc(derivative, t0, t1, y0, t_eval, steps << refinement, rtol, atol)
-            except _StepRejected:
+            except _StepRejectedError:
                 continue
-        raise _StepRejected
+        raise _StepRejectedError
 
     if method == "fixed":
         try:
             y_out, dv_eci = _propagate_arcs(y, t_nodes, dv, t_out, fixed)
-        except _StepRejected:
+        except _StepRejectedError:
             y_out, dv_eci = _propagate_arcs(y, t_nodes, dv, t_out, adaptive)
     else:
         y_out, dv_eci = _propagate_arcs(y, t_nodes, dv, t_out, adaptive)
