@@ -9,10 +9,9 @@ Measures, side by side in one run (interleaved, so that both see the same machin
    reports (warm start + SCP wall time, the latter including the verification), median of
    ``--solve-runs``;
 3. the rendezvous replay check (:func:`scpformer.problems.rendezvous.problem.verify_solution`)
-   per solve on ``--n`` sampled instances, with the adaptive ``solve_ivp`` propagation (the
-   previous implementation, ``method="adaptive"``) and the checked fixed-step one (the
-   default), each on a cold per-instance cache, median over the instances; also the largest
-   difference of the two replays' RTN states and terminal misses.
+   per solve, run by each tree in a child process on the same ``--n`` SCP plans of sampled
+   instances (solved once, here), each instance verified once on a cold cache; median over
+   the instances, and the largest difference of the two trees' replayed RTN positions.
 
 The load average before and after is printed: timings on a shared machine are noisy.
 
@@ -22,12 +21,14 @@ Usage: python benchmarks/cli_speed.py [--help-runs 10] [--solve-runs 5] [--n 20]
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -95,51 +96,62 @@ def process_times(trees: dict[str, Path], help_runs: int, solve_runs: int) -> No
         )
 
 
-def replay_times(n: int, seed: int) -> None:
-    from scpformer.dynamics import truth
+def replay_child(plans: Path, out: Path) -> None:
+    """Time the replay check of every plan in ``plans`` with the package on ``sys.path``."""
+    from scpformer.problems.rendezvous import problem
+    from scpformer.problems.rendezvous.instance import RendezvousInstance
+
+    data = np.load(plans)
+    instances = [RendezvousInstance.from_dict(d) for d in json.loads(str(data["instances"]))]
+    cache = getattr(problem, "_osculating_initial_state", None)  # absent before the change
+    walls, cpus, rtn, passed = [], [], [], []
+    for k, instance in enumerate(instances):
+        x, dv = data[f"x{k}"], data[f"dv{k}"]
+        model = problem.linear_model(instance)
+        if cache is not None:
+            cache.cache_clear()  # every instance is verified once, as in a solve
+        start, cpu = time.perf_counter(), time.process_time()
+        ver = problem.verify_solution(instance, model, x, dv, "scp")
+        walls.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - cpu)
+        passed.append(ver.passed)
+        rtn.append(problem.replay(instance, dv).rtn)
+    np.savez(out, wall=walls, cpu=cpus, passed=passed, **{f"rtn{k}": r for k, r in enumerate(rtn)})
+
+
+def replay_times(trees: dict[str, Path], n: int, seed: int) -> None:
+    """Replay check per solve of each tree on the same ``n`` SCP plans (solved here)."""
     from scpformer.problems.rendezvous import problem
     from scpformer.problems.rendezvous.instance import sample_instances
 
-    fixed = truth.propagate_relative
-    instances = sample_instances(np.random.default_rng(seed), n)
-    times: dict[str, list[float]] = {"adaptive": [], "fixed": []}
-    gaps = []
-    for instance in instances:
+    plans: dict[str, np.ndarray] = {}
+    kept = []
+    for instance in sample_instances(np.random.default_rng(seed), n):
         sol = problem.solve(instance, "scp", verify=False)
-        if sol.trajectory is None:
-            continue
-        x, dv = sol.trajectory.x, sol.trajectory.u
-        model = problem.linear_model(instance)
-        results = {}
-        for method in ("adaptive", "fixed"):
-            problem.propagate_relative = lambda *a, m=method, **k: fixed(*a, method=m, **k)
-            problem._osculating_initial_state.cache_clear()
-            start = time.perf_counter()
-            ver = problem.verify_solution(instance, model, x, dv, "scp")
-            times[method].append(time.perf_counter() - start)
-            results[method] = (ver, problem.replay(instance, dv))
-        problem.propagate_relative = fixed
-        (va, ra), (vf, rf) = results["adaptive"], results["fixed"]
-        if va.passed != vf.passed:
-            raise RuntimeError("the two propagations disagree on pass/fail")
-        gaps.append(
-            (
-                np.abs(ra.rtn[:, :3] - rf.rtn[:, :3]).max(),
-                np.abs(ra.rtn[:, 3:] - rf.rtn[:, 3:]).max(),
-                abs(va.terminal_error["position_m"] - vf.terminal_error["position_m"]),
-            )
-        )
-    worst = np.max(gaps, axis=0)
-    count = len(times["fixed"])
-    for method, label in (("adaptive", "before (solve_ivp)"), ("fixed", "after (fixed step)")):
+        if sol.trajectory is not None:
+            plans[f"x{len(kept)}"], plans[f"dv{len(kept)}"] = sol.trajectory.x, sol.trajectory.u
+            kept.append(instance.to_dict())
+    results = {}
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "plans.npz"
+        np.savez(path, instances=json.dumps(kept), **plans)
+        for name, src in trees.items():
+            out = Path(folder) / f"{name}.npz"
+            env = {**os.environ, "PYTHONPATH": str(src)}
+            command = [sys.executable, __file__, "--replay-child", str(path), str(out)]
+            subprocess.run(command, env=env, check=True)
+            results[name] = dict(np.load(out))
+    for name, res in results.items():
         print(
-            f"replay check {label}: {1e3 * statistics.median(times[method]):.1f} ms per solve "
-            f"(median of {count} instances, max {1e3 * max(times[method]):.1f} ms)"
+            f"{name:6s}  replay check {1e3 * np.median(res['wall']):.1f} ms wall, "
+            f"{1e3 * np.median(res['cpu']):.1f} ms CPU per solve (median of {len(kept)} "
+            f"instances; passed {int(np.sum(res['passed']))}/{len(kept)})"
         )
-    print(
-        f"largest difference of the two replays: RTN position {worst[0]:.2e} m, velocity "
-        f"{worst[1]:.2e} m/s, terminal miss {worst[2]:.2e} m; pass/fail identical"
-    )
+    before, after = results.values()
+    gap = max(np.abs(before[f"rtn{k}"] - after[f"rtn{k}"]).max(axis=0)[:3].max()
+              for k in range(len(kept)))  # fmt: skip
+    same = bool(np.array_equal(before["passed"], after["passed"]))
+    print(f"largest RTN position difference of the two replays {gap:.2e} m; verdicts equal: {same}")
 
 
 def main() -> int:
@@ -150,10 +162,15 @@ def main() -> int:
     parser.add_argument("--solve-runs", type=int, default=5)
     parser.add_argument("--n", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--replay-child", nargs=2, type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.replay_child:
+        replay_child(*args.replay_child)
+        return 0
+    trees = {"before": args.before, "after": args.after}
     print(f"load average before: {os.getloadavg()[0]:.2f}")
-    process_times({"before": args.before, "after": args.after}, args.help_runs, args.solve_runs)
-    replay_times(args.n, args.seed)
+    process_times(trees, args.help_runs, args.solve_runs)
+    replay_times(trees, args.n, args.seed)
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     return 0
 

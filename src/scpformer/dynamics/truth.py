@@ -21,6 +21,7 @@ deputy, expressed in the deputy's own RTN frame at that instant.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -58,9 +59,19 @@ STEPS_PER_ORBIT = 30
 MAX_REFINEMENTS = 3
 
 
+def _read_only(values: ArrayLike) -> FloatArray:
+    arr = np.array(values, dtype=float, copy=True)
+    arr.flags.writeable = False
+    return arr
+
+
 @dataclass(frozen=True)
 class TruthResult:
     """Output of :func:`propagate_relative` at the requested output times (read-only arrays).
+
+    The ECI states are stored; the relative RTN states, osculating elements and ROE are
+    computed from them on first access (a replay check reads the RTN states only, the
+    osculating-state fixed point the elements only).
 
     Attributes
     ----------
@@ -80,19 +91,30 @@ class TruthResult:
     """
 
     t: FloatArray
-    rtn: FloatArray
-    oe_chief: FloatArray
-    oe_deputy: FloatArray
-    roe: FloatArray
     x_chief: FloatArray
     x_deputy: FloatArray
     dv_eci: FloatArray
 
     def __post_init__(self) -> None:
-        for name in ("t", "rtn", "oe_chief", "oe_deputy", "roe", "x_chief", "x_deputy", "dv_eci"):
-            arr = np.array(getattr(self, name), dtype=float, copy=True)
-            arr.flags.writeable = False
-            object.__setattr__(self, name, arr)
+        for name in ("t", "x_chief", "x_deputy", "dv_eci"):
+            object.__setattr__(self, name, _read_only(getattr(self, name)))
+
+    @functools.cached_property
+    def rtn(self) -> FloatArray:
+        c, d = self.x_chief, self.x_deputy
+        return _read_only(eci_to_rtn(c[:, :3], c[:, 3:], d[:, :3], d[:, 3:]))
+
+    @functools.cached_property
+    def oe_chief(self) -> FloatArray:
+        return _read_only(eci_to_oe(self.x_chief[:, :3], self.x_chief[:, 3:]))
+
+    @functools.cached_property
+    def oe_deputy(self) -> FloatArray:
+        return _read_only(eci_to_oe(self.x_deputy[:, :3], self.x_deputy[:, 3:]))
+
+    @functools.cached_property
+    def roe(self) -> FloatArray:
+        return _read_only(oe_to_roe(self.oe_chief, self.oe_deputy))
 
 
 def _derivative_factory(j2: float) -> Callable[[list[float]], list[float]]:
@@ -402,17 +424,4 @@ def propagate_relative(
         y_out, dv_eci = _propagate_arcs(y, t_nodes, dv, t_out, adaptive)
 
     x_c = y_out[:, 0:6]
-    x_d = x_c + y_out[:, 6:12]
-    rtn = eci_to_rtn(x_c[:, :3], x_c[:, 3:], x_d[:, :3], x_d[:, 3:])
-    oe_chief = eci_to_oe(x_c[:, :3], x_c[:, 3:])
-    oe_deputy = eci_to_oe(x_d[:, :3], x_d[:, 3:])
-    return TruthResult(
-        t=t_out,
-        rtn=rtn,
-        oe_chief=oe_chief,
-        oe_deputy=oe_deputy,
-        roe=oe_to_roe(oe_chief, oe_deputy),
-        x_chief=x_c,
-        x_deputy=x_d,
-        dv_eci=dv_eci,
-    )
+    return TruthResult(t=t_out, x_chief=x_c, x_deputy=x_c + y_out[:, 6:12], dv_eci=dv_eci)
