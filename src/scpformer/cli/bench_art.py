@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from scpformer.cli.commands import command_help
+
 MODES = ("cached", "cached, 2 calls", "cached, bf16", "no cache")
 R_T1 = -0.2  # R(t_1) [m/s] of the random-weight runs: a typical -J_CVX of Table 1 instances
 
@@ -37,7 +39,7 @@ R_T1 = -0.2  # R(t_1) [m/s] of the random-weight runs: a typical -J_CVX of Table
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "art",
-        help="time ART trajectory generation (dynamics in the loop), cached vs uncached",
+        help=command_help("bench", "art"),
         description="Generate ART trajectories with the rendezvous dynamics in the loop "
         "(Algorithm 2) and time them: batch 1 with the key-value cache, and without it (full "
         "forward at every step), and the batched throughput with the cache. Random weights of "

@@ -19,11 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from scpformer.cli.commands import command_help
+
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "tscvx",
-        help="time T-SCvx network inference (tight flags and solution) at batch 1",
+        help=command_help("bench", "tscvx"),
         description="Time the T-SCvx predictor's calls (raw theta in, numpy out) at batch 1 and "
         "at --batch. Random weights of a preset unless --model gives a trained run.",
     )

@@ -17,6 +17,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from scpformer.cli.argtypes import count, positive
+from scpformer.cli.commands import command_help
 from scpformer.cli.errors import OneLineParser, Terminated, run_command
 from scpformer.data.errors import DatasetError
 from scpformer.data.executors import check_ray_address
@@ -179,7 +180,7 @@ def add_generate_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``generate FAMILY`` with one sub-command per known family."""
     parser = subparsers.add_parser(
         "generate",
-        help="sample, solve and store a dataset of a problem family",
+        help=command_help("", "generate"),
         description="Sample N instances with the family's sampler, solve them on a local "
         "process pool (or a Ray cluster with --ray) and store them as HDF5 shards with a "
         "manifest. Re-running the same command resumes an interrupted run.",
@@ -317,7 +318,7 @@ def _solved_line(manifest: Manifest) -> str:
 # -- dataset -----------------------------------------------------------------------------------
 def add_dataset_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``dataset info|verify|augment|split``."""
-    parser = subparsers.add_parser("dataset", help="inspect, check, augment and split datasets")
+    parser = subparsers.add_parser("dataset", help=command_help("", "dataset"))
     commands = parser.add_subparsers(dest="dataset_command", required=True, metavar="COMMAND")
     folder_commands = (
         ("info", "summarize a dataset", run_info),

@@ -21,11 +21,43 @@ _COMMENT = re.compile(r"^\s*(\w+)\s*:[^#]*#\s*(.+)$")
 @functools.cache  # reading the source is most of the time of building the parser
 def field_comments(cls: type) -> dict[str, str]:
     """Map field name -> end-of-line comment in the class source."""
-    try:
-        source = inspect.getsource(cls)
-    except (OSError, TypeError):
+    source = _class_source(cls)
+    if source is None:
         return {}
     return {m.group(1): m.group(2).strip() for m in map(_COMMENT.match, source.splitlines()) if m}
+
+
+@functools.cache
+def _source_lines(path: str) -> tuple[str, ...]:
+    with open(path, encoding="utf-8") as fh:
+        return tuple(fh.read().splitlines())
+
+
+def _class_source(cls: type) -> str | None:
+    """The source of ``cls``: its ``class`` line and the indented block under it.
+
+    ``inspect.getsource`` parses the whole module for each class (milliseconds per class,
+    tens of them per parser); a module with one ``class Name`` line is read directly and
+    only an ambiguous one is left to ``inspect``.
+    """
+    try:
+        lines = _source_lines(inspect.getsourcefile(cls) or "")
+    except (OSError, TypeError):
+        return None
+    header = re.compile(rf"^(\s*)class {re.escape(cls.__name__)}\b")
+    starts = [i for i, line in enumerate(lines) if header.match(line)]
+    if len(starts) != 1:
+        try:
+            return inspect.getsource(cls)
+        except (OSError, TypeError):
+            return None
+    indent = len(header.match(lines[starts[0]]).group(1))
+    end = starts[0] + 1
+    while end < len(lines) and (
+        not lines[end].strip() or len(lines[end]) - len(lines[end].lstrip()) > indent
+    ):
+        end += 1
+    return "\n".join(lines[starts[0] : end])
 
 
 def _flag(prefix: str, name: str) -> str:

@@ -27,8 +27,6 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import NoReturn
 
-from scpformer.data.errors import DiskFullError
-
 USAGE, FAILURE = 2, 1
 INTERRUPTED, TERMINATED = 130, 128 + signal.SIGTERM
 _MAX_MESSAGE = 600  # characters of one error line
@@ -60,23 +58,33 @@ def describe_os_error(err: OSError) -> str:
 
 def status_and_message(err: BaseException) -> tuple[int, str]:
     """The exit status and message of a failure (see the module docstring)."""
-    from cvxpy.error import SolverError
-
+    disk_full = _loaded_class("scpformer.data.errors", "DiskFullError")
+    solver_error = _loaded_class("cvxpy.error", "SolverError")
     if isinstance(err, KeyboardInterrupt | Terminated):
         what = "interrupted" if isinstance(err, KeyboardInterrupt) else "terminated (SIGTERM)"
         status = INTERRUPTED if isinstance(err, KeyboardInterrupt) else TERMINATED
         return status, f"{what}; {err}" if str(err) else what
-    if isinstance(err, DiskFullError):
+    if isinstance(err, disk_full):
         return FAILURE, str(err)
     if isinstance(err, ValueError):  # argument checks raise ValueError or ArgumentTypeError
         return USAGE, str(err)
     if isinstance(err, OSError):
         return FAILURE, describe_os_error(err)
-    if isinstance(err, SolverError):
+    if isinstance(err, solver_error):
         return FAILURE, f"the conic solver failed: {err}"
     if isinstance(err, MemoryError):
         return FAILURE, "out of memory"
     return FAILURE, f"internal error ({type(err).__name__}: {err}); SCPFORMER_DEBUG=1 shows where"
+
+
+def _loaded_class(module: str, name: str) -> type | tuple[()]:
+    """Exception class ``module.name`` if that module is loaded, else ``()`` (matches nothing).
+
+    An error of a module that was never imported cannot have been raised, and importing it
+    (cvxpy takes a second) only to say so would slow every failing command down.
+    """
+    loaded = sys.modules.get(module)
+    return getattr(loaded, name) if loaded is not None else ()
 
 
 @contextmanager

@@ -8,12 +8,13 @@ import sys
 from pathlib import Path
 
 from scpformer.cli.argtypes import count, positive
+from scpformer.cli.commands import command_help
 from scpformer.experiments import EXPERIMENTS, RunOptions, run_experiment
 
 
 def add_experiment_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``experiment list`` and ``experiment run NAME`` on the top-level subparsers."""
-    experiment = commands.add_parser("experiment", help="reproduce a paper table or figure")
+    experiment = commands.add_parser("experiment", help=command_help("", "experiment"))
     actions = experiment.add_subparsers(dest="action", required=True, metavar="ACTION")
     listing = actions.add_parser("list", help="name every experiment and what it reproduces")
     listing.set_defaults(handler=run_list)

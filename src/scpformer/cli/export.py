@@ -6,13 +6,14 @@ import argparse
 from pathlib import Path
 
 from scpformer.cli.argtypes import positive
+from scpformer.cli.commands import command_help
 
 
 def add_export_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``export`` on the top-level subparsers."""
     export = commands.add_parser(
         "export",
-        help="export a run's networks to ONNX and check them against PyTorch",
+        help=command_help("", "export"),
         description="Export each network of a training run to ONNX (full-sequence forward, "
         "dynamic batch and sequence axes), run it with onnxruntime and PyTorch on the same "
         "inputs and fail when they differ by more than --tolerance. A run with sub-folders "

@@ -1,25 +1,27 @@
 """The ``scpformer`` command: ``solve`` and ``bench`` per family, ``generate``, ``dataset``,
-``train``, ``experiment``."""
+``train``, ``experiment``.
+
+Only this module and :mod:`scpformer.cli.commands` are imported to build the parser; a
+command's module (and cvxpy, torch, ...) is imported when the command is used.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from scpformer import __version__
-from scpformer.cli import (
-    bench_art,
-    bench_tscvx,
-    data,
-    experiment,
-    export,
-    pdg6dof,
-    rendezvous,
-    report,
-    robust_rendezvous,
-    train,
-)
+from scpformer.cli.commands import LazySubParsersAction, add_lazy_commands
 from scpformer.cli.errors import OneLineParser, run_command
+
+
+class _VersionAction(argparse._VersionAction):
+    """``--version``: reads the package metadata only when asked."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        import scpformer
+
+        self.version = f"scpformer {scpformer.__version__}"
+        super().__call__(parser, namespace, values, option_string)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -27,26 +29,18 @@ def build_parser() -> argparse.ArgumentParser:
         prog="scpformer",
         description="Sequential convex programming for spacecraft trajectories.",
     )
-    parser.add_argument("--version", action="version", version=f"scpformer {__version__}")
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser.add_argument("--version", action=_VersionAction)
+    commands = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", action=LazySubParsersAction
+    )
     solve = commands.add_parser("solve", help="solve one instance of a problem family")
     bench = commands.add_parser("bench", help="benchmark a solver on a seeded instance set")
-    solve_families = solve.add_subparsers(dest="family", required=True, metavar="FAMILY")
-    bench_families = bench.add_subparsers(dest="family", required=True, metavar="FAMILY")
-    pdg6dof.add_solve_parser(solve_families)
-    pdg6dof.add_bench_parser(bench_families)
-    rendezvous.add_solve_parser(solve_families)
-    rendezvous.add_bench_parser(bench_families)
-    robust_rendezvous.add_solve_parser(solve_families)
-    robust_rendezvous.add_bench_parser(bench_families)
-    bench_art.add_bench_parser(bench_families)
-    bench_tscvx.add_bench_parser(bench_families)
-    data.add_generate_parser(commands)
-    data.add_dataset_parser(commands)
-    train.add_train_parser(commands)
-    experiment.add_experiment_parser(commands)
-    report.add_report_parser(commands)
-    export.add_export_parser(commands)
+    for command, sub in (("solve", solve), ("bench", bench)):
+        families = sub.add_subparsers(
+            dest="family", required=True, metavar="FAMILY", action=LazySubParsersAction
+        )
+        add_lazy_commands(families, command)
+    add_lazy_commands(commands, "")
     return parser
 
 

@@ -8,9 +8,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from scpformer.cli.argtypes import count
+from scpformer.cli.commands import command_help
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
 from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.files import check_output_file
@@ -57,7 +57,7 @@ def instance_from_args(args: argparse.Namespace) -> PDGInstance:
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "pdg6dof",
-        help="6-DoF free-final-time Mars powered descent with SCvx",
+        help=command_help("solve", "pdg6dof"),
         description="Solve the 6-DoF minimum-fuel powered descent problem (T-SCvx paper, "
         "Eqs. 2-6, Table 1) with SCvx and verify it by nonlinear propagation.",
     )
@@ -184,7 +184,7 @@ def run_solve(args: argparse.Namespace) -> int:
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "pdg6dof",
-        help="benchmark SCvx on a seeded set of 6-DoF instances",
+        help=command_help("bench", "pdg6dof"),
         description="Solve a fixed, seeded set of instances from the nominal sub-range and "
         "from Table 2; report wall time, iterations, converged rate and the share of time "
         "inside the conic solver.",
@@ -321,6 +321,8 @@ def run_bench(args: argparse.Namespace) -> int:
     print(f"compiled the subproblem (N = {config.n_nodes}) in {time.perf_counter() - start:.1f} s")
     rows = []
     total = sum(len(insts) for _, insts in sets)
+    from tqdm import tqdm  # only the benchmark needs it
+
     with tqdm(total=total, desc="pdg6dof", unit="solve") as bar:
         for name, instances in sets:
             for index, instance in enumerate(instances):

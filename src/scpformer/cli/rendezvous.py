@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from scpformer.cli.argtypes import count, positive
+from scpformer.cli.commands import command_help
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
 from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.cli.warmstart import (
@@ -81,7 +81,7 @@ def scenario_from_args(
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "rendezvous",
-        help="ISS rendezvous in relative orbital elements (ART paper, Problems 1-3)",
+        help=command_help("solve", "rendezvous"),
         description="Solve Problem 1 (two-point boundary value), 2 (convex: waypoint and "
         "approach cone) or 3 (keep-out ellipsoid, SCP of Section 4) of the ART paper for an "
         "ISS rendezvous (Table 1), and verify it by replaying the impulses through a "
@@ -242,7 +242,7 @@ def _plot(
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "rendezvous",
-        help="benchmark Problems 1-3 on seeded Table 1 instances",
+        help=command_help("bench", "rendezvous"),
         description="Solve Problems 1, 2 and 3 (the SCP warm-started from Problem 1 or 2) on a "
         "seeded set of instances sampled from Table 1; report wall time (median, p95), SCP "
         "iterations, failure rate, the share of time inside the conic solver and C_CVX(t_1), "
@@ -395,6 +395,8 @@ def run_bench(args: argparse.Namespace) -> int:
         f"{_warm_up(config, instances[0]):.1f} s"
     )
     verify, rows = not args.no_verify, []
+    from tqdm import tqdm  # only the benchmark needs it
+
     with tqdm(total=len(instances), desc="rendezvous", unit="instance") as bar:
         for index, instance in enumerate(instances):
             p1 = solve(instance, "tpbvp", config=config, verify=verify)

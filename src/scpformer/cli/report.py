@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from scpformer.cli.commands import command_help
+
 
 def add_report_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``report`` on the top-level subparsers."""
     report = commands.add_parser(
         "report",
-        help="gather docs/results/*/results.json into docs/RESULTS.md",
+        help=command_help("", "report"),
         description="Write one page with, per paper table and figure, the paper's number, "
         "ours and the commands that reproduce ours.",
     )

@@ -11,9 +11,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from scpformer.cli.argtypes import count, positive
+from scpformer.cli.commands import command_help
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
 from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.cli.rendezvous import print_rows
@@ -83,7 +83,7 @@ def common_from_args(args: argparse.Namespace, base: RobustInstance | None) -> d
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "robust-rendezvous",
-        help="passively safe, chance-constrained LEO rendezvous (robust ART, SCvx*)",
+        help=command_help("solve", "robust-rendezvous"),
         description="Solve the passively safe rendezvous of the robust ART paper (Table 1) "
         "with the three-stage procedure (convex TPBVP -> deterministic collision avoidance -> "
         "passive safety, deterministic or chance-constrained) and SCvx*; optionally verify "
@@ -214,7 +214,7 @@ def _monte_carlo(instance: RobustInstance, x: np.ndarray, u: np.ndarray, n: int,
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "robust-rendezvous",
-        help="benchmark SCvx* (deterministic and chance) from the convex warm start",
+        help=command_help("bench", "robust-rendezvous"),
         description="On a seeded set of Table 1 instances, solve the convex TPBVP and, from "
         "it, the passive-safety problem with SCvx* in both modes (PS-CVX-D, PS-CVX-C); report "
         "wall time (median, p95), iterations, infeasibility rate (not converged) and the share "
@@ -294,6 +294,8 @@ def run_bench(args: argparse.Namespace) -> int:
     solve_safety(instances[0], warm, config, "chance", verify=False)
     print(f"compiled or loaded the subproblems in {time.perf_counter() - start:.1f} s")
     rows = []
+    from tqdm import tqdm  # only the benchmark needs it
+
     with tqdm(total=len(instances), desc="robust-rendezvous", unit="instance") as bar:
         for index, instance in enumerate(instances):
             cvx = solve_tpbvp(instance, config)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from scpformer.cli.commands import command_help
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
 from scpformer.train.config import TRAIN_PRESETS, TrainConfig
 
@@ -22,7 +23,7 @@ _HELP = {
 
 def add_train_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``train MODEL`` on the top-level subparsers."""
-    train = commands.add_parser("train", help="train a model on a dataset")
+    train = commands.add_parser("train", help=command_help("", "train"))
     models = train.add_subparsers(dest="model", required=True, metavar="MODEL")
     for kind in SEQUENCE_MODELS:
         parser = models.add_parser(kind, help=_HELP[kind], description=_HELP[kind])

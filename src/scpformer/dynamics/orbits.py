@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from scpformer.dynamics.quaternion import cross
+
 __all__ = [
     "J2",
     "MU_EARTH",
@@ -109,10 +111,15 @@ def validate_oe(oe: ArrayLike | OrbitalElements, name: str = "oe") -> FloatArray
         return oe.to_array()
     arr = _as_float_array(oe, name)
     _check_last_dim(arr, 6, name)
+    a, e, inc = arr[..., 0], arr[..., 1], arr[..., 2]
+    if (
+        np.isfinite(arr).all()
+        and ((a >= R_EARTH) & (e >= 0.0) & (e < 1.0) & (inc >= 0.0) & (inc <= np.pi)).all()
+    ):
+        return arr  # the common case in one pass; a failure is named below
     for k, field in enumerate(_FIELDS):
         if not np.all(np.isfinite(arr[..., k])):
             raise ValueError(f"{name}.{field}: contains NaN or inf")
-    a, e, inc = arr[..., 0], arr[..., 1], arr[..., 2]
     if np.any(a < R_EARTH):
         raise ValueError(
             f"{name}.a: semi-major axis {np.min(a):.6g} m is below the Earth radius {R_EARTH:.6g} m"
@@ -344,7 +351,7 @@ def eci_to_oe(r: ArrayLike, v: ArrayLike, mu: float = MU_EARTH) -> FloatArray:
     r_mag = np.linalg.norm(r, axis=-1)
     if np.any(r_mag == 0.0):
         raise ValueError("r: zero position vector")
-    h = np.cross(r, v)
+    h = cross(r, v)
     h_mag = np.linalg.norm(h, axis=-1)
     if np.any(h_mag <= 1e-12 * r_mag * np.linalg.norm(v, axis=-1)):
         raise ValueError("v: rectilinear orbit (angular momentum is zero)")
@@ -358,8 +365,8 @@ def eci_to_oe(r: ArrayLike, v: ArrayLike, mu: float = MU_EARTH) -> FloatArray:
     equatorial = node_norm <= 1e-14 * h_mag
     raan = np.where(equatorial, 0.0, np.arctan2(h[..., 0], -h[..., 1]))
     p1 = np.stack([np.cos(raan), np.sin(raan), np.zeros_like(raan)], axis=-1)
-    p2 = np.cross(h_hat, p1)
-    e_vec = np.cross(v, h) / mu - r / r_mag[..., None]
+    p2 = cross(h_hat, p1)
+    e_vec = cross(v, h) / mu - r / r_mag[..., None]
     ex = np.sum(e_vec * p1, axis=-1)
     ey = np.sum(e_vec * p2, axis=-1)
     e = np.hypot(ex, ey)
@@ -384,9 +391,9 @@ def rtn_dcm(r: ArrayLike, v: ArrayLike) -> FloatArray:
     r = np.asarray(r, dtype=float)
     v = np.asarray(v, dtype=float)
     R = r / np.linalg.norm(r, axis=-1, keepdims=True)
-    h = np.cross(r, v)
+    h = cross(r, v)
     N = h / np.linalg.norm(h, axis=-1, keepdims=True)
-    T = np.cross(N, R)
+    T = cross(N, R)
     return np.stack([R, T, N], axis=-2)
 
 
@@ -408,7 +415,7 @@ def eci_to_rtn(r_c: ArrayLike, v_c: ArrayLike, r_d: ArrayLike, v_d: ArrayLike) -
     C = rtn_dcm(r_c, v_c)
     rho = np.einsum("...ij,...j->...i", C, r_d - r_c)
     drho = np.einsum("...ij,...j->...i", C, v_d - v_c)
-    w = np.linalg.norm(np.cross(r_c, v_c), axis=-1) / np.sum(r_c * r_c, axis=-1)
+    w = np.linalg.norm(cross(r_c, v_c), axis=-1) / np.sum(r_c * r_c, axis=-1)
     # omega x rho with omega = w N: (-w rho_T, w rho_R, 0)
     drho = drho - np.stack([-w * rho[..., 1], w * rho[..., 0], np.zeros_like(w)], axis=-1)
     return np.concatenate([rho, drho], axis=-1)
@@ -429,7 +436,7 @@ def rtn_to_eci(r_c: ArrayLike, v_c: ArrayLike, rtn: ArrayLike) -> tuple[FloatArr
         np.asarray(r_c, dtype=float), np.asarray(v_c, dtype=float), rtn[..., :3], rtn[..., 3:]
     )
     C = rtn_dcm(r_c, v_c)
-    w = np.linalg.norm(np.cross(r_c, v_c), axis=-1) / np.sum(r_c * r_c, axis=-1)
+    w = np.linalg.norm(cross(r_c, v_c), axis=-1) / np.sum(r_c * r_c, axis=-1)
     drho_in = drho + np.stack([-w * rho[..., 1], w * rho[..., 0], np.zeros_like(w)], axis=-1)
     r_d = r_c + np.einsum("...ji,...j->...i", C, rho)
     v_d = v_c + np.einsum("...ji,...j->...i", C, drho_in)

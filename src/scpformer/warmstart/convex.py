@@ -16,18 +16,18 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from scpformer.problems.rendezvous.instance import RendezvousInstance
 from scpformer.problems.rendezvous.problem import constraint_to_go, linear_model
 from scpformer.problems.rendezvous.problem import solve as solve_rendezvous
 from scpformer.problems.rendezvous.scenario import RendezvousSolverConfig
-from scpformer.problems.robust_rendezvous.instance import RobustInstance
-from scpformer.problems.robust_rendezvous.problem import solve_tpbvp
-from scpformer.problems.robust_rendezvous.safety import trajectory_violations
-from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig, check_mode
 from scpformer.scp.solution import Solution
 from scpformer.warmstart.base import WarmStartRecord, WarmStartResult
+
+if TYPE_CHECKING:  # the robust family is imported when used: a rendezvous solve needs none of it
+    from scpformer.problems.robust_rendezvous.instance import RobustInstance
+    from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig
 
 RENDEZVOUS_CONVEX = ("tpbvp", "convex")  # the ART paper's Problems 1 and 2
 
@@ -83,9 +83,15 @@ class RobustTpbvpWarmStart:
     mode: str = "chance"
 
     def __post_init__(self) -> None:
+        from scpformer.problems.robust_rendezvous.scenario import check_mode
+
         check_mode(self.mode)
 
     def guess(self, instance: RobustInstance) -> WarmStartResult:
+        from scpformer.problems.robust_rendezvous.instance import RobustInstance
+        from scpformer.problems.robust_rendezvous.problem import solve_tpbvp
+        from scpformer.problems.robust_rendezvous.safety import trajectory_violations
+
         check_instance(instance, RobustInstance, "robust-rendezvous")
         start = time.perf_counter()
         solution = solve_tpbvp(instance, self.config)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,24 +29,16 @@ from scpformer.problems.rendezvous.problem import (
     keep_out_slack,
     linear_model,
 )
-from scpformer.problems.robust_rendezvous.instance import RobustInstance
-from scpformer.problems.robust_rendezvous.problem import boundary
-from scpformer.problems.robust_rendezvous.safety import (
-    VIOLATION_TOL,
-    DriftGeometry,
-    drift_geometry,
-    evaluate_safety,
-    trajectory_violations,
-    violation_flags,
-)
-from scpformer.problems.robust_rendezvous.safety import linear_model as robust_linear_model
-from scpformer.problems.robust_rendezvous.scenario import check_mode
 from scpformer.warmstart.base import WarmStart
 from scpformer.warmstart.convex import (
     RendezvousConvexWarmStart,
     RobustTpbvpWarmStart,
     check_instance,
 )
+
+if TYPE_CHECKING:  # the robust family is imported when used: a rendezvous solve needs none of it
+    from scpformer.problems.robust_rendezvous.instance import RobustInstance
+    from scpformer.problems.robust_rendezvous.safety import DriftGeometry
 
 ART_FAMILIES = ("rendezvous", "robust-rendezvous")
 ART_FRAMES = ("rtn", "roe")
@@ -168,9 +160,16 @@ class RobustArtFamily:
     has_target: bool = True
 
     def __post_init__(self) -> None:
+        from scpformer.problems.robust_rendezvous.scenario import check_mode
+
         check_mode(self.mode)
 
     def batch(self, instances: Sequence[RobustInstance]) -> Batch:
+        from scpformer.problems.robust_rendezvous.instance import RobustInstance
+        from scpformer.problems.robust_rendezvous.problem import boundary
+        from scpformer.problems.robust_rendezvous.safety import drift_geometry
+        from scpformer.problems.robust_rendezvous.safety import linear_model as robust_linear_model
+
         for instance in instances:
             check_instance(instance, RobustInstance, self.name)
         models = [robust_linear_model(instance) for instance in instances]
@@ -192,6 +191,12 @@ class RobustArtFamily:
         local), so the instances of a group are evaluated as the nodes of one stacked
         trajectory by :func:`~scpformer.problems.robust_rendezvous.safety.evaluate_safety`.
         """
+        from scpformer.problems.robust_rendezvous.safety import (
+            VIOLATION_TOL,
+            evaluate_safety,
+            violation_flags,
+        )
+
         flags = np.zeros(x.shape[0], dtype=int)
         for idx, group in batch.groups:
             for i, geometry in zip(idx, group.geometry, strict=True):
@@ -205,6 +210,8 @@ class RobustArtFamily:
     def trajectory_ctg(self, instance: RobustInstance, model: LinearModel, x: np.ndarray,
                        u: np.ndarray) -> float:  # fmt: skip
         """``C(t_1)`` of a whole trajectory (Eq. 7 budget)."""
+        from scpformer.problems.robust_rendezvous.safety import trajectory_violations
+
         return float(trajectory_violations(instance, x, u, self.mode)[0])
 
     def fallback(self, config: Any = None) -> WarmStart:

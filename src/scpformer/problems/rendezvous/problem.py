@@ -21,6 +21,7 @@ initial state is removed by :func:`osculating_initial_state`; what remains and i
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -274,6 +275,17 @@ def _orbit_averaged_qns(
 
 def osculating_initial_state(
     instance: RendezvousInstance, iterations: int = 2, samples: int = 48
+) -> tuple[np.ndarray, np.ndarray]:
+    """Osculating target elements and relative RTN state at ``t_0`` (see
+    :func:`_osculating_initial_state`); a pure function of the instance, so the last few
+    results are kept: solving, verifying and saving one instance propagate the pair once."""
+    oe_c, rtn0 = _osculating_initial_state(instance, iterations, samples)
+    return oe_c.copy(), rtn0.copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _osculating_initial_state(
+    instance: RendezvousInstance, iterations: int, samples: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Osculating target elements and relative RTN state at ``t_0`` consistent with the model.
 

@@ -1,0 +1,150 @@
+"""Every ``scpformer`` command: its name, one-line help and where its parser is built.
+
+A command's parser (and with it its module, which imports cvxpy, torch, h5py, ...) is built
+only when the command is used: ``scpformer --help`` and ``scpformer solve --help`` list the
+commands from this table alone, and ``scpformer solve rendezvous`` builds (and imports) the
+rendezvous module only. The modules take their ``help=`` from :func:`command_help`, so the
+text lives here once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from collections.abc import Iterator, Mapping
+from typing import Any
+
+#: ``(parent, name) -> (help, "module:function")``; the function adds the parser of ``name``
+#: to the parent's subparsers action. Parent ``""`` is the ``scpformer`` command itself.
+COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
+    ("solve", "pdg6dof"): (
+        "6-DoF free-final-time Mars powered descent with SCvx",
+        "scpformer.cli.pdg6dof:add_solve_parser",
+    ),
+    ("solve", "rendezvous"): (
+        "ISS rendezvous in relative orbital elements (ART paper, Problems 1-3)",
+        "scpformer.cli.rendezvous:add_solve_parser",
+    ),
+    ("solve", "robust-rendezvous"): (
+        "passively safe, chance-constrained LEO rendezvous (robust ART, SCvx*)",
+        "scpformer.cli.robust_rendezvous:add_solve_parser",
+    ),
+    ("bench", "pdg6dof"): (
+        "benchmark SCvx on a seeded set of 6-DoF instances",
+        "scpformer.cli.pdg6dof:add_bench_parser",
+    ),
+    ("bench", "rendezvous"): (
+        "benchmark Problems 1-3 on seeded Table 1 instances",
+        "scpformer.cli.rendezvous:add_bench_parser",
+    ),
+    ("bench", "robust-rendezvous"): (
+        "benchmark SCvx* (deterministic and chance) from the convex warm start",
+        "scpformer.cli.robust_rendezvous:add_bench_parser",
+    ),
+    ("bench", "art"): (
+        "time ART trajectory generation (dynamics in the loop), cached vs uncached",
+        "scpformer.cli.bench_art:add_bench_parser",
+    ),
+    ("bench", "tscvx"): (
+        "time T-SCvx network inference (tight flags and solution) at batch 1",
+        "scpformer.cli.bench_tscvx:add_bench_parser",
+    ),
+    ("", "generate"): (
+        "sample, solve and store a dataset of a problem family",
+        "scpformer.cli.data:add_generate_parser",
+    ),
+    ("", "dataset"): (
+        "inspect, check, augment and split datasets",
+        "scpformer.cli.data:add_dataset_parser",
+    ),
+    ("", "train"): ("train a model on a dataset", "scpformer.cli.train:add_train_parser"),
+    ("", "experiment"): (
+        "reproduce a paper table or figure",
+        "scpformer.cli.experiment:add_experiment_parser",
+    ),
+    ("", "report"): (
+        "gather docs/results/*/results.json into docs/RESULTS.md",
+        "scpformer.cli.report:add_report_parser",
+    ),
+    ("", "export"): (
+        "export a run's networks to ONNX and check them against PyTorch",
+        "scpformer.cli.export:add_export_parser",
+    ),
+}
+
+
+def command_help(parent: str, name: str) -> str:
+    """The one-line help of command ``name`` under ``parent`` (``""``: top level)."""
+    return COMMANDS[parent, name][0]
+
+
+class _Names(Mapping):
+    """``choices`` of a :class:`LazySubParsersAction`: every name, built or not, in the order
+    they were added; looking a name up builds its parser."""
+
+    def __init__(self, action: LazySubParsersAction) -> None:
+        self._action = action
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._action._order
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._action._order)
+
+    def __len__(self) -> int:
+        return len(self._action._order)
+
+    def __getitem__(self, name: str) -> argparse.ArgumentParser:
+        return self._action.parser(name)
+
+
+class LazySubParsersAction(argparse._SubParsersAction):
+    """Subparsers whose parsers may be registered by name and help, and built on use.
+
+    ``add_lazy_parser(name, help, target)`` lists ``name`` with ``help`` at once;
+    ``target`` (``"module:function"``) is imported and called with this action the first
+    time ``name`` is parsed (or looked up in ``choices``), and must then call
+    ``add_parser(name, help=<the same help>, ...)``.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._order: list[str] = []
+        self._lazy: dict[str, tuple[str, str]] = {}
+        self.choices = _Names(self)
+
+    def add_lazy_parser(self, name: str, *, help: str, target: str) -> None:
+        self._lazy[name] = (help, target)
+        self._order.append(name)
+        self._choices_actions.append(self._ChoicesPseudoAction(name, (), help))
+
+    def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        if name in self._lazy:  # the deferred build: its help is listed already
+            declared = self._lazy[name][0]
+            given = kwargs.pop("help", declared)
+            if given != declared:
+                raise ValueError(f"command {name!r}: help {given!r} differs from {declared!r}")
+        else:
+            self._order.append(name)
+        return super().add_parser(name, **kwargs)
+
+    def parser(self, name: str) -> argparse.ArgumentParser:
+        """The parser of ``name``, built (its module imported) on first use."""
+        if name not in self._name_parser_map and name in self._lazy:
+            module, function = self._lazy[name][1].split(":")
+            getattr(importlib.import_module(module), function)(self)
+            if name not in self._name_parser_map:
+                raise ValueError(f"{self._lazy[name][1]} did not add the parser of {name!r}")
+        return self._name_parser_map[name]
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        if values and values[0] in self._lazy:
+            self.parser(values[0])
+        super().__call__(parser, namespace, values, option_string)
+
+
+def add_lazy_commands(action: LazySubParsersAction, parent: str) -> None:
+    """Register every command of ``parent`` in :data:`COMMANDS` on ``action``, unbuilt."""
+    for (owner, name), (help_text, target) in COMMANDS.items():
+        if owner == parent:
+            action.add_lazy_parser(name, help=help_text, target=target)
