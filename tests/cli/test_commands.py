@@ -114,4 +114,4 @@ def test_lazy_commands_of_a_parent_are_all_registered():
     parser = argparse.ArgumentParser(prog="scpformer")
     families = parser.add_subparsers(dest="family", action=LazySubParsersAction)
     add_lazy_commands(families, "bench")
-    assert list(families.choices) == ["pdg6dof", "rendezvous", "robust-rendezvous", "art"]
+    assert list(families.choices) == ["pdg6dof", "rendezvous", "robust-rendezvous", "art", "tscvx"]
