@@ -3,9 +3,11 @@
 ``TscvxWarmStart(predictor).guess(instance)`` is the initial guess of Algorithm 2 (its
 input line): the predicted ``(x, u, t_f)`` made consistent where cheap
 (:func:`~scpformer.problems.pdg6dof.tscvx.consistent_guess`), replaced by the straight-line
-guess when the prediction is unusable (wrong shape, NaN) or its penalized cost J (Eq. 16) is
-above the straight line's. Handed to :func:`scpformer.problems.pdg6dof.problem.solve` as
-``guess=``, the provider also supplies the predicted tight rows, and the solve runs T-SCvx
+guess when the prediction is unusable (wrong shape, NaN) or its penalized cost J (Eq. 16)
+is above ``guess_factor`` times the straight line's
+(:class:`~scpformer.problems.pdg6dof.tscvx.TscvxParameters`). Handed to
+:func:`scpformer.problems.pdg6dof.problem.solve` as ``guess=``, the provider also supplies
+the predicted tight rows, and the solve runs T-SCvx
 (:func:`~scpformer.problems.pdg6dof.tscvx.solve_tscvx`) instead of cold SCvx.
 """
 
@@ -81,10 +83,11 @@ class TscvxWarmStart:
         scores = _penalized_costs(instance, config, {"prediction": predicted,
                                                      "straight_line": fallback})  # fmt: skip
         details = {f"J_{name}": value for name, value in scores.items()}
-        if not scores["prediction"] <= scores["straight_line"]:
-            reason = "J of the prediction above the straight line's"
+        bound = self.params.guess_factor * max(abs(scores["straight_line"]), 1.0)
+        if not scores["prediction"] <= bound:
+            reason = f"J of the prediction above {self.params.guess_factor:g} straight lines'"
             return self._result(fallback, False, reason, details, start)
-        return self._result(predicted, True, "J below the straight line's", details, start)
+        return self._result(predicted, True, "J within the bound", details, start)
 
     def tight(self, instance: PDGInstance) -> Any:
         """``k -> flags (7N,)`` of the rows predicted tight at iteration ``k``."""
