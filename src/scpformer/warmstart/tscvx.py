@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
 from scpformer.problems.pdg6dof.guess import straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import PDGProblem, PDGSolverConfig
@@ -94,7 +95,15 @@ class TscvxWarmStart:
         from scpformer.data.pdg6dof_family import theta_vector
 
         theta = theta_vector(instance)
-        return lambda k: np.asarray(self.predictor.predict_tight(theta, int(k)), dtype=bool)
+        rows = len(CONSTRAINT_NAMES) * int(self.predictor.n_nodes)
+
+        def flags(k: int) -> np.ndarray:
+            out = np.asarray(self.predictor.predict_tight(theta, int(k)), dtype=bool).reshape(-1)
+            if out.size != rows:
+                raise ValueError(f"predict_tight gave {out.size} flags, expected {rows} (7 N)")
+            return out
+
+        return flags
 
     def solve(
         self, instance: PDGInstance, config: PDGSolverConfig, eta_init: float | None = None
