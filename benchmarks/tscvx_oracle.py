@@ -10,7 +10,11 @@ optimum. Side by side in one process, per instance:
 * ``T-SCvx``: Algorithm 2 with the oracle (reduced subproblems, Eq. 22), eta_init 1;
 * ``T-SCvx eta 0.01``: the same with Table 1's eta_reduced,init;
 * ``rows only``: Algorithm 2 with the oracle's flags from the straight-line guess (the
-  reduction alone, along a whole run).
+  reduction alone, along a whole run);
+* ``noisy guess only`` / ``noisy T-SCvx``: a stand-in for imperfect networks, the oracle's
+  solution with Gaussian noise of ``--noise`` times the trust-region scale of each variable
+  (:func:`~scpformer.problems.pdg6dof.subproblem.trust_region_scales`) and its flags with
+  ``--flip`` of them flipped; full subproblems, then Algorithm 2.
 
 Prints per-instance status, solves and wall time, then medians of wall time, solves, conic
 time per solve and (name, node) rows kept, and the largest propellant gap to cold SCvx.
@@ -29,21 +33,26 @@ import numpy as np
 from scpformer.problems.pdg6dof.guess import straight_line_guess
 from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
 from scpformer.problems.pdg6dof.problem import PDGSolverConfig, propellant_gap, solve
+from scpformer.problems.pdg6dof.subproblem import trust_region_scales
 from scpformer.problems.pdg6dof.tscvx import TscvxParameters
-from scpformer.scp.solution import Solution
+from scpformer.scp.solution import Solution, Trajectory
 from scpformer.warmstart.tscvx import TscvxWarmStart
 
 
 class Oracle:
     """Predictor API answering with a cold solve (its flags per solve, its optimum)."""
 
-    def __init__(self, cold: Solution, guess: tuple | None = None) -> None:
-        self.cold, self.guess = cold, guess
+    def __init__(self, cold: Solution, guess: tuple | None = None, flip: float = 0.0) -> None:
+        self.cold, self.guess, self.flip = cold, guess, flip
         self.n_nodes = cold.trajectory.x.shape[0]
 
     def predict_tight(self, theta: np.ndarray, k: int) -> np.ndarray:
         history = self.cold.history
-        return history[min(int(k), len(history)) - 1].tight_flags
+        flags = history[min(int(k), len(history)) - 1].tight_flags
+        if self.flip:
+            flipped = np.random.default_rng(int(k)).random(flags.shape) < self.flip
+            flags = flags ^ flipped
+        return flags
 
     def predict_solution(self, theta: np.ndarray) -> tuple:
         if self.guess is not None:
@@ -52,17 +61,30 @@ class Oracle:
         return z.x, z.u, float(z.p[0])
 
 
+def noisy(instance: PDGInstance, z: Trajectory, noise: float, seed: int) -> tuple:
+    """``z`` with Gaussian noise of ``noise`` trust-region scales per variable."""
+    rng = np.random.default_rng(seed)
+    sx, su, ss = trust_region_scales(instance)
+    x = z.x + noise * sx * rng.normal(size=z.x.shape)
+    u = z.u + noise * su * rng.normal(size=z.u.shape)
+    return x, u, float(z.p[0] + noise * ss * rng.normal())
+
+
 def variants(
-    instance: PDGInstance, cold: Solution, config: PDGSolverConfig
+    instance: PDGInstance, cold: Solution, config: PDGSolverConfig, args: argparse.Namespace
 ) -> dict[str, Callable[[], Solution]]:
     oracle = Oracle(cold)
     line = Oracle(cold, straight_line_guess(instance, config.n_nodes))
     paper = TscvxParameters(eta_init=0.01)
+    fuzzy = Oracle(cold, noisy(instance, cold.trajectory, args.noise, args.seed), args.flip)
+    fuzzy_guess = TscvxWarmStart(fuzzy).guess(instance).trajectory
     return {
         "guess only": lambda: solve(instance, config, guess=cold.trajectory, eta_init=1.0),
         "T-SCvx": lambda: solve(instance, config, guess=TscvxWarmStart(oracle)),
         "T-SCvx eta 0.01": lambda: solve(instance, config, guess=TscvxWarmStart(oracle, paper)),
         "rows only": lambda: solve(instance, config, guess=TscvxWarmStart(line)),
+        "noisy guess only": lambda: solve(instance, config, guess=fuzzy_guess, eta_init=1.0),
+        "noisy T-SCvx": lambda: solve(instance, config, guess=TscvxWarmStart(fuzzy)),
     }
 
 
@@ -70,6 +92,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=10, help="nominal instances (10)")
     parser.add_argument("--seed", type=int, default=0, help="sampling seed (0)")
+    parser.add_argument("--noise", type=float, default=0.02, help="guess noise (0.02)")
+    parser.add_argument("--flip", type=float, default=0.02, help="flipped flags (0.02)")
     args = parser.parse_args()
     config = PDGSolverConfig()
     instances = sample_instances(np.random.default_rng(args.seed), args.n, SampleRanges.nominal())
@@ -79,7 +103,7 @@ def main() -> int:
         t0 = time.perf_counter()
         cold = solve(instance, config)
         runs = {"cold": (cold, time.perf_counter() - t0)}
-        for name, run in variants(instance, cold, config).items():
+        for name, run in variants(instance, cold, config, args).items():
             t0 = time.perf_counter()
             solution = run()
             runs[name] = (solution, time.perf_counter() - t0)

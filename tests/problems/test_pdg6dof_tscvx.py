@@ -141,3 +141,14 @@ def test_eq22_contraction_exponent_has_a_floor():
 def test_bad_tscvx_parameters_are_refused_by_name(field, value):
     with pytest.raises(ValueError, match=field):
         TscvxParameters(**{field: value})
+
+
+@pytest.mark.slow
+def test_a_noisy_prediction_is_kept_although_its_j_exceeds_the_straight_lines(cold):
+    # Noise on the states inflates the L1 defects of J, not the distance to the optimum.
+    rng = np.random.default_rng(0)
+    z = cold.trajectory
+    guess = (z.x + 0.02 * rng.normal(size=z.x.shape), z.u, float(z.p[0]))
+    record = TscvxWarmStart(OraclePredictor(cold, guess=guess)).guess(PDGInstance()).record
+    assert record.accepted, record.reason
+    assert record.details["J_prediction"] > record.details["J_straight_line"]

@@ -3,9 +3,11 @@
 ``TscvxWarmStart(predictor).guess(instance)`` is the initial guess of Algorithm 2 (its
 input line): the predicted ``(x, u, t_f)`` made consistent where cheap
 (:func:`~scpformer.problems.pdg6dof.tscvx.consistent_guess`), replaced by the straight-line
-guess when the prediction is unusable (wrong shape, NaN) or its penalized cost J (Eq. 16) is
-above the straight line's. Handed to :func:`scpformer.problems.pdg6dof.problem.solve` as
-``guess=``, the provider also supplies the predicted tight rows, and the solve runs T-SCvx
+guess when the prediction is unusable (wrong shape, NaN) or its penalized cost J (Eq. 16)
+is above ``guess_factor`` times the straight line's
+(:class:`~scpformer.problems.pdg6dof.tscvx.TscvxParameters`). Handed to
+:func:`scpformer.problems.pdg6dof.problem.solve` as ``guess=``, the provider also supplies
+the predicted tight rows, and the solve runs T-SCvx
 (:func:`~scpformer.problems.pdg6dof.tscvx.solve_tscvx`) instead of cold SCvx.
 """
 
@@ -19,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
 from scpformer.problems.pdg6dof.guess import straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import PDGProblem, PDGSolverConfig
@@ -81,17 +84,26 @@ class TscvxWarmStart:
         scores = _penalized_costs(instance, config, {"prediction": predicted,
                                                      "straight_line": fallback})  # fmt: skip
         details = {f"J_{name}": value for name, value in scores.items()}
-        if not scores["prediction"] <= scores["straight_line"]:
-            reason = "J of the prediction above the straight line's"
+        bound = self.params.guess_factor * max(abs(scores["straight_line"]), 1.0)
+        if not scores["prediction"] <= bound:
+            reason = f"J of the prediction above {self.params.guess_factor:g} straight lines'"
             return self._result(fallback, False, reason, details, start)
-        return self._result(predicted, True, "J below the straight line's", details, start)
+        return self._result(predicted, True, "J within the bound", details, start)
 
     def tight(self, instance: PDGInstance) -> Any:
         """``k -> flags (7N,)`` of the rows predicted tight at iteration ``k``."""
         from scpformer.data.pdg6dof_family import theta_vector
 
         theta = theta_vector(instance)
-        return lambda k: np.asarray(self.predictor.predict_tight(theta, int(k)), dtype=bool)
+        rows = len(CONSTRAINT_NAMES) * int(self.predictor.n_nodes)
+
+        def flags(k: int) -> np.ndarray:
+            out = np.asarray(self.predictor.predict_tight(theta, int(k)), dtype=bool).reshape(-1)
+            if out.size != rows:
+                raise ValueError(f"predict_tight gave {out.size} flags, expected {rows} (7 N)")
+            return out
+
+        return flags
 
     def solve(
         self, instance: PDGInstance, config: PDGSolverConfig, eta_init: float | None = None
