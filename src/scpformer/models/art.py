@@ -27,6 +27,7 @@ Sizes: ``paper`` (Table 4) 6 layers, 6 heads, 384 dimensions, 10.7 M parameters;
 from __future__ import annotations
 
 import dataclasses
+import functools
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -171,15 +172,17 @@ class Block(nn.Module):
 
 @dataclass(eq=False, kw_only=True)
 class ArtCache(StepCache):
-    """Key-value cache of a batch of generations, preallocated for ``max_steps`` steps.
+    """Queries, keys and values of a batch of generations, preallocated for ``max_steps`` steps.
 
-    ``kv[l]`` (2, B, h, L_max, d) holds block ``l``'s keys and values of the ``length``
-    tokens fed so far; ``mask`` (L_max, L_max) is the additive causal mask (0 or -inf),
-    sliced for calls that feed several tokens.
+    ``qkv[l]`` (3, B, h, L_max, d) holds block ``l``'s queries, keys and values of the
+    ``length`` tokens fed so far, written by one copy per block and call; ``heads[l]`` are
+    views of it with the batch and heads flattened: queries and values (B h, L_max, d) and
+    the keys transposed (B h, d, L_max). ``mask`` (L_max, L_max) is the additive causal mask
+    (0 or -inf), sliced for calls that feed several tokens.
     """
 
-    kv: list[Tensor]  # n_layer x (2, B, h, L_max, d)
-    kv_flat: list[tuple[Tensor, Tensor]]  # views of kv[l]: keys, values (B h, L_max, d)
+    qkv: list[Tensor]  # n_layer x (3, B, h, L_max, d)
+    heads: list[tuple[Tensor, Tensor, Tensor]]  # views of qkv[l]: Q, K^T, V
     weights: list[tuple[Tensor | None, ...]]  # per block: the 12 tensors _feed reads
     linear: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # x W^T + b with weights[l]
     mask: Tensor  # (L_max, L_max) additive causal mask
@@ -204,9 +207,11 @@ class ART(TokenSequenceModel):
         """A block's 12 tensors in :meth:`_feed`'s order; linear weights packed for oneDNN
         when ``batch_size`` > 0, in ``dtype`` (repacked only when a weight changed since)."""
         tensors = _block_weights(block)
-        if not batch_size:
-            return tensors
         out = list(tensors)
+        if not batch_size:  # transposed views for addmm (they follow in-place updates)
+            for i in (2, 4, 8, 10):
+                out[i] = tensors[i].detach().t()
+            return tuple(out)
         for i in (2, 4, 8, 10):  # qkv, attention proj, fc, mlp proj weights
             packs = _packs_of(tensors[i])
             version, pack = packs.get((batch_size, dtype), (-1, None))
@@ -237,17 +242,17 @@ class ART(TokenSequenceModel):
         packed = bf16 or (onednn and (cfg.n_embd >= 256 or batch_size >= 8))
         dtype = torch.bfloat16 if bf16 else param.dtype
         weights = [self._weights(b, batch_size if packed else 0, dtype) for b in self.blocks]
-        linear = functional.linear
+        linear = transposed_linear
         if packed:
             linear = packed_linear_bf16 if bf16 else packed_linear
-        kv = [param.new_zeros(2, batch_size, cfg.n_head, length, d) for _ in self.blocks]
-        flat = [(k.view(-1, length, d), v.view(-1, length, d)) for k, v in kv]
+        qkv = [param.new_empty(3, batch_size, cfg.n_head, length, d) for _ in self.blocks]
+        heads = [tuple(t.view(-1, length, d) for t in block) for block in qkv]
         return ArtCache(
-            kv=kv,
-            kv_flat=flat,
+            qkv=qkv,
+            heads=[(q, k.transpose(1, 2), v) for q, k, v in heads],
             weights=weights,
             linear=linear,
-            mask=param.new_full((length, length), float("-inf")).triu(1),  # (L, L)
+            mask=causal_mask(length, param.dtype, param.device),  # (L, L)
             target=target,
             batch_size=batch_size,
             max_steps=max_steps,
@@ -257,11 +262,12 @@ class ART(TokenSequenceModel):
         """Run new tokens (B, n, C) through the blocks; the last one's output (B, C).
 
         The eager inference path, cut to few operations per block: functional calls on the
-        weights gathered by :meth:`_empty_cache`, attention written out as
-        ``softmax(q K^T / sqrt(d) + mask) V`` over the cached keys with one ``baddbmm`` (for a
-        few query rows several times faster than ``scaled_dot_product_attention`` on the CPU),
-        and the last block computed for the last token only (the other tokens' outputs are
-        never read; their keys and values are).
+        weights gathered by :meth:`_empty_cache`; the new queries, keys and values written
+        into the cache by one copy; attention written out as ``softmax(q K^T / sqrt(d) +
+        mask) V`` over the cached keys with one ``baddbmm`` (for a few query rows several
+        times faster than ``scaled_dot_product_attention`` on the CPU); the last block
+        computed for the last token only (the other tokens' outputs are never read; their
+        keys and values are).
         """
         b, n, c = x.shape
         start = cache.length
@@ -271,25 +277,28 @@ class ART(TokenSequenceModel):
         scale = d**-0.5
         mask = cache.mask[start:end, :end]  # (n, end)
         eps, last = self.ln_f.eps, len(cache.weights) - 1
-        linear = cache.linear
-        for layer, (w, kv, (keys, values)) in enumerate(
-            zip(cache.weights, cache.kv, cache.kv_flat, strict=True)
+        linear, act = cache.linear, self._act
+        x = x.reshape(b * n, c)  # rows: (batch, token)
+        for layer, (w, qkv, (queries, keys_t, values)) in enumerate(
+            zip(cache.weights, cache.qkv, cache.heads, strict=True)
         ):
             hid = torch.layer_norm(x, (c,), w[0], w[1], eps)
-            qkv = linear(hid, w[2], w[3]).view(b, n, 3, h, d)
-            kv[:, :, :, start:end] = qkv[:, :, 1:].permute(2, 0, 3, 1, 4)  # (2, B, h, n, d)
+            qkv[:, :, :, start:end] = linear(hid, w[2], w[3]).view(b, n, 3, h, d).permute(
+                2, 0, 3, 1, 4
+            )  # (3, B, h, n, d)
             if layer == last:  # only the last token's output is read
-                qkv, x, mask = qkv[:, -1:], x[:, -1:], mask[-1:]
-            q = qkv[:, :, 0].transpose(1, 2).reshape(b * h, -1, d)  # (B h, n', d)
-            scores = torch.baddbmm(mask, q, keys[:, :end].transpose(1, 2), alpha=scale)
+                x, mask, q = x.view(b, n, c)[:, -1], mask[-1:], queries[:, end - 1 : end]
+            else:
+                q = queries[:, start:end]  # (B h, n', d)
+            scores = torch.baddbmm(mask, q, keys_t[:, :, :end], alpha=scale)
             y = torch.bmm(torch.softmax(scores, dim=-1), values[:, :end])  # (B h, n', d)
-            y = y.view(b, h, -1, d).transpose(1, 2).reshape(b, -1, c)  # (B, n', C)
-            x = x + linear(y, w[4], w[5])
-            hid = torch.layer_norm(x, (c,), w[6], w[7], eps)
-            hid = self._act(linear(hid, w[8], w[9]))
-            x = x + linear(hid, w[10], w[11])  # (B, n', C)
+            if y.shape[1] > 1:
+                y = y.view(b, h, -1, d).transpose(1, 2)  # (B, n', h, d)
+            x = x + linear(y.reshape(-1, c), w[4], w[5])  # (B n', C)
+            hid = act(linear(torch.layer_norm(x, (c,), w[6], w[7], eps), w[8], w[9]))
+            x = x + linear(hid, w[10], w[11])  # (B n', C)
         cache.length = end
-        return torch.layer_norm(x[:, -1], (c,), self.ln_f.weight, self.ln_f.bias, eps)
+        return torch.layer_norm(x, (c,), self.ln_f.weight, self.ln_f.bias, eps)  # (B, C)
 
 
 def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
@@ -328,6 +337,20 @@ def onednn_available() -> bool:
     ~1.2x at batch 64 of a 128-wide model, but slower for 128-wide layers at batch 1.
     """
     return torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
+
+
+def transposed_linear(x: Tensor, weight_t: Tensor, bias: Tensor | None) -> Tensor:
+    """``x W^T + b`` for 2-D ``x`` with ``weight_t = W^T`` (one ``addmm``, no transpose)."""
+    return torch.mm(x, weight_t) if bias is None else torch.addmm(bias, x, weight_t)
+
+
+@functools.lru_cache(maxsize=8)
+def causal_mask(length: int, dtype: torch.dtype, device: torch.device) -> Tensor:
+    """The additive causal mask (length, length): 0 on and below the diagonal, -inf above.
+
+    Shared by every generation of that length (read only).
+    """
+    return torch.full((length, length), float("-inf"), dtype=dtype, device=device).triu(1)
 
 
 def packed_linear(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
