@@ -149,32 +149,76 @@ class UncachedPolicy:
 
 
 def rollout(policy, dynamics: Dynamics, normalization, frame: str, batch: int, steps: int):
-    """Algorithm 2: controls (B, N, 3) [m/s] and states (B, N+1, 6) ROE [m]."""
+    """Algorithm 2: controls (B, N, 3) [m/s] and states (B, N+1, 6) ROE [m].
+
+    Each step's maps are composed before the loop (:func:`step_maps`), so that one step
+    outside the model is a handful of small products.
+    """
     import torch
 
+    maps = step_maps(dynamics, normalization, frame, steps)
     x = dynamics.x0.expand(batch, 6).clone()  # (B, 6) ROE [m]
     rtg = torch.full((batch, 1), R_T1, dtype=torch.float64)  # R(t_1) [m/s]
     ctg = torch.zeros(batch, 1, dtype=torch.float64)  # C(t_1)
     states, actions = [x], []
     for k in range(steps):
-        rtn = x @ dynamics.Psi[k].T  # (B, 6)
-        observed = rtn if frame == "rtn" else x
         u_norm = policy.act(
             k,
-            normalization.encode("rtg", rtg).float(),
-            normalization.encode("ctg", ctg).float(),
-            normalization.encode("state", observed, step=k).float(),
-        )  # (B, 3)
+            (rtg * maps.rtg_gain).float(),
+            (ctg * maps.ctg_gain).float(),
+            torch.addmm(maps.state_shift[k], x, maps.state_map[k]).float(),
+        )  # (B, 3), the model's inputs normalized as normalization.encode does
         policy.observe(k, u_norm)
-        u = normalization.decode("action", u_norm.double(), step=k)  # (B, 3) [m/s]
+        u = torch.addcmul(maps.action_shift[k], u_norm.double(), maps.action_gain[k])  # [m/s]
         rtg = rtg - u.norm(dim=1, keepdim=True)  # Eq. 20
         if k <= dynamics.n_waypoint:  # Eq. 21: keep-out violation at node k
-            inside = (rtn[:, :3] @ dynamics.E_koz).norm(dim=1, keepdim=True) < 1.0
-            ctg = ctg - inside.double()
-        x = (x + u @ dynamics.B[k].T) @ dynamics.Phi[k].T  # Eq. 10
+            ctg = ctg - ((x @ maps.keep_out[k]).norm(dim=1, keepdim=True) < 1.0).double()
+        x = torch.addmm(x @ maps.Phi_t[k], u, maps.Phi_B_t[k])  # Eq. 10: Phi (x + B u)
         states.append(x)
         actions.append(u)
     return torch.stack(actions, 1), torch.stack(states, 1)
+
+
+@dataclass(frozen=True)
+class StepMaps:
+    """Per-step linear maps of :func:`rollout` (row vectors: ``y = x M + c``), float64."""
+
+    state_map: Any  # (N, 6, 6): ROE -> normalized model input (frame change / std)
+    state_shift: Any  # (N, 6)
+    rtg_gain: float  # normalized R per m/s
+    ctg_gain: float
+    action_gain: Any  # (N, 3): normalized control -> m/s
+    action_shift: Any  # (N, 3)
+    keep_out: Any  # (N, 6, 3): ROE -> dr E_koz (Eq. 21)
+    Phi_t: Any  # (N, 6, 6): Phi_k^T
+    Phi_B_t: Any  # (N, 3, 6): (Phi_k B_k)^T
+
+
+def step_maps(dynamics: Dynamics, normalization, frame: str, steps: int) -> StepMaps:
+    """The maps of :func:`rollout`, the normalization's affine maps read off its encode and
+    decode (of zeros and ones, so that they are the normalization's own statistics)."""
+    import torch
+
+    def affine(method, key: str, width: int, rows: int):
+        zero = torch.zeros(1, rows, width, dtype=torch.float64)
+        shift = method(key, zero)[0]  # (N, w)
+        return method(key, zero + 1.0)[0] - shift, shift
+
+    gain, shift = affine(normalization.encode, "state", 6, steps)  # (N, 6) each
+    frame_t = dynamics.Psi[:steps].transpose(1, 2) if frame == "rtn" else torch.eye(6).double()
+    action_gain, action_shift = affine(normalization.decode, "action", 3, steps)
+    one = torch.ones(1, 1, 1, dtype=torch.float64)
+    return StepMaps(
+        state_map=frame_t * gain[:, None, :],
+        state_shift=shift,
+        rtg_gain=float(normalization.encode("rtg", one)),
+        ctg_gain=float(normalization.encode("ctg", one)),
+        action_gain=action_gain,
+        action_shift=action_shift,
+        keep_out=dynamics.Psi[:steps, :3].transpose(1, 2) @ dynamics.E_koz,
+        Phi_t=dynamics.Phi.transpose(1, 2),
+        Phi_B_t=(dynamics.Phi @ dynamics.B).transpose(1, 2),
+    )
 
 
 def unit_normalization(steps: int, state_dim: int, action_dim: int):
