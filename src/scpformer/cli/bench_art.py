@@ -11,9 +11,13 @@ next state, and R and C are updated (Eq. 20 and the keep-out check of Eq. 21). S
   needs for its state prediction);
 * ``cached, bf16`` (with ``--bf16``): as ``cached``, multiplying by bfloat16 copies of the
   weights (``model.start(..., bf16=True)``);
+* ``cached, int8`` (with ``--int8``): as ``cached``, with int8 weights and dynamically
+  quantized activations (``model.start(..., int8=True)``); the ``vs fp32`` column gives the
+  relative error of its controls against the float32 cached run;
 * ``no cache``: the full teacher-forcing forward over the whole prefix at every step.
 
-Times are the median over ``--repeats`` runs after one untimed run, on ``--threads`` threads;
+Times are the median over ``--repeats`` rounds after one untimed run of each mode, the modes
+interleaved within a round (see :func:`time_plan`), on ``--threads`` threads;
 ``wall`` is elapsed time, ``cpu`` this process's CPU time (less sensitive to other load on a
 shared machine). torch is imported when the command runs, not when the CLI starts.
 """
@@ -30,7 +34,8 @@ from typing import Any
 
 import numpy as np
 
-MODES = ("cached", "cached, 2 calls", "cached, bf16", "no cache")
+MODES = ("cached", "cached, 2 calls", "cached, bf16", "cached, int8", "no cache")
+FORMATS = {"cached, bf16": "bf16", "cached, int8": "int8"}  # mode -> start() keyword
 R_T1 = -0.2  # R(t_1) [m/s] of the random-weight runs: a typical -J_CVX of Table 1 instances
 
 
@@ -60,6 +65,9 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--bf16", action="store_true", help="also time generation with bfloat16 weights"
+    )
+    parser.add_argument(
+        "--int8", action="store_true", help="also time generation with int8 weights"
     )
     parser.set_defaults(handler=run_bench)
 
@@ -105,10 +113,17 @@ class CachedPolicy:
     """Controls from the key-value cache; ``two_calls`` feeds each control token alone."""
 
     def __init__(
-        self, model, batch: int, steps: int, target, two_calls: bool, bf16: bool = False
+        self,
+        model,
+        batch: int,
+        steps: int,
+        target,
+        two_calls: bool,
+        bf16: bool = False,
+        int8: bool = False,
     ) -> None:
         self.model, self.two_calls = model, two_calls
-        self.cache = model.start(batch, target, max_steps=steps, bf16=bf16)
+        self.cache = model.start(batch, target, max_steps=steps, bf16=bf16, int8=int8)
 
     def act(self, k: int, rtg, ctg, state):
         return self.model.predict_action(self.cache, rtg, ctg, state)
@@ -245,6 +260,7 @@ class Timing:
     wall_s: float  # median elapsed time of one rollout
     cpu_s: float  # median process CPU time of one rollout
     repeats: int
+    error: float | None = None  # |u - u_cached| / |u_cached| of the controls (same batch)
 
     @property
     def per_second(self) -> float:
@@ -252,19 +268,8 @@ class Timing:
         return self.batch / self.wall_s
 
 
-def time_runs(run: Callable[[], Any], repeats: int) -> tuple[float, float]:
-    """Median (wall, cpu) seconds of ``repeats`` calls after one untimed call."""
-    run()
-    walls, cpus = [], []
-    for _ in range(repeats):
-        wall, cpu = time.perf_counter(), time.process_time()
-        run()
-        walls.append(time.perf_counter() - wall)
-        cpus.append(time.process_time() - cpu)
-    return statistics.median(walls), statistics.median(cpus)
-
-
-def time_mode(setup: dict[str, Any], mode: str, batch: int, repeats: int) -> Timing:
+def rollout_of(setup: dict[str, Any], mode: str, batch: int) -> Callable[[], Any]:
+    """One call: a fresh policy of ``mode`` and a whole rollout; returns the controls."""
     model, steps = setup["model"], setup["steps"]
     target = setup["target"]
     target = None if target is None else target.expand(batch, -1)
@@ -273,12 +278,52 @@ def time_mode(setup: dict[str, Any], mode: str, batch: int, repeats: int) -> Tim
         if mode == "no cache":
             policy = UncachedPolicy(model, batch, steps, target)
         else:
-            two_calls, bf16 = mode == "cached, 2 calls", mode == "cached, bf16"
-            policy = CachedPolicy(model, batch, steps, target, two_calls, bf16)
-        rollout(policy, setup["dynamics"], setup["normalization"], setup["frame"], batch, steps)
+            fmt = {FORMATS[mode]: True} if mode in FORMATS else {}
+            policy = CachedPolicy(model, batch, steps, target, mode == "cached, 2 calls", **fmt)
+        actions, _ = rollout(
+            policy, setup["dynamics"], setup["normalization"], setup["frame"], batch, steps
+        )
+        return actions
 
-    wall, cpu = time_runs(run, repeats)
-    return Timing(mode, batch, wall, cpu, repeats)
+    return run
+
+
+def time_plan(
+    setup: dict[str, Any], plan: list[tuple[str, int]], repeats: int, progress: bool = False
+) -> list[Timing]:
+    """Median (wall, cpu) seconds of each (mode, batch) of ``plan`` over ``repeats`` rounds.
+
+    Every mode runs once untimed, then the rounds interleave the modes (one timed rollout
+    of each per round), so that a change of the machine's load hits them alike and their
+    ratios stay meaningful on a shared machine.
+    """
+    runs = {key: rollout_of(setup, *key) for key in plan}
+    controls = {key: run() for key, run in runs.items()}  # untimed warm-up
+    walls: dict[tuple[str, int], list[float]] = {key: [] for key in plan}
+    cpus: dict[tuple[str, int], list[float]] = {key: [] for key in plan}
+    for r in range(repeats):
+        for key, run in runs.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            run()
+            walls[key].append(time.perf_counter() - wall)
+            cpus[key].append(time.process_time() - cpu)
+        if progress:
+            print(f"  round {r + 1}/{repeats} done", flush=True)
+    timings = []
+    for mode, batch in plan:
+        reference = controls.get(("cached", batch))
+        error = None
+        if mode != "cached" and reference is not None:
+            diff = controls[mode, batch] - reference
+            error = float(diff.norm() / reference.norm().clamp_min(1e-300))
+        wall, cpu = statistics.median(walls[mode, batch]), statistics.median(cpus[mode, batch])
+        timings.append(Timing(mode, batch, wall, cpu, repeats, error))
+    return timings
+
+
+def time_mode(setup: dict[str, Any], mode: str, batch: int, repeats: int) -> Timing:
+    """:func:`time_plan` of one mode."""
+    return time_plan(setup, [(mode, batch)], repeats)[0]
 
 
 def load_setup(args: argparse.Namespace) -> dict[str, Any]:
@@ -331,17 +376,26 @@ def check_args(args: argparse.Namespace) -> None:
 
 def report(setup: dict[str, Any], timings: list[Timing], threads: int) -> list[str]:
     model = setup["model"]
+    uncached = {t.batch: t for t in timings if t.mode == "no cache"}
     lines = [
         f"{setup['label']}: {model.num_parameters() / 1e6:.2f} M parameters, "
         f"{setup['steps']} steps, dynamics in the loop (rendezvous linear model), "
-        f"{threads} thread(s), median of {timings[0].repeats} runs",
-        f"{'mode':<17} {'batch':>5} {'wall ms':>9} {'cpu ms':>9} {'traj/s':>8}",
+        f"{threads} thread(s), median of {timings[0].repeats} interleaved runs",
+        f"{'mode':<17} {'batch':>5} {'wall ms':>9} {'cpu ms':>9} {'traj/s':>8} "
+        f"{'vs no cache':>11} {'vs cached':>9}",
     ]
     for t in timings:
+        slow = uncached.get(t.batch)
+        ratio = f"{slow.wall_s / t.wall_s:>10.1f}x" if slow and slow is not t else f"{'':>11}"
+        error = f"{t.error:>9.1e}" if t.error is not None else f"{'':>9}"
         lines.append(
             f"{t.mode:<17} {t.batch:>5} {1e3 * t.wall_s:>9.1f} {1e3 * t.cpu_s:>9.1f} "
-            f"{t.per_second:>8.1f}"
+            f"{t.per_second:>8.1f} {ratio} {error}"
         )
+    lines.append(
+        "vs no cache: speed-up of wall time over the run without the cache (same batch); "
+        "vs cached: relative error of the controls against the float32 cached run"
+    )
     return lines
 
 
@@ -355,12 +409,11 @@ def run_bench(args: argparse.Namespace) -> int:
     if not args.skip_uncached:
         plan.append(("no cache", 1))
     plan.append(("cached", args.batch))
-    if args.bf16:
-        plan[1:1] = [("cached, bf16", 1)]
-        plan.append(("cached, bf16", args.batch))
-    timings = []
-    for mode, batch in plan:
-        timings.append(time_mode(setup, mode, batch, args.repeats))
-        print(f"  {mode}, batch {batch}: {1e3 * timings[-1].wall_s:.1f} ms", flush=True)
+    for flag, mode in (("int8", "cached, int8"), ("bf16", "cached, bf16")):
+        if getattr(args, flag):
+            plan[1:1] = [(mode, 1)]
+            plan.append((mode, args.batch))
+    plan = list(dict.fromkeys(plan))  # --batch 1: each (mode, batch) once
+    timings = time_plan(setup, plan, args.repeats, progress=True)
     print("\n".join(report(setup, timings, args.threads)))
     return 0

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -203,25 +204,33 @@ class ART(TokenSequenceModel):
 
         self._act = activation_fn(config.activation)
 
-    def _weights(self, block: Block, batch_size: int, dtype: torch.dtype) -> tuple:
-        """A block's 12 tensors in :meth:`_feed`'s order; linear weights packed for oneDNN
-        when ``batch_size`` > 0, in ``dtype`` (repacked only when a weight changed since)."""
+    def _weights(self, block: Block, batch_size: int, weights: str) -> tuple:
+        """A block's 12 tensors in :meth:`_feed`'s order, in the layout of ``weights``.
+
+        ``plain``: the linear weights as transposed views (for ``addmm``; they follow
+        in-place updates); ``float32`` / ``bfloat16``: packed for oneDNN's product with
+        ``4 batch_size`` rows; ``int8``: quantized and packed for ``linear_dynamic`` with the
+        bias inside. Packed copies are made again only when a weight changed since.
+        """
         tensors = _block_weights(block)
         out = list(tensors)
-        if not batch_size:  # transposed views for addmm (they follow in-place updates)
-            for i in (2, 4, 8, 10):
-                out[i] = tensors[i].detach().t()
-            return tuple(out)
         for i in (2, 4, 8, 10):  # qkv, attention proj, fc, mlp proj weights
-            packs = _packs_of(tensors[i])
-            version, pack = packs.get((batch_size, dtype), (-1, None))
-            if version != tensors[i]._version:
-                weight = tensors[i].detach().to(dtype)
-                pack = torch.ops.mkldnn._reorder_linear_weight(weight, 4 * batch_size)
-                packs[batch_size, dtype] = (tensors[i]._version, pack)
+            weight, bias = tensors[i], tensors[i + 1]
+            if weights == "plain":
+                out[i] = weight.detach().t()
+                continue
+            packs = _packs_of(weight)
+            key = (weights, batch_size)
+            version = (weight._version, -1 if bias is None else bias._version)
+            found, pack = packs.get(key, (None, None))
+            if found != version:
+                pack = _pack(weight.detach(), bias, weights, batch_size)
+                packs[key] = (version, pack)
             out[i] = pack
-            if tensors[i + 1] is not None:
-                out[i + 1] = tensors[i + 1].detach().to(dtype)
+            if weights == "int8":
+                out[i + 1] = None  # inside the pack
+            elif bias is not None:
+                out[i + 1] = bias.detach().to(_DTYPES[weights])
         return tuple(out)
 
     def _core(self, tokens: Tensor) -> Tensor:  # (B, L, C)
@@ -230,27 +239,33 @@ class ART(TokenSequenceModel):
         return self.ln_f(tokens)  # (B, L, C)
 
     def _empty_cache(
-        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+        self, batch_size: int, max_steps: int, target: Tensor | None, weights: str
     ) -> ArtCache:
         cfg = self.config
         length = max_steps * self.codec.tokens_per_step
         param = self.ln_f.weight
         d = cfg.n_embd // cfg.n_head
-        onednn = param.device.type == "cpu" and onednn_available()
-        if bf16 and not onednn:
+        cpu = param.device.type == "cpu"
+        onednn = cpu and onednn_available()
+        if weights == "bfloat16" and not onednn:
             raise ValueError("bf16 generation needs oneDNN on the CPU (torch.backends.mkldnn)")
-        packed = bf16 or (onednn and (cfg.n_embd >= 256 or batch_size >= 8))
-        dtype = torch.bfloat16 if bf16 else param.dtype
-        weights = [self._weights(b, batch_size if packed else 0, dtype) for b in self.blocks]
-        linear = transposed_linear
-        if packed:
-            linear = packed_linear_bf16 if bf16 else packed_linear
+        if weights == "int8" and not (cpu and int8_available()):
+            raise ValueError("int8 generation needs the x86 quantized engine on the CPU")
+        if weights == "float32" and not (onednn and (cfg.n_embd >= 256 or batch_size >= 8)):
+            weights = "plain"
+        packed = [self._weights(b, batch_size, weights) for b in self.blocks]
+        linear = {
+            "plain": transposed_linear,
+            "float32": packed_linear,
+            "bfloat16": packed_linear_bf16,
+            "int8": quantized_linear,
+        }[weights]
         qkv = [param.new_empty(3, batch_size, cfg.n_head, length, d) for _ in self.blocks]
         heads = [tuple(t.view(-1, length, d) for t in block) for block in qkv]
         return ArtCache(
             qkv=qkv,
             heads=[(q, k.transpose(1, 2), v) for q, k, v in heads],
-            weights=weights,
+            weights=packed,
             linear=linear,
             mask=causal_mask(length, param.dtype, param.device),  # (L, L)
             target=target,
@@ -314,13 +329,13 @@ def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
     return tuple(t for layer in layers for t in (layer.weight, layer.bias))
 
 
-# oneDNN copies of generation weights: id(weight) -> {batch size: (weight version, pack)};
-# kept outside the modules (state dicts, pickles and copies of a model never carry them) and
-# dropped when the weight is freed.
-_PACKS: dict[int, dict[int, tuple[int, Tensor]]] = {}
+# Packed copies of generation weights: id(weight) -> {(format, batch size): ((weight, bias)
+# versions, pack)}; kept outside the modules (state dicts, pickles and copies of a model
+# never carry them) and dropped when the weight is freed.
+_PACKS: dict[int, dict[tuple[str, int], tuple[tuple[int, int], Any]]] = {}
 
 
-def _packs_of(weight: Tensor) -> dict[int, tuple[int, Tensor]]:
+def _packs_of(weight: Tensor) -> dict[tuple[str, int], tuple[tuple[int, int], Any]]:
     key = id(weight)
     if key not in _PACKS:
         _PACKS[key] = {}
@@ -351,6 +366,38 @@ def causal_mask(length: int, dtype: torch.dtype, device: torch.device) -> Tensor
     Shared by every generation of that length (read only).
     """
     return torch.full((length, length), float("-inf"), dtype=dtype, device=device).triu(1)
+
+
+_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
+
+
+def _pack(weight: Tensor, bias: Tensor | None, weights: str, batch_size: int) -> Tensor:
+    """``weight`` (out, in) in the layout of ``weights`` (see :meth:`ART._weights`)."""
+    if weights != "int8":
+        return torch.ops.mkldnn._reorder_linear_weight(
+            weight.to(_DTYPES[weights]), 4 * batch_size
+        )
+    scale = weight.abs().amax(dim=1).clamp_min(1e-12).double() / 127.0  # per output channel
+    zero = torch.zeros(weight.shape[0], dtype=torch.long)
+    with warnings.catch_warnings():  # quantized tensors are deprecated in favour of torchao
+        warnings.simplefilter("ignore")
+        quantized = torch.quantize_per_channel(weight, scale, zero, 0, torch.qint8)
+        return torch.ops.quantized.linear_prepack(
+            quantized, None if bias is None else bias.detach()
+        )
+
+
+def int8_available() -> bool:
+    """Whether PyTorch has the x86 (fbgemm) engine for int8 dynamic quantized products."""
+    engines = torch.backends.quantized.supported_engines
+    return "x86" in engines or "fbgemm" in engines
+
+
+def quantized_linear(x: Tensor, pack: Tensor, bias: None) -> Tensor:
+    """``x W^T + b`` with ``W`` in int8 per output channel and ``b`` in ``pack``
+    (:func:`_pack`); ``x`` is quantized per call to uint8 over its own range (7 bits:
+    ``reduce_range``, which keeps fbgemm's 16-bit intermediate sums from saturating)."""
+    return torch.ops.quantized.linear_dynamic(x, pack, True)
 
 
 def packed_linear(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:

@@ -300,7 +300,7 @@ class TokenSequenceModel(nn.Module):
         raise NotImplementedError
 
     def _empty_cache(
-        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+        self, batch_size: int, max_steps: int, target: Tensor | None, weights: str
     ) -> StepCache:
         raise NotImplementedError
 
@@ -316,13 +316,17 @@ class TokenSequenceModel(nn.Module):
         *,
         max_steps: int | None = None,
         bf16: bool = False,
+        int8: bool = False,
     ) -> StepCache:
         """An empty cache for ``batch_size`` generations of at most ``max_steps`` steps.
 
         ``target`` (B, g) is the normalized target state, required when ``target_dim > 0``.
         ``max_steps`` defaults to the context length (fewer steps need less memory).
         ``bf16`` multiplies by bfloat16 copies of the weights (ART on oneDNN only: about half
-        the weight traffic, relative error of the order of 1e-3).
+        the weight traffic, relative error of the order of 1e-3); ``int8`` by int8 copies
+        quantized per output channel, the activations quantized per call (ART only: a
+        quarter of the weight traffic, relative error of the order of 1e-2). Both are
+        approximations of the float32 model, off by default.
         """
         context = self.codec.context
         max_steps = context if max_steps is None else max_steps
@@ -332,8 +336,11 @@ class TokenSequenceModel(nn.Module):
             raise ValueError(f"max_steps must be an int in [1, {context}], got {max_steps!r}")
         if not 1 <= max_steps <= context:
             raise ValueError(f"max_steps must be in [1, {context}], got {max_steps}")
+        if bf16 and int8:
+            raise ValueError("bf16 and int8 exclude each other: choose one weight format")
         self._check_target(target, batch_size)
-        cache = self._empty_cache(batch_size, max_steps, target, bool(bf16))
+        weights = "bfloat16" if bf16 else "int8" if int8 else "float32"
+        cache = self._empty_cache(batch_size, max_steps, target, weights)
         cache.encoder = self.codec.step_encoder(max_steps)
         return cache
 
