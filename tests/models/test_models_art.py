@@ -258,16 +258,16 @@ def test_one_product_embeds_a_step_as_the_encoders_and_time_embedding_do():
     model = tiny_model(6)
     batch = random_batch(2, 3, 6)
     tokens = model.codec.embed_sequence(batch).view(2, 3, 5, -1)  # (B, T, k, C)
-    encoder = model.codec.step_encoder(3)
+    codec = model.codec.step_codec(3)
     step = [batch["target"], *(batch[key][:, 2] for key in ("rtg", "ctg", "state"))]
-    new = encoder.step_tokens(2, [batch["action"][:, 1], *step], True)
+    new = codec.step_tokens(2, [batch["action"][:, 1], *step], True)
     torch.testing.assert_close(new[:, 0], tokens[:, 1, 4])  # u(t_1), time embedding of 1
     torch.testing.assert_close(new[:, 1:], tokens[:, 2, :4])
-    first = encoder.step_tokens(
+    first = codec.step_tokens(
         0, [batch["target"], *(batch[k][:, 0] for k in ("rtg", "ctg", "state"))], False
     )
     torch.testing.assert_close(first, tokens[:, 0, :4])
-    torch.testing.assert_close(encoder.action_token(2, batch["action"][:, 2]), tokens[:, 2, 4:])
+    torch.testing.assert_close(codec.action_token(2, batch["action"][:, 2]), tokens[:, 2, 4:])
 
 
 def test_a_control_changed_after_feed_action_does_not_change_the_generation():

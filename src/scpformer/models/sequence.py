@@ -21,9 +21,11 @@ that mixes the tokens.
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import Tensor, nn
@@ -55,6 +57,20 @@ def check_sizes(config: object, **extra: tuple[int, int]) -> None:
     dropout = config.dropout
     if not isinstance(dropout, int | float) or not 0.0 <= dropout < 1.0:
         raise ValueError(f"dropout must be in [0, 1), got {dropout!r}")
+
+
+def _inference(method: Callable) -> Callable:
+    """``method`` under ``torch.no_grad()``, entered only when gradients are on (generation
+    calls it a few hundred times per trajectory; the context costs microseconds)."""
+
+    @functools.wraps(method)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        if torch.is_grad_enabled():
+            with torch.no_grad():
+                return method(*args, **kwargs)
+        return method(*args, **kwargs)
+
+    return wrapper
 
 
 class TokenCodec(nn.Module):
@@ -117,7 +133,7 @@ class TokenCodec(nn.Module):
         return target[:, None].expand(-1, t, -1) if target.dim() == 2 else target
 
     @torch.no_grad()
-    def step_encoder(self, max_steps: int) -> StepEncoder:
+    def step_codec(self, max_steps: int) -> StepCodec:
         """Every encoder and the time-step embedding of generation as one product per call.
 
         The tokens that one generation call feeds, ``[u(t_{i-1})] [g] R(t_i) C(t_i) x(t_i)``,
@@ -141,12 +157,13 @@ class TokenCodec(nn.Module):
         action_bias = self.embed_action.bias + time  # (N, C): the control token of step i
         step_bias = torch.cat([e.bias + time for e in encoders[1:]], dim=1)  # (N, (k-1) C)
         previous = torch.cat([action_bias[:1], action_bias[:-1]])  # row i: u(t_{i-1})
-        return StepEncoder(
+        return StepCodec(
             weight=weight,
             bias=torch.cat([previous, step_bias], dim=1),  # (N, k C)
             action_bias=action_bias,
             action_dim=self.action_dim,
             n_embd=c,
+            decoder=(self.predict_action.weight.T, self.predict_action.bias),
         )
 
     def decode_sequence(self, hidden: Tensor) -> dict[str, Tensor]:
@@ -200,7 +217,7 @@ class TokenCodec(nn.Module):
 
 
 @dataclass(frozen=True, kw_only=True)
-class StepEncoder:
+class StepCodec:
     """The encoders of one generation step as one product (:meth:`TokenCodec.step_encoder`).
 
     ``weight`` (a + g + 2 + s, k C) is block-diagonal; ``bias`` (N, k C) row ``i`` holds the
@@ -213,6 +230,7 @@ class StepEncoder:
     action_bias: Tensor  # (N, C)
     action_dim: int  # a
     n_embd: int  # C
+    decoder: tuple[Tensor, Tensor]  # the control decoder's W^T (C, a) and bias (a,)
 
     def step_tokens(self, step: int, inputs: list[Tensor], with_action: bool) -> Tensor:
         """The tokens of ``inputs`` ([u], [g], R, C, x: (B, width) each) as (B, n, C)."""
@@ -223,6 +241,11 @@ class StepEncoder:
             a, c = self.action_dim, self.n_embd
             tokens = torch.addmm(self.bias[step, c:], z, self.weight[a:, c:])
         return tokens.view(z.shape[0], -1, self.n_embd)  # (B, n, C)
+
+    def decode_action(self, hidden: Tensor) -> Tensor:
+        """``u_hat`` (B, a) from the output (B, C) at the state token."""
+        weight_t, bias = self.decoder
+        return torch.addmm(bias, hidden, weight_t)
 
     def action_token(self, step: int, action: Tensor) -> Tensor:
         """The control token ``u(t_step)`` (B, a) as (B, 1, C)."""
@@ -240,7 +263,7 @@ class StepCache:
     batch_size: int
     max_steps: int  # time steps the generation may take
     target: Tensor | None  # (B, g) normalized target state g (None without one)
-    encoder: StepEncoder | None = None  # the step's encoders as one product (set by start)
+    step_codec: StepCodec | None = None  # encoders as one product, decoder (set by start)
     step: int = 0  # time step i of the next R, C, x tokens
     awaiting_action: bool = False  # predict_action done, control token not given yet
     pending: Tensor | None = None  # (B, a) normalized control staged by feed_action
@@ -341,7 +364,7 @@ class TokenSequenceModel(nn.Module):
         self._check_target(target, batch_size)
         weights = "bfloat16" if bf16 else "int8" if int8 else "float32"
         cache = self._empty_cache(batch_size, max_steps, target, weights)
-        cache.encoder = self.codec.step_encoder(max_steps)
+        cache.step_codec = self.codec.step_codec(max_steps)
         return cache
 
     def _check_target(self, target: Tensor | None, batch_size: int) -> None:
@@ -354,7 +377,7 @@ class TokenSequenceModel(nn.Module):
             got = "nothing" if target is None else _shape(target)
             raise ValueError(f"target must be ({batch_size}, {g}), got {got}")
 
-    @torch.no_grad()
+    @_inference
     def predict_action(self, cache: StepCache, rtg: Tensor, ctg: Tensor, state: Tensor) -> Tensor:
         """Feed step i's [g] R C x tokens in one call; return ``u_hat(t_i)`` (B, a).
 
@@ -372,19 +395,19 @@ class TokenSequenceModel(nn.Module):
         pending = cache.pending is not None
         if pending:
             inputs.insert(0, cache.pending)
-        new = cache.encoder.step_tokens(i, inputs, pending)  # (B, n, C)
+        new = cache.step_codec.step_tokens(i, inputs, pending)  # (B, n, C)
         cache.pending, cache.awaiting_action = None, True
-        return self.codec.predict_action(self._feed(cache, new))  # (B, a)
+        return cache.step_codec.decode_action(self._feed(cache, new))  # (B, a)
 
-    @torch.no_grad()
+    @_inference
     def predict_state(self, cache: StepCache, action: Tensor) -> Tensor:
         """Feed step i's control token ``u(t_i)`` (B, a); return ``x_hat(t_{i+1})`` (B, s)."""
         self.feed_action(cache, action)
-        token = cache.encoder.action_token(cache.step - 1, cache.pending)  # (B, 1, C)
+        token = cache.step_codec.action_token(cache.step - 1, cache.pending)  # (B, 1, C)
         cache.pending = None
         return self.codec.predict_state(self._feed(cache, token))  # (B, s)
 
-    @torch.no_grad()
+    @_inference
     def feed_action(self, cache: StepCache, action: Tensor) -> None:
         """Stage step i's control token ``u(t_i)`` (B, a) without predicting the next state.
 
