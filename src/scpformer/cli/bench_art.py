@@ -268,6 +268,18 @@ class Timing:
         return self.batch / self.wall_s
 
 
+def time_runs(run: Callable[[], Any], repeats: int) -> tuple[float, float]:
+    """Median (wall, cpu) seconds of ``repeats`` calls after one untimed call."""
+    run()
+    walls, cpus = [], []
+    for _ in range(repeats):
+        wall, cpu = time.perf_counter(), time.process_time()
+        run()
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
+    return statistics.median(walls), statistics.median(cpus)
+
+
 def rollout_of(setup: dict[str, Any], mode: str, batch: int) -> Callable[[], Any]:
     """One call: a fresh policy of ``mode`` and a whole rollout; returns the controls."""
     model, steps = setup["model"], setup["steps"]
