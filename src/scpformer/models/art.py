@@ -298,8 +298,8 @@ class ART(TokenSequenceModel):
             zip(cache.weights, cache.qkv, cache.heads, strict=True)
         ):
             hid = torch.layer_norm(x, (c,), w[0], w[1], eps)
-            qkv[:, :, :, start:end] = linear(hid, w[2], w[3]).view(b, n, 3, h, d).permute(
-                2, 0, 3, 1, 4
+            qkv[:, :, :, start:end] = (
+                linear(hid, w[2], w[3]).view(b, n, 3, h, d).permute(2, 0, 3, 1, 4)
             )  # (3, B, h, n, d)
             if layer == last:  # only the last token's output is read
                 x, mask, q = x.view(b, n, c)[:, -1], mask[-1:], queries[:, end - 1 : end]
@@ -374,9 +374,7 @@ _DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 def _pack(weight: Tensor, bias: Tensor | None, weights: str, batch_size: int) -> Tensor:
     """``weight`` (out, in) in the layout of ``weights`` (see :meth:`ART._weights`)."""
     if weights != "int8":
-        return torch.ops.mkldnn._reorder_linear_weight(
-            weight.to(_DTYPES[weights]), 4 * batch_size
-        )
+        return torch.ops.mkldnn._reorder_linear_weight(weight.to(_DTYPES[weights]), 4 * batch_size)
     scale = weight.abs().amax(dim=1).clamp_min(1e-12).double() / 127.0  # per output channel
     zero = torch.zeros(weight.shape[0], dtype=torch.long)
     with warnings.catch_warnings():  # quantized tensors are deprecated in favour of torchao
