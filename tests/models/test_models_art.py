@@ -115,6 +115,14 @@ def test_cached_generation_equals_the_full_forward_for_a_batch(target_dim):
         torch.testing.assert_close(states[i], full["state"][:, i], rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("batch_size", [2, 9])  # 9: linear layers on oneDNN when available
+def test_cached_generation_with_gelu_equals_the_full_forward(batch_size):
+    model = tiny_model(activation="gelu")
+    batch = random_batch(batch_size, 5)
+    actions, _ = generate(model, batch)
+    torch.testing.assert_close(actions, model(batch)[0]["action"], rtol=1e-5, atol=1e-5)
+
+
 def test_cached_generation_of_the_small_preset_equals_the_full_forward():
     torch.manual_seed(1)
     model = ART(dataclasses.replace(ART_PRESETS["small"], context=20)).eval()

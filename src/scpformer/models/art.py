@@ -186,6 +186,7 @@ class ArtCache(StepCache):
     heads: list[tuple[Tensor, Tensor, Tensor]]  # views of qkv[l]: Q, K^T, V
     weights: list[tuple[Tensor | None, ...]]  # per block: the 12 tensors _feed reads
     linear: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # x W^T + b with weights[l]
+    linear_act: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # act(x W^T + b), MLP in
     mask: Tensor  # (L_max, L_max) additive causal mask
     length: int = 0  # tokens fed through the blocks
 
@@ -260,6 +261,13 @@ class ART(TokenSequenceModel):
             "bfloat16": packed_linear_bf16,
             "int8": quantized_linear,
         }[weights]
+        act = self._act
+        if cfg.activation == "relu" and weights in ("float32", "bfloat16"):  # oneDNN post-op
+            linear_act = functools.partial(linear, activation="relu")
+        elif cfg.activation == "relu":
+            linear_act = lambda x, w, b: torch.relu_(linear(x, w, b))  # noqa: E731
+        else:
+            linear_act = lambda x, w, b: act(linear(x, w, b))  # noqa: E731
         qkv = [param.new_empty(3, batch_size, cfg.n_head, length, d) for _ in self.blocks]
         heads = [tuple(t.view(-1, length, d) for t in block) for block in qkv]
         return ArtCache(
@@ -267,6 +275,7 @@ class ART(TokenSequenceModel):
             heads=[(q, k.transpose(1, 2), v) for q, k, v in heads],
             weights=packed,
             linear=linear,
+            linear_act=linear_act,
             mask=causal_mask(length, param.dtype, param.device),  # (L, L)
             target=target,
             batch_size=batch_size,
@@ -292,7 +301,7 @@ class ART(TokenSequenceModel):
         scale = d**-0.5
         mask = cache.mask[start:end, :end]  # (n, end)
         eps, last = self.ln_f.eps, len(cache.weights) - 1
-        linear, act = cache.linear, self._act
+        linear, linear_act = cache.linear, cache.linear_act
         x = x.reshape(b * n, c)  # rows: (batch, token)
         for layer, (w, qkv, (queries, keys_t, values)) in enumerate(
             zip(cache.weights, cache.qkv, cache.heads, strict=True)
@@ -310,7 +319,7 @@ class ART(TokenSequenceModel):
             if y.shape[1] > 1:
                 y = y.view(b, h, -1, d).transpose(1, 2)  # (B, n', h, d)
             x = x + linear(y.reshape(-1, c), w[4], w[5])  # (B n', C)
-            hid = act(linear(torch.layer_norm(x, (c,), w[6], w[7], eps), w[8], w[9]))
+            hid = linear_act(torch.layer_norm(x, (c,), w[6], w[7], eps), w[8], w[9])
             x = x + linear(hid, w[10], w[11])  # (B n', C)
         cache.length = end
         return torch.layer_norm(x, (c,), self.ln_f.weight, self.ln_f.bias, eps)  # (B, C)
@@ -398,11 +407,17 @@ def quantized_linear(x: Tensor, pack: Tensor, bias: None) -> Tensor:
     return torch.ops.quantized.linear_dynamic(x, pack, True)
 
 
-def packed_linear(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
-    """``x W^T + b`` with ``W`` prepacked by ``torch.ops.mkldnn._reorder_linear_weight``."""
-    return torch.ops.mkldnn._linear_pointwise(x, weight, bias, "none", [], "")
+def packed_linear(
+    x: Tensor, weight: Tensor, bias: Tensor | None, activation: str = "none"
+) -> Tensor:
+    """``x W^T + b`` with ``W`` prepacked by ``torch.ops.mkldnn._reorder_linear_weight``,
+    then ``activation`` (``none`` or ``relu``, fused into oneDNN's product)."""
+    return torch.ops.mkldnn._linear_pointwise(x, weight, bias, activation, [], "")
 
 
-def packed_linear_bf16(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
+def packed_linear_bf16(
+    x: Tensor, weight: Tensor, bias: Tensor | None, activation: str = "none"
+) -> Tensor:
     """:func:`packed_linear` with bfloat16 weights; ``x`` and the result stay float32."""
-    return torch.ops.mkldnn._linear_pointwise(x.bfloat16(), weight, bias, "none", [], "").float()
+    out = torch.ops.mkldnn._linear_pointwise(x.bfloat16(), weight, bias, activation, [], "")
+    return out.float()
