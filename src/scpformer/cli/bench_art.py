@@ -172,6 +172,11 @@ def rollout(policy, dynamics: Dynamics, normalization, frame: str, batch: int, s
     import torch
 
     maps = step_maps(dynamics, normalization, frame, steps)
+    state_map, state_shift, action_gain, action_shift, keep_out, Phi_t, Phi_B_t = (
+        t.unbind(0)  # per-step views, made once
+        for t in (maps.state_map, maps.state_shift, maps.action_gain, maps.action_shift,
+                  maps.keep_out, maps.Phi_t, maps.Phi_B_t)
+    )  # fmt: skip
     x = dynamics.x0.expand(batch, 6).clone()  # (B, 6) ROE [m]
     rtg = torch.full((batch, 1), R_T1, dtype=torch.float64)  # R(t_1) [m/s]
     ctg = torch.zeros(batch, 1, dtype=torch.float64)  # C(t_1)
@@ -181,14 +186,14 @@ def rollout(policy, dynamics: Dynamics, normalization, frame: str, batch: int, s
             k,
             (rtg * maps.rtg_gain).float(),
             (ctg * maps.ctg_gain).float(),
-            torch.addmm(maps.state_shift[k], x, maps.state_map[k]).float(),
+            torch.addmm(state_shift[k], x, state_map[k]).float(),
         )  # (B, 3), the model's inputs normalized as normalization.encode does
         policy.observe(k, u_norm)
-        u = torch.addcmul(maps.action_shift[k], u_norm.double(), maps.action_gain[k])  # [m/s]
+        u = torch.addcmul(action_shift[k], u_norm.double(), action_gain[k])  # [m/s]
         rtg = rtg - u.norm(dim=1, keepdim=True)  # Eq. 20
         if k <= dynamics.n_waypoint:  # Eq. 21: keep-out violation at node k
-            ctg = ctg - ((x @ maps.keep_out[k]).norm(dim=1, keepdim=True) < 1.0).double()
-        x = torch.addmm(x @ maps.Phi_t[k], u, maps.Phi_B_t[k])  # Eq. 10: Phi (x + B u)
+            ctg = ctg - ((x @ keep_out[k]).norm(dim=1, keepdim=True) < 1.0).double()
+        x = torch.addmm(x @ Phi_t[k], u, Phi_B_t[k])  # Eq. 10: Phi (x + B u)
         states.append(x)
         actions.append(u)
     return torch.stack(actions, 1), torch.stack(states, 1)

@@ -188,6 +188,7 @@ class ArtCache(StepCache):
     linear: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # x W^T + b with weights[l]
     linear_act: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # act(x W^T + b), MLP in
     mask: Tensor  # (L_max, L_max) additive causal mask
+    no_mask: Tensor  # (1, 1) zero: the mask of a last row, which sees every key
     length: int = 0  # tokens fed through the blocks
 
 
@@ -277,6 +278,7 @@ class ART(TokenSequenceModel):
             linear=linear,
             linear_act=linear_act,
             mask=causal_mask(length, param.dtype, param.device),  # (L, L)
+            no_mask=param.new_zeros(1, 1),
             target=target,
             batch_size=batch_size,
             max_steps=max_steps,
@@ -311,7 +313,7 @@ class ART(TokenSequenceModel):
                 linear(hid, w[2], w[3]).view(b, n, 3, h, d).permute(2, 0, 3, 1, 4)
             )  # (3, B, h, n, d)
             if layer == last:  # only the last token's output is read
-                x, mask, q = x.view(b, n, c)[:, -1], mask[-1:], queries[:, end - 1 : end]
+                x, mask, q = x[n - 1 :: n], cache.no_mask, queries[:, end - 1 : end]
             else:
                 q = queries[:, start:end]  # (B h, n', d)
             scores = torch.baddbmm(mask, q, keys_t[:, :, :end], alpha=scale)

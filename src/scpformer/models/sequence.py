@@ -231,12 +231,16 @@ class StepCodec:
     action_dim: int  # a
     n_embd: int  # C
     decoder: tuple[Tensor, Tensor]  # the control decoder's W^T (C, a) and bias (a,)
+    rows: tuple[tuple[Tensor, ...], tuple[Tensor, ...]] = ()  # bias, action_bias per step
+
+    def __post_init__(self) -> None:  # per-step views, made once (one index op less a call)
+        object.__setattr__(self, "rows", (self.bias.unbind(0), self.action_bias.unbind(0)))
 
     def step_tokens(self, step: int, inputs: list[Tensor], with_action: bool) -> Tensor:
         """The tokens of ``inputs`` ([u], [g], R, C, x: (B, width) each) as (B, n, C)."""
         z = torch.cat(inputs, dim=1)  # (B, m)
         if with_action:
-            tokens = torch.addmm(self.bias[step], z, self.weight)
+            tokens = torch.addmm(self.rows[0][step], z, self.weight)
         else:
             a, c = self.action_dim, self.n_embd
             tokens = torch.addmm(self.bias[step, c:], z, self.weight[a:, c:])
@@ -250,7 +254,7 @@ class StepCodec:
     def action_token(self, step: int, action: Tensor) -> Tensor:
         """The control token ``u(t_step)`` (B, a) as (B, 1, C)."""
         a, c = self.action_dim, self.n_embd
-        return torch.addmm(self.action_bias[step], action, self.weight[:a, :c])[:, None]
+        return torch.addmm(self.rows[1][step], action, self.weight[:a, :c])[:, None]
 
 
 @dataclass(eq=False, kw_only=True)
