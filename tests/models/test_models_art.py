@@ -212,9 +212,10 @@ def test_config_round_trips_through_its_dict():
     assert ArtConfig(**config.to_dict()) == config
 
 
-def test_generation_with_prepacked_weights_follows_weight_updates():
+@pytest.mark.parametrize("batch_size", [2, 9])  # 9: linear layers on oneDNN when available
+def test_generation_with_prepacked_weights_follows_weight_updates(batch_size):
     model = tiny_model(6)
-    batch = random_batch(9, 6, 6)  # batch >= 8: linear layers on oneDNN when available
+    batch = random_batch(batch_size, 6, 6)
     for _ in range(2):
         actions, _ = generate(model, batch)
         torch.testing.assert_close(actions, model(batch)[0]["action"], rtol=1e-5, atol=1e-5)

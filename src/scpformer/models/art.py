@@ -209,18 +209,17 @@ class ART(TokenSequenceModel):
     def _weights(self, block: Block, batch_size: int, weights: str) -> tuple:
         """A block's 12 tensors in :meth:`_feed`'s order, in the layout of ``weights``.
 
-        ``plain``: the linear weights as transposed views (for ``addmm``; they follow
-        in-place updates); ``float32`` / ``bfloat16``: packed for oneDNN's product with
-        ``4 batch_size`` rows; ``int8``: quantized and packed for ``linear_dynamic`` with the
-        bias inside. Packed copies are made again only when a weight changed since.
+        ``plain``: the linear weights transposed, contiguous (for ``addmm``: ~10 % faster
+        than on a transposed view for the few-row products of the small preset);
+        ``float32`` / ``bfloat16``: packed for oneDNN's product with ``4 batch_size`` rows;
+        ``int8``: quantized and packed for ``linear_dynamic`` with the bias inside. The
+        copies are made again only when a weight or bias changed since (in-place updates
+        bump their version).
         """
         tensors = _block_weights(block)
         out = list(tensors)
         for i in (2, 4, 8, 10):  # qkv, attention proj, fc, mlp proj weights
             weight, bias = tensors[i], tensors[i + 1]
-            if weights == "plain":
-                out[i] = weight.detach().t()
-                continue
             packs = _packs_of(weight)
             key = (weights, batch_size)
             version = (weight._version, -1 if bias is None else bias._version)
@@ -231,8 +230,8 @@ class ART(TokenSequenceModel):
             out[i] = pack
             if weights == "int8":
                 out[i + 1] = None  # inside the pack
-            elif bias is not None:
-                out[i + 1] = bias.detach().to(_DTYPES[weights])
+            elif bias is not None and weights == "bfloat16":
+                out[i + 1] = bias.detach().to(torch.bfloat16)
         return tuple(out)
 
     def _core(self, tokens: Tensor) -> Tensor:  # (B, L, C)
@@ -384,6 +383,8 @@ _DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 
 def _pack(weight: Tensor, bias: Tensor | None, weights: str, batch_size: int) -> Tensor:
     """``weight`` (out, in) in the layout of ``weights`` (see :meth:`ART._weights`)."""
+    if weights == "plain":
+        return weight.t().contiguous()  # (in, out)
     if weights != "int8":
         return torch.ops.mkldnn._reorder_linear_weight(weight.to(_DTYPES[weights]), 4 * batch_size)
     scale = weight.abs().amax(dim=1).clamp_min(1e-12).double() / 127.0  # per output channel
