@@ -11,13 +11,22 @@ pytest.importorskip("torch")
 
 
 def test_bench_art_times_cached_and_uncached_generation(capsys):
-    argv = ["bench", "art", "--steps", "12", "--repeats", "1", "--batch", "3", "--target", "--bf16"]
-    assert main(argv) == 0
+    argv = ["bench", "art", "--steps", "12", "--repeats", "1", "--batch", "3", "--target"]
+    assert main([*argv, "--bf16", "--int8"]) == 0
     out = capsys.readouterr().out
-    assert "ART small preset, random weights" in out and "median of 1 runs" in out
-    for mode in ("cached", "cached, 2 calls", "cached, bf16", "no cache"):
+    assert "ART small preset, random weights" in out and "median of 1 interleaved runs" in out
+    for mode in ("cached", "cached, 2 calls", "cached, bf16", "cached, int8", "no cache"):
         assert f"{mode:<17}     1" in out
-    assert "cached                3" in out and "cached, bf16          3" in out
+    for mode in ("cached", "cached, bf16", "cached, int8"):
+        assert f"{mode:<17}     3" in out
+
+
+def test_bench_art_reports_the_speed_up_and_the_control_error_of_each_mode(capsys):
+    assert main(["bench", "art", "--steps", "12", "--repeats", "1", "--batch", "1"]) == 0
+    rows = {line[:17].strip(): line[17:].split() for line in capsys.readouterr().out.splitlines()}
+    assert rows["cached"][-1].endswith("x")  # batch 1 once, with its speed-up over no cache
+    assert float(rows["no cache"][-1]) < 1e-5  # same controls to float tolerance
+    assert float(rows["cached, 2 calls"][-1]) < 1e-5
 
 
 def test_rollout_with_and_without_the_cache_gives_the_same_controls():

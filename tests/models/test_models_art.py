@@ -115,6 +115,14 @@ def test_cached_generation_equals_the_full_forward_for_a_batch(target_dim):
         torch.testing.assert_close(states[i], full["state"][:, i], rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("batch_size", [2, 9])  # 9: linear layers on oneDNN when available
+def test_cached_generation_with_gelu_equals_the_full_forward(batch_size):
+    model = tiny_model(activation="gelu")
+    batch = random_batch(batch_size, 5)
+    actions, _ = generate(model, batch)
+    torch.testing.assert_close(actions, model(batch)[0]["action"], rtol=1e-5, atol=1e-5)
+
+
 def test_cached_generation_of_the_small_preset_equals_the_full_forward():
     torch.manual_seed(1)
     model = ART(dataclasses.replace(ART_PRESETS["small"], context=20)).eval()
@@ -204,9 +212,10 @@ def test_config_round_trips_through_its_dict():
     assert ArtConfig(**config.to_dict()) == config
 
 
-def test_generation_with_prepacked_weights_follows_weight_updates():
+@pytest.mark.parametrize("batch_size", [2, 9])  # 9: linear layers on oneDNN when available
+def test_generation_with_prepacked_weights_follows_weight_updates(batch_size):
     model = tiny_model(6)
-    batch = random_batch(9, 6, 6)  # batch >= 8: linear layers on oneDNN when available
+    batch = random_batch(batch_size, 6, 6)
     for _ in range(2):
         actions, _ = generate(model, batch)
         torch.testing.assert_close(actions, model(batch)[0]["action"], rtol=1e-5, atol=1e-5)
@@ -215,15 +224,71 @@ def test_generation_with_prepacked_weights_follows_weight_updates():
                 p.mul_(1.5)  # in place, as an optimizer step: the packed copies must follow
 
 
-def test_bf16_generation_agrees_with_the_full_forward_to_bfloat16_accuracy():
-    model = tiny_model()
-    batch = random_batch(3, 8)
-    full = model(batch)[0]["action"]
-    cache = model.start(3, bf16=True)
+def teacher_forced_actions(model, batch, **weights):
+    b, t = batch["state"].shape[:2]
+    cache = model.start(b, **weights)
     actions = []
-    for i in range(8):
+    for i in range(t):
         step = [batch[key][:, i] for key in ("rtg", "ctg", "state")]
         actions.append(model.predict_action(cache, *step))
         model.feed_action(cache, batch["action"][:, i])
-    error = (torch.stack(actions, 1) - full).norm() / full.norm()
-    assert 0 < error < 2e-2
+    return torch.stack(actions, 1)
+
+
+@pytest.mark.parametrize(("weights", "tolerance"), [("bf16", 2e-2), ("int8", 6e-2)])
+def test_low_precision_generation_agrees_with_the_full_forward_to_its_accuracy(weights, tolerance):
+    model = tiny_model()
+    batch = random_batch(3, 8)
+    full = model(batch)[0]["action"]
+    actions = teacher_forced_actions(model, batch, **{weights: True})
+    error = (actions - full).norm() / full.norm()
+    assert 0 < error < tolerance
+
+
+def test_int8_generation_follows_weight_updates():
+    model = tiny_model()
+    batch = random_batch(2, 4)
+    before = teacher_forced_actions(model, batch, int8=True)
+    with torch.no_grad():
+        model.codec.predict_action.bias.add_(1.0)
+        for p in model.blocks.parameters():
+            p.mul_(1.5)
+    after = teacher_forced_actions(model, batch, int8=True)
+    full = model(batch)[0]["action"]
+    assert (after - full).norm() / full.norm() < 6e-2 < (after - before).norm() / full.norm()
+
+
+def test_bf16_and_int8_together_are_an_error():
+    with pytest.raises(ValueError, match="bf16 and int8"):
+        tiny_model().start(1, bf16=True, int8=True)
+
+
+def test_one_product_embeds_a_step_as_the_encoders_and_time_embedding_do():
+    model = tiny_model(6)
+    batch = random_batch(2, 3, 6)
+    tokens = model.codec.embed_sequence(batch).view(2, 3, 5, -1)  # (B, T, k, C)
+    codec = model.codec.step_codec(3)
+    step = [batch["target"], *(batch[key][:, 2] for key in ("rtg", "ctg", "state"))]
+    new = codec.step_tokens(2, [batch["action"][:, 1], *step], True)
+    torch.testing.assert_close(new[:, 0], tokens[:, 1, 4])  # u(t_1), time embedding of 1
+    torch.testing.assert_close(new[:, 1:], tokens[:, 2, :4])
+    first = codec.step_tokens(
+        0, [batch["target"], *(batch[k][:, 0] for k in ("rtg", "ctg", "state"))], False
+    )
+    torch.testing.assert_close(first, tokens[:, 0, :4])
+    torch.testing.assert_close(codec.action_token(2, batch["action"][:, 2]), tokens[:, 2, 4:])
+
+
+def test_a_control_changed_after_feed_action_does_not_change_the_generation():
+    model = tiny_model()
+    batch = random_batch(2, 3)
+    reference = teacher_forced_actions(model, batch)
+    cache = model.start(2)
+    actions = []
+    for i in range(3):
+        step = [batch[key][:, i] for key in ("rtg", "ctg", "state")]
+        actions.append(model.predict_action(cache, *step))
+        control = batch["action"][:, i].clone()
+        model.feed_action(cache, control)
+        control.fill_(7.0)  # the caller reuses its buffer
+    torch.testing.assert_close(torch.stack(actions, 1), reference)

@@ -11,9 +11,16 @@ next state, and R and C are updated (Eq. 20 and the keep-out check of Eq. 21). S
   needs for its state prediction);
 * ``cached, bf16`` (with ``--bf16``): as ``cached``, multiplying by bfloat16 copies of the
   weights (``model.start(..., bf16=True)``);
+* ``cached, int8`` (with ``--int8``): as ``cached``, with int8 weights and dynamically
+  quantized activations (``model.start(..., int8=True)``);
 * ``no cache``: the full teacher-forcing forward over the whole prefix at every step.
 
-Times are the median over ``--repeats`` runs after one untimed run, on ``--threads`` threads;
+Beside the times: ``vs no cache``, the speed-up over ``no cache`` at the same batch, and
+``vs cached``, the relative error of a mode's controls against the float32 ``cached`` run
+(float rounding for ``no cache`` and ``2 calls``; the approximation for bf16 and int8).
+
+Times are the median over ``--repeats`` rounds after one untimed run of each mode, the modes
+interleaved within a round (see :func:`time_plan`), on ``--threads`` threads;
 ``wall`` is elapsed time, ``cpu`` this process's CPU time (less sensitive to other load on a
 shared machine). torch is imported when the command runs, not when the CLI starts.
 """
@@ -32,7 +39,8 @@ import numpy as np
 
 from scpformer.cli.commands import command_help
 
-MODES = ("cached", "cached, 2 calls", "cached, bf16", "no cache")
+MODES = ("cached", "cached, 2 calls", "cached, bf16", "cached, int8", "no cache")
+FORMATS = {"cached, bf16": "bf16", "cached, int8": "int8"}  # mode -> start() keyword
 R_T1 = -0.2  # R(t_1) [m/s] of the random-weight runs: a typical -J_CVX of Table 1 instances
 
 
@@ -62,6 +70,9 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--bf16", action="store_true", help="also time generation with bfloat16 weights"
+    )
+    parser.add_argument(
+        "--int8", action="store_true", help="also time generation with int8 weights"
     )
     parser.set_defaults(handler=run_bench)
 
@@ -107,10 +118,17 @@ class CachedPolicy:
     """Controls from the key-value cache; ``two_calls`` feeds each control token alone."""
 
     def __init__(
-        self, model, batch: int, steps: int, target, two_calls: bool, bf16: bool = False
+        self,
+        model,
+        batch: int,
+        steps: int,
+        target,
+        two_calls: bool,
+        bf16: bool = False,
+        int8: bool = False,
     ) -> None:
         self.model, self.two_calls = model, two_calls
-        self.cache = model.start(batch, target, max_steps=steps, bf16=bf16)
+        self.cache = model.start(batch, target, max_steps=steps, bf16=bf16, int8=int8)
 
     def act(self, k: int, rtg, ctg, state):
         return self.model.predict_action(self.cache, rtg, ctg, state)
@@ -151,32 +169,81 @@ class UncachedPolicy:
 
 
 def rollout(policy, dynamics: Dynamics, normalization, frame: str, batch: int, steps: int):
-    """Algorithm 2: controls (B, N, 3) [m/s] and states (B, N+1, 6) ROE [m]."""
+    """Algorithm 2: controls (B, N, 3) [m/s] and states (B, N+1, 6) ROE [m].
+
+    Each step's maps are composed before the loop (:func:`step_maps`), so that one step
+    outside the model is a handful of small products.
+    """
     import torch
 
+    maps = step_maps(dynamics, normalization, frame, steps)
+    state_map, state_shift, action_gain, action_shift, keep_out, Phi_t, Phi_B_t = (
+        t.unbind(0)  # per-step views, made once
+        for t in (maps.state_map, maps.state_shift, maps.action_gain, maps.action_shift,
+                  maps.keep_out, maps.Phi_t, maps.Phi_B_t)
+    )  # fmt: skip
     x = dynamics.x0.expand(batch, 6).clone()  # (B, 6) ROE [m]
     rtg = torch.full((batch, 1), R_T1, dtype=torch.float64)  # R(t_1) [m/s]
     ctg = torch.zeros(batch, 1, dtype=torch.float64)  # C(t_1)
     states, actions = [x], []
     for k in range(steps):
-        rtn = x @ dynamics.Psi[k].T  # (B, 6)
-        observed = rtn if frame == "rtn" else x
         u_norm = policy.act(
             k,
-            normalization.encode("rtg", rtg).float(),
-            normalization.encode("ctg", ctg).float(),
-            normalization.encode("state", observed, step=k).float(),
-        )  # (B, 3)
+            (rtg * maps.rtg_gain).float(),
+            (ctg * maps.ctg_gain).float(),
+            torch.addmm(state_shift[k], x, state_map[k]).float(),
+        )  # (B, 3), the model's inputs normalized as normalization.encode does
         policy.observe(k, u_norm)
-        u = normalization.decode("action", u_norm.double(), step=k)  # (B, 3) [m/s]
+        u = torch.addcmul(action_shift[k], u_norm.double(), action_gain[k])  # [m/s]
         rtg = rtg - u.norm(dim=1, keepdim=True)  # Eq. 20
         if k <= dynamics.n_waypoint:  # Eq. 21: keep-out violation at node k
-            inside = (rtn[:, :3] @ dynamics.E_koz).norm(dim=1, keepdim=True) < 1.0
-            ctg = ctg - inside.double()
-        x = (x + u @ dynamics.B[k].T) @ dynamics.Phi[k].T  # Eq. 10
+            ctg = ctg - ((x @ keep_out[k]).norm(dim=1, keepdim=True) < 1.0).double()
+        x = torch.addmm(x @ Phi_t[k], u, Phi_B_t[k])  # Eq. 10: Phi (x + B u)
         states.append(x)
         actions.append(u)
     return torch.stack(actions, 1), torch.stack(states, 1)
+
+
+@dataclass(frozen=True)
+class StepMaps:
+    """Per-step linear maps of :func:`rollout` (row vectors: ``y = x M + c``), float64."""
+
+    state_map: Any  # (N, 6, 6): ROE -> normalized model input (frame change / std)
+    state_shift: Any  # (N, 6)
+    rtg_gain: float  # normalized R per m/s
+    ctg_gain: float
+    action_gain: Any  # (N, 3): normalized control -> m/s
+    action_shift: Any  # (N, 3)
+    keep_out: Any  # (N, 6, 3): ROE -> dr E_koz (Eq. 21)
+    Phi_t: Any  # (N, 6, 6): Phi_k^T
+    Phi_B_t: Any  # (N, 3, 6): (Phi_k B_k)^T
+
+
+def step_maps(dynamics: Dynamics, normalization, frame: str, steps: int) -> StepMaps:
+    """The maps of :func:`rollout`, the normalization's affine maps read off its encode and
+    decode (of zeros and ones, so that they are the normalization's own statistics)."""
+    import torch
+
+    def affine(method, key: str, width: int, rows: int):
+        zero = torch.zeros(1, rows, width, dtype=torch.float64)
+        shift = method(key, zero)[0]  # (N, w)
+        return method(key, zero + 1.0)[0] - shift, shift
+
+    gain, shift = affine(normalization.encode, "state", 6, steps)  # (N, 6) each
+    frame_t = dynamics.Psi[:steps].transpose(1, 2) if frame == "rtn" else torch.eye(6).double()
+    action_gain, action_shift = affine(normalization.decode, "action", 3, steps)
+    one = torch.ones(1, 1, 1, dtype=torch.float64)
+    return StepMaps(
+        state_map=frame_t * gain[:, None, :],
+        state_shift=shift,
+        rtg_gain=float(normalization.encode("rtg", one)),
+        ctg_gain=float(normalization.encode("ctg", one)),
+        action_gain=action_gain,
+        action_shift=action_shift,
+        keep_out=dynamics.Psi[:steps, :3].transpose(1, 2) @ dynamics.E_koz,
+        Phi_t=dynamics.Phi.transpose(1, 2),
+        Phi_B_t=(dynamics.Phi @ dynamics.B).transpose(1, 2),
+    )
 
 
 def unit_normalization(steps: int, state_dim: int, action_dim: int):
@@ -203,6 +270,7 @@ class Timing:
     wall_s: float  # median elapsed time of one rollout
     cpu_s: float  # median process CPU time of one rollout
     repeats: int
+    error: float | None = None  # |u - u_cached| / |u_cached| of the controls (same batch)
 
     @property
     def per_second(self) -> float:
@@ -222,7 +290,8 @@ def time_runs(run: Callable[[], Any], repeats: int) -> tuple[float, float]:
     return statistics.median(walls), statistics.median(cpus)
 
 
-def time_mode(setup: dict[str, Any], mode: str, batch: int, repeats: int) -> Timing:
+def rollout_of(setup: dict[str, Any], mode: str, batch: int) -> Callable[[], Any]:
+    """One call: a fresh policy of ``mode`` and a whole rollout; returns the controls."""
     model, steps = setup["model"], setup["steps"]
     target = setup["target"]
     target = None if target is None else target.expand(batch, -1)
@@ -231,12 +300,52 @@ def time_mode(setup: dict[str, Any], mode: str, batch: int, repeats: int) -> Tim
         if mode == "no cache":
             policy = UncachedPolicy(model, batch, steps, target)
         else:
-            two_calls, bf16 = mode == "cached, 2 calls", mode == "cached, bf16"
-            policy = CachedPolicy(model, batch, steps, target, two_calls, bf16)
-        rollout(policy, setup["dynamics"], setup["normalization"], setup["frame"], batch, steps)
+            fmt = {FORMATS[mode]: True} if mode in FORMATS else {}
+            policy = CachedPolicy(model, batch, steps, target, mode == "cached, 2 calls", **fmt)
+        actions, _ = rollout(
+            policy, setup["dynamics"], setup["normalization"], setup["frame"], batch, steps
+        )
+        return actions
 
-    wall, cpu = time_runs(run, repeats)
-    return Timing(mode, batch, wall, cpu, repeats)
+    return run
+
+
+def time_plan(
+    setup: dict[str, Any], plan: list[tuple[str, int]], repeats: int, progress: bool = False
+) -> list[Timing]:
+    """Median (wall, cpu) seconds of each (mode, batch) of ``plan`` over ``repeats`` rounds.
+
+    Every mode runs once untimed, then the rounds interleave the modes (one timed rollout
+    of each per round), so that a change of the machine's load hits them alike and their
+    ratios stay meaningful on a shared machine.
+    """
+    runs = {key: rollout_of(setup, *key) for key in plan}
+    controls = {key: run() for key, run in runs.items()}  # untimed warm-up
+    walls: dict[tuple[str, int], list[float]] = {key: [] for key in plan}
+    cpus: dict[tuple[str, int], list[float]] = {key: [] for key in plan}
+    for r in range(repeats):
+        for key, run in runs.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            run()
+            walls[key].append(time.perf_counter() - wall)
+            cpus[key].append(time.process_time() - cpu)
+        if progress:
+            print(f"  round {r + 1}/{repeats} done", flush=True)
+    timings = []
+    for mode, batch in plan:
+        reference = controls.get(("cached", batch))
+        error = None
+        if mode != "cached" and reference is not None:
+            diff = controls[mode, batch] - reference
+            error = float(diff.norm() / reference.norm().clamp_min(1e-300))
+        wall, cpu = statistics.median(walls[mode, batch]), statistics.median(cpus[mode, batch])
+        timings.append(Timing(mode, batch, wall, cpu, repeats, error))
+    return timings
+
+
+def time_mode(setup: dict[str, Any], mode: str, batch: int, repeats: int) -> Timing:
+    """:func:`time_plan` of one mode."""
+    return time_plan(setup, [(mode, batch)], repeats)[0]
 
 
 def load_setup(args: argparse.Namespace) -> dict[str, Any]:
@@ -289,17 +398,26 @@ def check_args(args: argparse.Namespace) -> None:
 
 def report(setup: dict[str, Any], timings: list[Timing], threads: int) -> list[str]:
     model = setup["model"]
+    uncached = {t.batch: t for t in timings if t.mode == "no cache"}
     lines = [
         f"{setup['label']}: {model.num_parameters() / 1e6:.2f} M parameters, "
         f"{setup['steps']} steps, dynamics in the loop (rendezvous linear model), "
-        f"{threads} thread(s), median of {timings[0].repeats} runs",
-        f"{'mode':<17} {'batch':>5} {'wall ms':>9} {'cpu ms':>9} {'traj/s':>8}",
+        f"{threads} thread(s), median of {timings[0].repeats} interleaved runs",
+        f"{'mode':<17} {'batch':>5} {'wall ms':>9} {'cpu ms':>9} {'traj/s':>8} "
+        f"{'vs no cache':>11} {'vs cached':>9}",
     ]
     for t in timings:
+        slow = uncached.get(t.batch)
+        ratio = f"{slow.wall_s / t.wall_s:>10.1f}x" if slow and slow is not t else f"{'':>11}"
+        error = f"{t.error:>9.1e}" if t.error is not None else f"{'':>9}"
         lines.append(
             f"{t.mode:<17} {t.batch:>5} {1e3 * t.wall_s:>9.1f} {1e3 * t.cpu_s:>9.1f} "
-            f"{t.per_second:>8.1f}"
+            f"{t.per_second:>8.1f} {ratio} {error}"
         )
+    lines.append(
+        "vs no cache: speed-up of wall time over the run without the cache (same batch); "
+        "vs cached: relative error of the controls against the float32 cached run"
+    )
     return lines
 
 
@@ -313,12 +431,11 @@ def run_bench(args: argparse.Namespace) -> int:
     if not args.skip_uncached:
         plan.append(("no cache", 1))
     plan.append(("cached", args.batch))
-    if args.bf16:
-        plan[1:1] = [("cached, bf16", 1)]
-        plan.append(("cached, bf16", args.batch))
-    timings = []
-    for mode, batch in plan:
-        timings.append(time_mode(setup, mode, batch, args.repeats))
-        print(f"  {mode}, batch {batch}: {1e3 * timings[-1].wall_s:.1f} ms", flush=True)
+    for flag, mode in (("int8", "cached, int8"), ("bf16", "cached, bf16")):
+        if getattr(args, flag):
+            plan[1:1] = [(mode, 1)]
+            plan.append((mode, args.batch))
+    plan = list(dict.fromkeys(plan))  # --batch 1: each (mode, batch) once
+    timings = time_plan(setup, plan, args.repeats, progress=True)
     print("\n".join(report(setup, timings, args.threads)))
     return 0

@@ -27,6 +27,8 @@ Sizes: ``paper`` (Table 4) 6 layers, 6 heads, 384 dimensions, 10.7 M parameters;
 from __future__ import annotations
 
 import dataclasses
+import functools
+import warnings
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -171,18 +173,22 @@ class Block(nn.Module):
 
 @dataclass(eq=False, kw_only=True)
 class ArtCache(StepCache):
-    """Key-value cache of a batch of generations, preallocated for ``max_steps`` steps.
+    """Queries, keys and values of a batch of generations, preallocated for ``max_steps`` steps.
 
-    ``kv[l]`` (2, B, h, L_max, d) holds block ``l``'s keys and values of the ``length``
-    tokens fed so far; ``mask`` (L_max, L_max) is the additive causal mask (0 or -inf),
-    sliced for calls that feed several tokens.
+    ``qkv[l]`` (3, B, h, L_max, d) holds block ``l``'s queries, keys and values of the
+    ``length`` tokens fed so far, written by one copy per block and call; ``heads[l]`` are
+    views of it with the batch and heads flattened: queries and values (B h, L_max, d) and
+    the keys transposed (B h, d, L_max). ``mask`` (L_max, L_max) is the additive causal mask
+    (0 or -inf), sliced for calls that feed several tokens.
     """
 
-    kv: list[Tensor]  # n_layer x (2, B, h, L_max, d)
-    kv_flat: list[tuple[Tensor, Tensor]]  # views of kv[l]: keys, values (B h, L_max, d)
+    qkv: list[Tensor]  # n_layer x (3, B, h, L_max, d)
+    heads: list[tuple[Tensor, Tensor, Tensor]]  # views of qkv[l]: Q, K^T, V
     weights: list[tuple[Tensor | None, ...]]  # per block: the 12 tensors _feed reads
     linear: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # x W^T + b with weights[l]
+    linear_act: Callable[[Tensor, Tensor, Tensor | None], Tensor]  # act(x W^T + b), MLP in
     mask: Tensor  # (L_max, L_max) additive causal mask
+    no_mask: Tensor  # (1, 1) zero: the mask of a last row, which sees every key
     length: int = 0  # tokens fed through the blocks
 
 
@@ -200,23 +206,32 @@ class ART(TokenSequenceModel):
 
         self._act = activation_fn(config.activation)
 
-    def _weights(self, block: Block, batch_size: int, dtype: torch.dtype) -> tuple:
-        """A block's 12 tensors in :meth:`_feed`'s order; linear weights packed for oneDNN
-        when ``batch_size`` > 0, in ``dtype`` (repacked only when a weight changed since)."""
+    def _weights(self, block: Block, batch_size: int, weights: str) -> tuple:
+        """A block's 12 tensors in :meth:`_feed`'s order, in the layout of ``weights``.
+
+        ``plain``: the linear weights transposed, contiguous (for ``addmm``: ~10 % faster
+        than on a transposed view for the few-row products of the small preset);
+        ``float32`` / ``bfloat16``: packed for oneDNN's product with ``4 batch_size`` rows;
+        ``int8``: quantized and packed for ``linear_dynamic`` with the bias inside. The
+        copies are made again only when a weight or bias changed since (in-place updates
+        bump their version).
+        """
         tensors = _block_weights(block)
-        if not batch_size:
-            return tensors
         out = list(tensors)
         for i in (2, 4, 8, 10):  # qkv, attention proj, fc, mlp proj weights
-            packs = _packs_of(tensors[i])
-            version, pack = packs.get((batch_size, dtype), (-1, None))
-            if version != tensors[i]._version:
-                weight = tensors[i].detach().to(dtype)
-                pack = torch.ops.mkldnn._reorder_linear_weight(weight, 4 * batch_size)
-                packs[batch_size, dtype] = (tensors[i]._version, pack)
+            weight, bias = tensors[i], tensors[i + 1]
+            packs = _packs_of(weight)
+            key = (weights, batch_size)
+            version = (weight._version, -1 if bias is None else bias._version)
+            found, pack = packs.get(key, (None, None))
+            if found != version:
+                pack = _pack(weight.detach(), bias, weights, batch_size)
+                packs[key] = (version, pack)
             out[i] = pack
-            if tensors[i + 1] is not None:
-                out[i + 1] = tensors[i + 1].detach().to(dtype)
+            if weights == "int8":
+                out[i + 1] = None  # inside the pack
+            elif bias is not None and weights == "bfloat16":
+                out[i + 1] = bias.detach().to(torch.bfloat16)
         return tuple(out)
 
     def _core(self, tokens: Tensor) -> Tensor:  # (B, L, C)
@@ -225,29 +240,44 @@ class ART(TokenSequenceModel):
         return self.ln_f(tokens)  # (B, L, C)
 
     def _empty_cache(
-        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+        self, batch_size: int, max_steps: int, target: Tensor | None, weights: str
     ) -> ArtCache:
         cfg = self.config
         length = max_steps * self.codec.tokens_per_step
         param = self.ln_f.weight
         d = cfg.n_embd // cfg.n_head
-        onednn = param.device.type == "cpu" and onednn_available()
-        if bf16 and not onednn:
+        cpu = param.device.type == "cpu"
+        onednn = cpu and onednn_available()
+        if weights == "bfloat16" and not onednn:
             raise ValueError("bf16 generation needs oneDNN on the CPU (torch.backends.mkldnn)")
-        packed = bf16 or (onednn and (cfg.n_embd >= 256 or batch_size >= 8))
-        dtype = torch.bfloat16 if bf16 else param.dtype
-        weights = [self._weights(b, batch_size if packed else 0, dtype) for b in self.blocks]
-        linear = functional.linear
-        if packed:
-            linear = packed_linear_bf16 if bf16 else packed_linear
-        kv = [param.new_zeros(2, batch_size, cfg.n_head, length, d) for _ in self.blocks]
-        flat = [(k.view(-1, length, d), v.view(-1, length, d)) for k, v in kv]
+        if weights == "int8" and not (cpu and int8_available()):
+            raise ValueError("int8 generation needs the x86 quantized engine on the CPU")
+        if weights == "float32" and not (onednn and (cfg.n_embd >= 256 or batch_size >= 8)):
+            weights = "plain"
+        packed = [self._weights(b, batch_size, weights) for b in self.blocks]
+        linear = {
+            "plain": transposed_linear,
+            "float32": packed_linear,
+            "bfloat16": packed_linear_bf16,
+            "int8": quantized_linear,
+        }[weights]
+        act = self._act
+        if cfg.activation == "relu" and weights in ("float32", "bfloat16"):  # oneDNN post-op
+            linear_act = functools.partial(linear, activation="relu")
+        elif cfg.activation == "relu":
+            linear_act = lambda x, w, b: torch.relu_(linear(x, w, b))  # noqa: E731
+        else:
+            linear_act = lambda x, w, b: act(linear(x, w, b))  # noqa: E731
+        qkv = [param.new_empty(3, batch_size, cfg.n_head, length, d) for _ in self.blocks]
+        heads = [tuple(t.view(-1, length, d) for t in block) for block in qkv]
         return ArtCache(
-            kv=kv,
-            kv_flat=flat,
-            weights=weights,
+            qkv=qkv,
+            heads=[(q, k.transpose(1, 2), v) for q, k, v in heads],
+            weights=packed,
             linear=linear,
-            mask=param.new_full((length, length), float("-inf")).triu(1),  # (L, L)
+            linear_act=linear_act,
+            mask=causal_mask(length, param.dtype, param.device),  # (L, L)
+            no_mask=param.new_zeros(1, 1),
             target=target,
             batch_size=batch_size,
             max_steps=max_steps,
@@ -257,11 +287,20 @@ class ART(TokenSequenceModel):
         """Run new tokens (B, n, C) through the blocks; the last one's output (B, C).
 
         The eager inference path, cut to few operations per block: functional calls on the
-        weights gathered by :meth:`_empty_cache`, attention written out as
-        ``softmax(q K^T / sqrt(d) + mask) V`` over the cached keys with one ``baddbmm`` (for a
-        few query rows several times faster than ``scaled_dot_product_attention`` on the CPU),
-        and the last block computed for the last token only (the other tokens' outputs are
-        never read; their keys and values are).
+        weights gathered by :meth:`_empty_cache`; the new queries, keys and values written
+        into the cache by one copy; attention written out as ``softmax(q K^T / sqrt(d) +
+        mask) V`` over the cached keys with one ``baddbmm`` (for a few query rows several
+        times faster than ``scaled_dot_product_attention`` on the CPU); the last block
+        computed for the last token only (the other tokens' outputs are never read; their
+        keys and values are). About 80 operator calls per Algorithm 2 step for three blocks
+        (~140 before these cuts), which at a few microseconds each is most of the small
+        preset's time at batch 1; the paper preset's is its 43 MB of float32 weights read
+        once per step (``start(bf16=True)`` / ``start(int8=True)`` read a half / a quarter).
+
+        Measured and not used: ``torch.compile`` of this loop (fixed shapes, full-length
+        masked attention) took 29 s to compile and ran no faster than eager (24.5 vs 22.3
+        ms per 100 small-preset steps, one thread, loaded machine); ``torch.jit.script`` is
+        deprecated in this PyTorch.
         """
         b, n, c = x.shape
         start = cache.length
@@ -271,25 +310,28 @@ class ART(TokenSequenceModel):
         scale = d**-0.5
         mask = cache.mask[start:end, :end]  # (n, end)
         eps, last = self.ln_f.eps, len(cache.weights) - 1
-        linear = cache.linear
-        for layer, (w, kv, (keys, values)) in enumerate(
-            zip(cache.weights, cache.kv, cache.kv_flat, strict=True)
+        linear, linear_act = cache.linear, cache.linear_act
+        x = x.reshape(b * n, c)  # rows: (batch, token)
+        for layer, (w, qkv, (queries, keys_t, values)) in enumerate(
+            zip(cache.weights, cache.qkv, cache.heads, strict=True)
         ):
             hid = torch.layer_norm(x, (c,), w[0], w[1], eps)
-            qkv = linear(hid, w[2], w[3]).view(b, n, 3, h, d)
-            kv[:, :, :, start:end] = qkv[:, :, 1:].permute(2, 0, 3, 1, 4)  # (2, B, h, n, d)
+            qkv[:, :, :, start:end] = (
+                linear(hid, w[2], w[3]).view(b, n, 3, h, d).permute(2, 0, 3, 1, 4)
+            )  # (3, B, h, n, d)
             if layer == last:  # only the last token's output is read
-                qkv, x, mask = qkv[:, -1:], x[:, -1:], mask[-1:]
-            q = qkv[:, :, 0].transpose(1, 2).reshape(b * h, -1, d)  # (B h, n', d)
-            scores = torch.baddbmm(mask, q, keys[:, :end].transpose(1, 2), alpha=scale)
+                x, mask, q = x[n - 1 :: n], cache.no_mask, queries[:, end - 1 : end]
+            else:
+                q = queries[:, start:end]  # (B h, n', d)
+            scores = torch.baddbmm(mask, q, keys_t[:, :, :end], alpha=scale)
             y = torch.bmm(torch.softmax(scores, dim=-1), values[:, :end])  # (B h, n', d)
-            y = y.view(b, h, -1, d).transpose(1, 2).reshape(b, -1, c)  # (B, n', C)
-            x = x + linear(y, w[4], w[5])
-            hid = torch.layer_norm(x, (c,), w[6], w[7], eps)
-            hid = self._act(linear(hid, w[8], w[9]))
-            x = x + linear(hid, w[10], w[11])  # (B, n', C)
+            if y.shape[1] > 1:
+                y = y.view(b, h, -1, d).transpose(1, 2)  # (B, n', h, d)
+            x = x + linear(y.reshape(-1, c), w[4], w[5])  # (B n', C)
+            hid = linear_act(torch.layer_norm(x, (c,), w[6], w[7], eps), w[8], w[9])
+            x = x + linear(hid, w[10], w[11])  # (B n', C)
         cache.length = end
-        return torch.layer_norm(x[:, -1], (c,), self.ln_f.weight, self.ln_f.bias, eps)
+        return torch.layer_norm(x, (c,), self.ln_f.weight, self.ln_f.bias, eps)  # (B, C)
 
 
 def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
@@ -305,13 +347,13 @@ def _block_weights(block: Block) -> tuple[Tensor | None, ...]:
     return tuple(t for layer in layers for t in (layer.weight, layer.bias))
 
 
-# oneDNN copies of generation weights: id(weight) -> {batch size: (weight version, pack)};
-# kept outside the modules (state dicts, pickles and copies of a model never carry them) and
-# dropped when the weight is freed.
-_PACKS: dict[int, dict[int, tuple[int, Tensor]]] = {}
+# Packed copies of generation weights: id(weight) -> {(format, batch size): ((weight, bias)
+# versions, pack)}; kept outside the modules (state dicts, pickles and copies of a model
+# never carry them) and dropped when the weight is freed.
+_PACKS: dict[int, dict[tuple[str, int], tuple[tuple[int, int], Any]]] = {}
 
 
-def _packs_of(weight: Tensor) -> dict[int, tuple[int, Tensor]]:
+def _packs_of(weight: Tensor) -> dict[tuple[str, int], tuple[tuple[int, int], Any]]:
     key = id(weight)
     if key not in _PACKS:
         _PACKS[key] = {}
@@ -330,11 +372,63 @@ def onednn_available() -> bool:
     return torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
 
 
-def packed_linear(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
-    """``x W^T + b`` with ``W`` prepacked by ``torch.ops.mkldnn._reorder_linear_weight``."""
-    return torch.ops.mkldnn._linear_pointwise(x, weight, bias, "none", [], "")
+def transposed_linear(x: Tensor, weight_t: Tensor, bias: Tensor | None) -> Tensor:
+    """``x W^T + b`` for 2-D ``x`` with ``weight_t = W^T`` (one ``addmm``, no transpose)."""
+    return torch.mm(x, weight_t) if bias is None else torch.addmm(bias, x, weight_t)
 
 
-def packed_linear_bf16(x: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
+@functools.lru_cache(maxsize=8)
+def causal_mask(length: int, dtype: torch.dtype, device: torch.device) -> Tensor:
+    """The additive causal mask (length, length): 0 on and below the diagonal, -inf above.
+
+    Shared by every generation of that length (read only).
+    """
+    return torch.full((length, length), float("-inf"), dtype=dtype, device=device).triu(1)
+
+
+_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
+
+
+def _pack(weight: Tensor, bias: Tensor | None, weights: str, batch_size: int) -> Tensor:
+    """``weight`` (out, in) in the layout of ``weights`` (see :meth:`ART._weights`)."""
+    if weights == "plain":
+        return weight.t().contiguous()  # (in, out)
+    if weights != "int8":
+        return torch.ops.mkldnn._reorder_linear_weight(weight.to(_DTYPES[weights]), 4 * batch_size)
+    scale = weight.abs().amax(dim=1).clamp_min(1e-12).double() / 127.0  # per output channel
+    zero = torch.zeros(weight.shape[0], dtype=torch.long)
+    with warnings.catch_warnings():  # quantized tensors are deprecated in favour of torchao
+        warnings.simplefilter("ignore")
+        quantized = torch.quantize_per_channel(weight, scale, zero, 0, torch.qint8)
+        return torch.ops.quantized.linear_prepack(
+            quantized, None if bias is None else bias.detach()
+        )
+
+
+def int8_available() -> bool:
+    """Whether PyTorch has the x86 (fbgemm) engine for int8 dynamic quantized products."""
+    engines = torch.backends.quantized.supported_engines
+    return "x86" in engines or "fbgemm" in engines
+
+
+def quantized_linear(x: Tensor, pack: Tensor, bias: None) -> Tensor:
+    """``x W^T + b`` with ``W`` in int8 per output channel and ``b`` in ``pack``
+    (:func:`_pack`); ``x`` is quantized per call to uint8 over its own range (7 bits:
+    ``reduce_range``, which keeps fbgemm's 16-bit intermediate sums from saturating)."""
+    return torch.ops.quantized.linear_dynamic(x, pack, True)
+
+
+def packed_linear(
+    x: Tensor, weight: Tensor, bias: Tensor | None, activation: str = "none"
+) -> Tensor:
+    """``x W^T + b`` with ``W`` prepacked by ``torch.ops.mkldnn._reorder_linear_weight``,
+    then ``activation`` (``none`` or ``relu``, fused into oneDNN's product)."""
+    return torch.ops.mkldnn._linear_pointwise(x, weight, bias, activation, [], "")
+
+
+def packed_linear_bf16(
+    x: Tensor, weight: Tensor, bias: Tensor | None, activation: str = "none"
+) -> Tensor:
     """:func:`packed_linear` with bfloat16 weights; ``x`` and the result stay float32."""
-    return torch.ops.mkldnn._linear_pointwise(x.bfloat16(), weight, bias, "none", [], "").float()
+    out = torch.ops.mkldnn._linear_pointwise(x.bfloat16(), weight, bias, activation, [], "")
+    return out.float()

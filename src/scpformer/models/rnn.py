@@ -83,10 +83,10 @@ class SequenceRNN(TokenSequenceModel):
         return self.core(tokens)[0]  # (B, L, C)
 
     def _empty_cache(
-        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+        self, batch_size: int, max_steps: int, target: Tensor | None, weights: str
     ) -> RnnCache:
-        if bf16:
-            raise ValueError("bf16 generation is implemented for ART only")
+        if weights != "float32":
+            raise ValueError(f"{weights} generation is implemented for ART only")
         return RnnCache(batch_size=batch_size, max_steps=max_steps, target=target)
 
     def _feed(self, cache: RnnCache, tokens: Tensor) -> Tensor:  # tokens (B, n, C)

@@ -21,9 +21,11 @@ that mixes the tokens.
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import Tensor, nn
@@ -55,6 +57,20 @@ def check_sizes(config: object, **extra: tuple[int, int]) -> None:
     dropout = config.dropout
     if not isinstance(dropout, int | float) or not 0.0 <= dropout < 1.0:
         raise ValueError(f"dropout must be in [0, 1), got {dropout!r}")
+
+
+def _inference(method: Callable) -> Callable:
+    """``method`` under ``torch.no_grad()``, entered only when gradients are on (generation
+    calls it a few hundred times per trajectory; the context costs microseconds)."""
+
+    @functools.wraps(method)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        if torch.is_grad_enabled():
+            with torch.no_grad():
+                return method(*args, **kwargs)
+        return method(*args, **kwargs)
+
+    return wrapper
 
 
 class TokenCodec(nn.Module):
@@ -116,6 +132,40 @@ class TokenCodec(nn.Module):
         """The target as (B, T, g): a (B, g) target is repeated at every step."""
         return target[:, None].expand(-1, t, -1) if target.dim() == 2 else target
 
+    @torch.no_grad()
+    def step_codec(self, max_steps: int) -> StepCodec:
+        """Every encoder and the time-step embedding of generation as one product per call.
+
+        The tokens that one generation call feeds, ``[u(t_{i-1})] [g] R(t_i) C(t_i) x(t_i)``,
+        are ``bias[i] + [u, g, R, C, x] W`` with ``W`` the block-diagonal stack of the
+        encoders' (transposed) weights and ``bias[i]`` their biases plus the time-step
+        embeddings of ``i - 1`` (the control token) and ``i`` (the others): the same tokens
+        as :meth:`embed_sequence`, up to float rounding, in one ``addmm`` instead of one
+        linear layer per modality.
+        """
+        encoders = [self.embed_action, self.embed_rtg, self.embed_ctg, self.embed_state]
+        if self.embed_target is not None:
+            encoders.insert(1, self.embed_target)
+        c = self.embed_time.weight.shape[1]
+        widths = [e.in_features for e in encoders]
+        weight = self.embed_time.weight.new_zeros(sum(widths), c * len(encoders))
+        row = 0
+        for j, (encoder, width) in enumerate(zip(encoders, widths, strict=True)):
+            weight[row : row + width, j * c : (j + 1) * c] = encoder.weight.T
+            row += width
+        time = self.embed_time.weight[:max_steps]  # (N, C)
+        action_bias = self.embed_action.bias + time  # (N, C): the control token of step i
+        step_bias = torch.cat([e.bias + time for e in encoders[1:]], dim=1)  # (N, (k-1) C)
+        previous = torch.cat([action_bias[:1], action_bias[:-1]])  # row i: u(t_{i-1})
+        return StepCodec(
+            weight=weight,
+            bias=torch.cat([previous, step_bias], dim=1),  # (N, k C)
+            action_bias=action_bias,
+            action_dim=self.action_dim,
+            n_embd=c,
+            decoder=(self.predict_action.weight.T, self.predict_action.bias),
+        )
+
     def decode_sequence(self, hidden: Tensor) -> dict[str, Tensor]:
         """Predictions from the core's output (B, T k, C) (see the module docstring)."""
         b, length, c = hidden.shape
@@ -166,6 +216,47 @@ class TokenCodec(nn.Module):
             raise ValueError(f"batch['target'] must be {shapes[0]} or {shapes[1]}, got {got}")
 
 
+@dataclass(frozen=True, kw_only=True)
+class StepCodec:
+    """The encoders of one generation step as one product (:meth:`TokenCodec.step_encoder`).
+
+    ``weight`` (a + g + 2 + s, k C) is block-diagonal; ``bias`` (N, k C) row ``i`` holds the
+    encoders' biases plus the time-step embeddings of the tokens ``u(t_{i-1})`` and ``[g] R C
+    x(t_i)``; ``action_bias`` (N, C) row ``i`` is the control token's bias at step ``i``.
+    """
+
+    weight: Tensor  # (a + g + 2 + s, k C)
+    bias: Tensor  # (N, k C)
+    action_bias: Tensor  # (N, C)
+    action_dim: int  # a
+    n_embd: int  # C
+    decoder: tuple[Tensor, Tensor]  # the control decoder's W^T (C, a) and bias (a,)
+    rows: tuple[tuple[Tensor, ...], tuple[Tensor, ...]] = ()  # bias, action_bias per step
+
+    def __post_init__(self) -> None:  # per-step views, made once (one index op less a call)
+        object.__setattr__(self, "rows", (self.bias.unbind(0), self.action_bias.unbind(0)))
+
+    def step_tokens(self, step: int, inputs: list[Tensor], with_action: bool) -> Tensor:
+        """The tokens of ``inputs`` ([u], [g], R, C, x: (B, width) each) as (B, n, C)."""
+        z = torch.cat(inputs, dim=1)  # (B, m)
+        if with_action:
+            tokens = torch.addmm(self.rows[0][step], z, self.weight)
+        else:
+            a, c = self.action_dim, self.n_embd
+            tokens = torch.addmm(self.bias[step, c:], z, self.weight[a:, c:])
+        return tokens.view(z.shape[0], -1, self.n_embd)  # (B, n, C)
+
+    def decode_action(self, hidden: Tensor) -> Tensor:
+        """``u_hat`` (B, a) from the output (B, C) at the state token."""
+        weight_t, bias = self.decoder
+        return torch.addmm(bias, hidden, weight_t)
+
+    def action_token(self, step: int, action: Tensor) -> Tensor:
+        """The control token ``u(t_step)`` (B, a) as (B, 1, C)."""
+        a, c = self.action_dim, self.n_embd
+        return torch.addmm(self.rows[1][step], action, self.weight[:a, :c])[:, None]
+
+
 @dataclass(eq=False, kw_only=True)
 class StepCache:
     """Where a batch of generations stands: step ``i``, and which token comes next.
@@ -175,10 +266,11 @@ class StepCache:
 
     batch_size: int
     max_steps: int  # time steps the generation may take
-    target: Tensor | None  # (B, 1, C) encoded target state g (None without one)
+    target: Tensor | None  # (B, g) normalized target state g (None without one)
+    step_codec: StepCodec | None = None  # encoders as one product, decoder (set by start)
     step: int = 0  # time step i of the next R, C, x tokens
     awaiting_action: bool = False  # predict_action done, control token not given yet
-    pending: Tensor | None = None  # (B, 1, C) control token staged by feed_action
+    pending: Tensor | None = None  # (B, a) normalized control staged by feed_action
 
 
 class TokenSequenceModel(nn.Module):
@@ -235,7 +327,7 @@ class TokenSequenceModel(nn.Module):
         raise NotImplementedError
 
     def _empty_cache(
-        self, batch_size: int, max_steps: int, target: Tensor | None, bf16: bool
+        self, batch_size: int, max_steps: int, target: Tensor | None, weights: str
     ) -> StepCache:
         raise NotImplementedError
 
@@ -251,13 +343,21 @@ class TokenSequenceModel(nn.Module):
         *,
         max_steps: int | None = None,
         bf16: bool = False,
+        int8: bool = False,
     ) -> StepCache:
         """An empty cache for ``batch_size`` generations of at most ``max_steps`` steps.
 
         ``target`` (B, g) is the normalized target state, required when ``target_dim > 0``.
         ``max_steps`` defaults to the context length (fewer steps need less memory).
         ``bf16`` multiplies by bfloat16 copies of the weights (ART on oneDNN only: about half
-        the weight traffic, relative error of the order of 1e-3).
+        the weight traffic, relative error of the order of 1e-3 per call); ``int8`` by int8
+        copies quantized per output channel, the activations quantized per call (ART only:
+        a quarter of the weight traffic, relative error of the order of 1e-2 per call).
+        Both are approximations of the float32 model, off by default: in Algorithm 2's
+        closed loop the errors grow (trained small preset, 20 sampled rendezvous: controls
+        off by 1.1e-2 median / 3.6e-2 max with bf16, 5.6e-2 / 0.62 with int8, whose
+        trajectory cost changed by up to 28 %); ``scpformer bench art --bf16 --int8``
+        prints the error beside the time.
         """
         context = self.codec.context
         max_steps = context if max_steps is None else max_steps
@@ -267,10 +367,15 @@ class TokenSequenceModel(nn.Module):
             raise ValueError(f"max_steps must be an int in [1, {context}], got {max_steps!r}")
         if not 1 <= max_steps <= context:
             raise ValueError(f"max_steps must be in [1, {context}], got {max_steps}")
-        target = self._encode_target(target, batch_size)
-        return self._empty_cache(batch_size, max_steps, target, bool(bf16))
+        if bf16 and int8:
+            raise ValueError("bf16 and int8 exclude each other: choose one weight format")
+        self._check_target(target, batch_size)
+        weights = "bfloat16" if bf16 else "int8" if int8 else "float32"
+        cache = self._empty_cache(batch_size, max_steps, target, weights)
+        cache.step_codec = self.codec.step_codec(max_steps)
+        return cache
 
-    def _encode_target(self, target: Tensor | None, batch_size: int) -> Tensor | None:
+    def _check_target(self, target: Tensor | None, batch_size: int) -> None:
         g = self.codec.target_dim
         if not g:
             if target is not None:
@@ -279,39 +384,38 @@ class TokenSequenceModel(nn.Module):
         if target is None or tuple(target.shape) != (batch_size, g):
             got = "nothing" if target is None else _shape(target)
             raise ValueError(f"target must be ({batch_size}, {g}), got {got}")
-        return self.codec.embed_target(target)[:, None]  # (B, 1, C)
 
-    @torch.no_grad()
+    @_inference
     def predict_action(self, cache: StepCache, rtg: Tensor, ctg: Tensor, state: Tensor) -> Tensor:
         """Feed step i's [g] R C x tokens in one call; return ``u_hat(t_i)`` (B, a).
 
         ``rtg``, ``ctg`` (B, 1) and ``state`` (B, s) are normalized; ``cache`` is updated. A
         control token staged by :meth:`feed_action` goes through in the same call.
         """
-        codec, i = self.codec, cache.step
+        i = cache.step
         if cache.awaiting_action:
             raise ValueError("predict_action called twice: give the control with predict_state")
         if i >= cache.max_steps:
             raise ValueError(f"the cache holds {cache.max_steps} steps; start a new one")
-        time = codec.embed_time.weight[i]  # (C,)
-        tokens = [codec.embed_rtg(rtg), codec.embed_ctg(ctg), codec.embed_state(state)]
-        new = torch.stack(tokens, dim=1) + time  # (B, 3, C)
-        parts = [cache.pending] if cache.pending is not None else []
+        inputs = [rtg, ctg, state]
         if cache.target is not None:
-            parts.append(cache.target + time)  # (B, 1, C)
-        if parts:
-            new = torch.cat([*parts, new], dim=1)  # (B, n, C)
+            inputs.insert(0, cache.target)
+        pending = cache.pending is not None
+        if pending:
+            inputs.insert(0, cache.pending)
+        new = cache.step_codec.step_tokens(i, inputs, pending)  # (B, n, C)
         cache.pending, cache.awaiting_action = None, True
-        return codec.predict_action(self._feed(cache, new))  # (B, a)
+        return cache.step_codec.decode_action(self._feed(cache, new))  # (B, a)
 
-    @torch.no_grad()
+    @_inference
     def predict_state(self, cache: StepCache, action: Tensor) -> Tensor:
         """Feed step i's control token ``u(t_i)`` (B, a); return ``x_hat(t_{i+1})`` (B, s)."""
         self.feed_action(cache, action)
-        token, cache.pending = cache.pending, None
+        token = cache.step_codec.action_token(cache.step - 1, cache.pending)  # (B, 1, C)
+        cache.pending = None
         return self.codec.predict_state(self._feed(cache, token))  # (B, s)
 
-    @torch.no_grad()
+    @_inference
     def feed_action(self, cache: StepCache, action: Tensor) -> None:
         """Stage step i's control token ``u(t_i)`` (B, a) without predicting the next state.
 
@@ -321,10 +425,8 @@ class TokenSequenceModel(nn.Module):
         """
         if not cache.awaiting_action:
             raise ValueError("the control token must follow predict_action of the same step")
-        i = cache.step
-        token = self.codec.embed_action(action) + self.codec.embed_time.weight[i]  # (B, C)
-        cache.pending = token[:, None]  # (B, 1, C)
-        cache.awaiting_action, cache.step = False, i + 1
+        cache.pending = action.clone()  # (B, a), encoded with the tokens it goes with
+        cache.awaiting_action, cache.step = False, cache.step + 1
 
 
 def eq8_loss(predictions: Mapping[str, Tensor], batch: Mapping[str, Tensor]) -> Tensor:

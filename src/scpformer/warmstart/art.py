@@ -199,6 +199,9 @@ def generate(
     x[:, 0] = batch.x0
     states[:, 0] = batch.to_frame(0, batch.x0, frame)
     R, C = np.asarray(rtg0, dtype=float).copy(), np.asarray(ctg0, dtype=float).copy()
+    # Algorithm 2 reads no x_hat: with feed_action (optional in the contract) the u_k token
+    # goes through with step k+1's tokens, one pass through the model per step instead of two.
+    feed_action = getattr(model, "feed_action", None) or model.predict_state
     with torch.no_grad():
         cache = model.start(size, target)
         for k in range(n):
@@ -217,11 +220,12 @@ def generate(
             if k == n - 1:
                 x[:, n] = x_next
                 break
-            predicted = model.predict_state(cache, u_norm)  # feeds the u_k token
             if art_mode == "transformer":
+                predicted = model.predict_state(cache, u_norm)  # feeds the u_k token
                 states[:, k + 1] = normalization.decode("state", numpy(predicted), step=k + 1)
                 x[:, k + 1] = batch.from_frame(k + 1, states[:, k + 1], frame)
             else:
+                feed_action(cache, u_norm)
                 x[:, k + 1] = x_next
                 states[:, k + 1] = batch.to_frame(k + 1, x_next, frame)
     return ArtRollout(x, u, states, rtg, ctg, violations, time.perf_counter() - start)
