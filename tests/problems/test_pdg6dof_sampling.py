@@ -1,5 +1,6 @@
 """The 'feasible' sampling preset: consistent draws, documented ranges, rotation invariance."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -29,8 +30,10 @@ def draws():
     return sample_instances(np.random.default_rng(3), 150, FEASIBLE)
 
 
-def test_feasible_preset_is_the_dataset_default():
-    assert PDG6DoFDataConfig().ranges == FEASIBLE
+def test_feasible_preset_is_the_dataset_default_and_round_trips_through_a_manifest():
+    config = PDG6DoFDataConfig()
+    assert config.ranges == FEASIBLE
+    assert PDG6DoFDataConfig.from_dict(dataclasses.asdict(config)) == config
 
 
 def test_feasible_draws_violate_no_state_constraint_at_t0(draws):
