@@ -329,6 +329,13 @@ def add_dataset_parser(subparsers: argparse._SubParsersAction) -> None:
         sub = commands.add_parser(name, help=summary, description=summary)
         sub.add_argument("dir", type=Path, metavar="DIR")
         sub.set_defaults(handler=handler)
+        if name == "info":
+            sub.add_argument(
+                "--table2",
+                action="store_true",
+                help="pdg6dof: min and max of theta and K over the converged samples, beside "
+                "Table 2 of the T-SCvx paper",
+            )
     _add_augment_parser(commands)
     _add_split_parser(commands)
 
@@ -380,8 +387,13 @@ def _add_split_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def run_info(args: argparse.Namespace) -> int:
-    """Handler of ``dataset info DIR``."""
-    print("\n".join(info_lines(args.dir, read_manifest(args.dir))))
+    """Handler of ``dataset info DIR [--table2]``."""
+    lines = info_lines(args.dir, read_manifest(args.dir))
+    if args.table2:
+        from scpformer.data.pdg6dof_family import dataset_table2_lines
+
+        lines += ["", *dataset_table2_lines(args.dir)]
+    print("\n".join(lines))
     return 0
 
 

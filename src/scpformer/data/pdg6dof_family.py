@@ -34,6 +34,7 @@ import dataclasses
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -45,6 +46,7 @@ from scpformer.data.family import (
     dataclass_from_dict,
     package_versions,
 )
+from scpformer.data.storage import ShardedSamples
 from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
 from scpformer.problems.pdg6dof.guess import straight_line_guess
@@ -228,3 +230,77 @@ SPEC = FamilySpec(
     summary="6-DoF free-final-time Mars powered descent solved with SCvx (T-SCvx dataset)",
     build=build,
 )
+
+
+#: Table 2 of the T-SCvx paper, (min, max) per theta component (:data:`THETA_NAMES`) and of K,
+#: the SCvx iteration. Its m0 reaches 0.003, below the dry mass: the table records the dataset
+#: the paper saw, not a box it sampled.
+PAPER_TABLE2: dict[str, tuple[float, float]] = {
+    "K": (1.0, 20.0),
+    "gamma_gs_deg": (0.0, 90.0),
+    "theta_max_deg": (0.0, 359.4),
+    "r0_up": (0.003, 9.997),
+    "r0_east": (-13.83, 13.83),
+    "r0_north": (-13.83, 13.83),
+    "v0_up": (-1.998, -0.001),
+    "v0_east": (-2.779, 2.779),
+    "v0_north": (-2.779, 2.779),
+    "q0_w": (-0.996, 1.0),
+    "q0_x": (-1.0, 1.0),
+    "q0_y": (-1.0, 1.0),
+    "q0_z": (-1.0, 0.999),
+    "omega0_x_deg": (-89.98, 89.70),
+    "omega0_y_deg": (-123.49, 123.49),
+    "omega0_z_deg": (-123.49, 123.49),
+    "m0": (0.003, 3.0),
+}
+
+
+def table2_ranges(theta: np.ndarray, iterations: np.ndarray) -> dict[str, tuple[float, float]]:
+    """(min, max) of K and of every theta component, keyed as :data:`PAPER_TABLE2`.
+
+    ``theta`` is (S, 16) and ``iterations`` (S,), the SCvx solves of each sample (K runs from 1
+    to the iteration count). ``ValueError`` when there are no samples.
+    """
+    theta = np.asarray(theta, dtype=float).reshape(-1, len(THETA_NAMES))
+    iterations = np.asarray(iterations).reshape(-1)
+    if theta.shape[0] == 0 or theta.shape[0] != iterations.shape[0]:
+        raise ValueError(
+            f"theta/iterations: need as many rows as iteration counts, at least one; got "
+            f"{theta.shape[0]} and {iterations.shape[0]}"
+        )
+    out = {"K": (1.0, float(iterations.max()))}
+    low, high = theta.min(axis=0), theta.max(axis=0)
+    out.update({name: (float(low[i]), float(high[i])) for i, name in enumerate(THETA_NAMES)})
+    return out
+
+
+def table2_lines(theta: np.ndarray, iterations: np.ndarray) -> list[str]:
+    """Table 2 of these samples beside the paper's: min and max of each parameter."""
+    ours = table2_ranges(theta, iterations)
+    lines = [f"{'parameter':<14}  {'min':>9} {'max':>9}  {'paper min':>9} {'paper max':>9}"]
+    for name, (p_low, p_high) in PAPER_TABLE2.items():
+        low, high = ours[name]
+        lines.append(f"{name:<14}  {low:>9.4g} {high:>9.4g}  {p_low:>9.4g} {p_high:>9.4g}")
+    return lines
+
+
+def dataset_table2_lines(folder: str | Path) -> list[str]:
+    """:func:`table2_lines` of the converged samples of the pdg6dof dataset in ``folder``.
+
+    A header line counts the samples; ``ValueError`` for another family or no converged sample.
+    """
+    samples = ShardedSamples(folder)
+    if samples.manifest.family != PDG6DoFFamily.name:
+        raise ValueError(
+            f"DIR: Table 2 needs a pdg6dof dataset, {folder} is {samples.manifest.family}"
+        )
+    solved = np.isin(samples.column("status"), list(PDG6DoFFamily.success_statuses))
+    if not solved.any():
+        raise ValueError(f"DIR: {folder} holds no converged sample")
+    iterations = samples.column("iterations")[solved]
+    header = (
+        f"Table 2 of {folder}: {int(solved.sum())} converged samples of {len(solved)}; "
+        f"SCvx solves per sample {int(iterations.min())}-{int(iterations.max())}"
+    )
+    return [header, *table2_lines(samples.column("theta")[solved], iterations)]
