@@ -97,7 +97,7 @@ def test_both_losses_decrease_and_the_run_loads_as_a_predictor(fake_pdg, tmp_pat
     predictor = load_tscvx_predictor(run)
     arrays, norm = read_tscvx(fake_pdg)
     theta = arrays.theta[:3]
-    loaded = load_checkpoint(run / "tight", models=TSCVX_MODELS)
+    loaded = load_checkpoint(run / "tight" / "best.pt", models=TSCVX_MODELS)
     z = torch.tensor(norm.encode_theta(theta), dtype=torch.float32)
     with torch.no_grad():
         logits = loaded.model(z, torch.tensor([1, 2, 3])).numpy()

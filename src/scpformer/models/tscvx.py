@@ -457,10 +457,20 @@ class TscvxPredictor:
         return (x[0], u[0], float(tf[0])) if single else (x, u, tf)
 
 
+CHECKPOINT_CHOICES = {"best": "best.pt", "last": "checkpoint.pt"}
+
+
 def load_tscvx_predictor(
-    run_dir: Path | str, device: str | torch.device = "cpu", *, threshold: float = 0.5
+    run_dir: Path | str,
+    device: str | torch.device = "cpu",
+    *,
+    threshold: float = 0.5,
+    checkpoint: str = "best",
 ) -> TscvxPredictor:
     """The predictor of run folder ``run_dir`` (``RUN/tight`` and ``RUN/solution``).
+
+    ``checkpoint``: ``best`` (each network's epoch of least validation loss, ``best.pt``) or
+    ``last`` (its last epoch, ``checkpoint.pt``).
 
     Raises
     ------
@@ -470,9 +480,13 @@ def load_tscvx_predictor(
     """
     from scpformer.train.checkpoint import load_checkpoint
 
-    run = Path(run_dir)
+    if checkpoint not in CHECKPOINT_CHOICES:
+        raise ValueError(
+            f"checkpoint must be one of {tuple(CHECKPOINT_CHOICES)}, got {checkpoint!r}"
+        )
+    run, file = Path(run_dir), CHECKPOINT_CHOICES[checkpoint]
     loaded = {
-        kind: load_checkpoint(run / folder, kind=kind, family=FAMILY, models=TSCVX_MODELS)
+        kind: load_checkpoint(run / folder / file, kind=kind, family=FAMILY, models=TSCVX_MODELS)
         for kind, folder in ((TIGHT_KIND, "tight"), (SOLUTION_KIND, "solution"))
     }
     return TscvxPredictor(

@@ -88,6 +88,7 @@ from scpformer.train.tscvx_metrics import (
 
 NETWORKS = {"tight": TIGHT_KIND, "solution": SOLUTION_KIND}  # run sub-folder -> model kind
 CV_NAME = "cv.json"
+PLOT_EVERY = 10  # epochs between redrawings of loss.png (and the last epoch)
 
 # Training values per preset. paper: Sec. III.E.3 (batch 128, 4000 warm-up steps, two
 # epochs, K = 3); its learning rate is not given. small: measured here (see module docstring).
@@ -387,7 +388,8 @@ class _RunContext:
 
 
 def _check_new_or_resume(folder: Path, resume: bool) -> None:
-    if (folder / CHECKPOINT_NAME).is_file() and not resume:
+    """Refuse to overwrite a network's run (or one of its folds) without ``resume``."""
+    if not resume and folder.is_dir() and any(folder.rglob(CHECKPOINT_NAME)):
         raise ValueError(
             f"{folder} already holds a training run: pass --resume to continue it, or another --out"
         )
@@ -484,7 +486,8 @@ def _fit_fold(
         if state.improved:
             save_checkpoint(folder / BEST_NAME, **fields)
         write_metrics(folder, state.history)
-        plot_losses(folder, state.history, title=f"{kind} ({ctx.preset})")
+        if state.epoch % PLOT_EVERY == 0 or state.epoch == config.epochs:  # f1: many short epochs
+            plot_losses(folder, state.history, title=f"{kind} ({ctx.preset})")
 
     resume_state = None if previous is None else previous["extra"]
     state = fit(objective, train, validation, config, device=ctx.device, world=ctx.world,
@@ -554,16 +557,18 @@ def evaluate_tscvx(
     *,
     split: str = "test",
     threshold: float = 0.5,
+    checkpoint: str = "best",
     batch: int = 4096,
     arrays: tuple[TscvxArrays, TscvxNormalization] | None = None,
 ) -> dict[str, Any]:
     """Metrics of run ``run``'s networks on ``split`` of ``data`` (see tscvx_metrics).
 
+    The networks are ``checkpoint`` (``best`` or ``last``, see :func:`load_tscvx_predictor`).
     Writes ``run/metrics_<split>.json`` and ``run/tight_<split>.csv`` and returns
-    ``{"tight": ..., "solution": ..., "split": split, "threshold": threshold}``.
+    ``{"tight": ..., "solution": ..., "split": ..., "threshold": ..., "checkpoint": ...}``.
     """
     run = Path(run)
-    predictor = load_tscvx_predictor(run, threshold=threshold)
+    predictor = load_tscvx_predictor(run, threshold=threshold, checkpoint=checkpoint)
     arrays, _ = read_tscvx(data) if arrays is None else arrays
     chosen = arrays.subset(arrays.split == split)
     if len(chosen) == 0:
@@ -579,6 +584,7 @@ def evaluate_tscvx(
     metrics = {
         "split": split,
         "threshold": threshold,
+        "checkpoint": checkpoint,
         "tight": tight_metrics(truth, predicted),
         "solution": solution_metrics(
             norm.encode_solution(x, u, tf),
@@ -593,5 +599,8 @@ def evaluate_tscvx(
 
 def format_metrics(metrics: dict[str, Any]) -> str:
     """Printable summary of :func:`evaluate_tscvx`'s result."""
-    lines = [f"on the {metrics['split']} split (threshold {metrics['threshold']}):"]
+    lines = [
+        f"on the {metrics['split']} split ({metrics['checkpoint']} checkpoints, threshold "
+        f"{metrics['threshold']}):"
+    ]
     return "\n".join(lines + format_tight(metrics["tight"]) + format_solution(metrics["solution"]))
