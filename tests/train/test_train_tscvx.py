@@ -206,3 +206,19 @@ def test_solution_metrics_match_hand_computed_errors():
     assert m["rmse_physical"]["r"] == pytest.approx(np.sqrt(4.0 / 3.0))
     assert m["rmse_physical"]["u"] == pytest.approx(1.0)
     assert m["rmse_physical"]["tf"] == pytest.approx(0.5)
+
+
+def test_command_line_errors_are_one_line(toy_rdv, fake_pdg, tmp_path, capsys):
+    base = ["train", "tscvx", "--out", str(tmp_path / "x"), "--no-progress"]
+    assert main([*base, "--data", str(toy_rdv)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("scpformer: error:") and "pdg6dof" in err[0]
+    assert main([*base, "--data", str(fake_pdg), "--folds", "0"]) == 2
+    assert "folds" in capsys.readouterr().err
+
+
+def test_bench_times_the_predictor_calls(capsys):
+    args = ["bench", "tscvx", "--repeats", "3", "--warmup", "1", "--batch", "2"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "predict_tight, batch 1" in out and "predict_solution, batch 2" in out
