@@ -103,6 +103,9 @@ TSCVX_EPOCHS = {  # (f2, f1) epochs per preset; f1 sees ~1/iterations as many it
     "small": (4, 60),  # f2 reached its best validation loss at epoch 4 of 8 on the dev set
 }
 TSCVX_FOLDS = {"paper": 3, "small": 1}
+# f1's warm-up: it takes ~1/iterations as many steps per epoch as f2 (small: a few per epoch
+# on the dev set), so 200 steps would hold its learning rate low for most of the run.
+SOLUTION_WARMUP = {"paper": 4000, "small": 50}
 
 
 # ======================================================================================
@@ -348,7 +351,8 @@ def train_tscvx(
         "tight": train_config(preset_name, model_defaults=TSCVX_TRAIN_DEFAULTS,
                               **{"epochs": epochs[0], **overrides}),
         "solution": train_config(preset_name, model_defaults=TSCVX_TRAIN_DEFAULTS,
-                                 **{**overrides, "epochs": solution_epochs or epochs[1]}),
+                                 **{"warmup_steps": SOLUTION_WARMUP[preset_name], **overrides,
+                                    "epochs": solution_epochs or epochs[1]}),
     }  # fmt: skip
     for name in networks:
         _check_new_or_resume(out / name, resume)
