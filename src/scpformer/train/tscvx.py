@@ -159,13 +159,15 @@ def read_tscvx(folder: Path | str) -> tuple[TscvxArrays, TscvxNormalization]:
     for name, indices in splits.indices.items():
         split[indices] = name
     column = view.samples.column
+    flags = column("tight_flags")[positions]
+    iterations = np.minimum(column("iterations")[positions], flags.shape[1])  # rows stored
     arrays = TscvxArrays(
         theta=column("theta")[positions],
         x=column("x")[positions],
         u=column("u")[positions],
         tf=column("tf")[positions],
-        iterations=column("iterations")[positions].astype(np.int64),
-        flags=column("tight_flags")[positions],
+        iterations=iterations.astype(np.int64),
+        flags=flags,
         base_index=column("base_index")[positions],
         split=split[positions].astype(str),
     )
