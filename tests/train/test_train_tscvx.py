@@ -88,7 +88,7 @@ def test_positive_weight_balances_the_tight_rows():
 
 def test_both_losses_decrease_and_the_run_loads_as_a_predictor(fake_pdg, tmp_path):
     run = tmp_path / "run"
-    result = train(fake_pdg, run, overrides=FAST | {"epochs": 15, "lr": 3e-3},
+    result = train(fake_pdg, run, overrides=FAST | {"epochs": 30, "lr": 3e-3},
                    solution_epochs=15)  # fmt: skip
     for name in ("tight", "solution"):
         history = result.networks[name].states[-1].history

@@ -372,7 +372,7 @@ def train_tscvx(
             _write_run_config(out, context, results, configs)
         distributed.barrier(world)
         metrics = {}
-        if world.is_main and all((out / name / CHECKPOINT_NAME).is_file() for name in NETWORKS):
+        if world.is_main and all(_finished(out / name) for name in NETWORKS):
             metrics = evaluate_tscvx(out, data, split=report_split, arrays=(arrays, norm))
         return TscvxRunResult(run=out, networks=results, metrics=metrics,
                               report_split=report_split, world=world)  # fmt: skip
@@ -399,6 +399,16 @@ def _check_new_or_resume(folder: Path, resume: bool) -> None:
         raise ValueError(
             f"{folder} already holds a training run: pass --resume to continue it, or another --out"
         )
+
+
+def _finished(folder: Path) -> bool:
+    """Whether the network in ``folder`` has run all its epochs (another launch may still be
+    training it: ``--networks tight`` and ``--networks solution`` side by side)."""
+    if not (folder / CHECKPOINT_NAME).is_file():
+        return False
+    payload = read_checkpoint(folder)
+    epochs = from_plain(payload["extra"])["train_config"]["epochs"]
+    return int(payload["metrics"]["epoch"]) >= int(epochs)
 
 
 def _fold_folder(folder: Path, fold: int, folds: int) -> Path:
