@@ -142,6 +142,11 @@ def test_evaluation_on_the_test_split_writes_its_files(fake_pdg, tmp_path):
     assert overall["all_zeros_accuracy"] + overall["all_ones_accuracy"] == pytest.approx(1.0)
     assert set(metrics["tight"]["per_name"]) >= {"mass", "gimbal"}
     assert (run / "metrics_test.json").is_file() and (run / "tight_test.csv").is_file()
+    strict = evaluate_tscvx(run, fake_pdg, split="test", threshold=0.9)
+    assert strict["tight"]["overall"]["predicted_share"] <= overall["predicted_share"]
+    assert (run / "metrics_test_best_t0.9.json").is_file()
+    with pytest.raises(ValueError, match="split"):
+        evaluate_tscvx(run, fake_pdg, split="train ")
 
 
 def test_bad_data_and_arguments_are_refused(fake_pdg, toy_rdv, tmp_path):

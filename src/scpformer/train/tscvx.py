@@ -580,9 +580,12 @@ def evaluate_tscvx(
     """Metrics of run ``run``'s networks on ``split`` of ``data`` (see tscvx_metrics).
 
     The networks are ``checkpoint`` (``best`` or ``last``, see :func:`load_tscvx_predictor`).
-    Writes ``run/metrics_<split>.json`` and ``run/tight_<split>.csv`` and returns
+    Writes ``run/metrics_<split>.json`` and ``run/tight_<split>.csv`` (with a suffix
+    ``_<checkpoint>_t<threshold>`` unless ``best`` at 0.5) and returns
     ``{"tight": ..., "solution": ..., "split": ..., "threshold": ..., "checkpoint": ...}``.
     """
+    if split not in SPLIT_NAMES:
+        raise ValueError(f"split must be one of {SPLIT_NAMES}, got {split!r}")
     run = Path(run)
     predictor = load_tscvx_predictor(run, threshold=threshold, checkpoint=checkpoint)
     arrays, _ = read_tscvx(data) if arrays is None else arrays
@@ -609,7 +612,8 @@ def evaluate_tscvx(
             (chosen.x, chosen.u, chosen.tf),
         ),
     }
-    write_metrics_files(run, split, metrics)
+    tag = "" if threshold == 0.5 and checkpoint == "best" else f"_{checkpoint}_t{threshold:g}"
+    write_metrics_files(run, split, metrics, tag)
     return metrics
 
 
