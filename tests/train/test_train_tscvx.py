@@ -88,7 +88,7 @@ def test_positive_weight_balances_the_tight_rows():
 
 def test_both_losses_decrease_and_the_run_loads_as_a_predictor(fake_pdg, tmp_path):
     run = tmp_path / "run"
-    result = train(fake_pdg, run, overrides=FAST | {"epochs": 15, "lr": 3e-3},
+    result = train(fake_pdg, run, overrides=FAST | {"epochs": 30, "lr": 3e-3},
                    solution_epochs=15)  # fmt: skip
     for name in ("tight", "solution"):
         history = result.networks[name].states[-1].history
@@ -97,7 +97,7 @@ def test_both_losses_decrease_and_the_run_loads_as_a_predictor(fake_pdg, tmp_pat
     predictor = load_tscvx_predictor(run)
     arrays, norm = read_tscvx(fake_pdg)
     theta = arrays.theta[:3]
-    loaded = load_checkpoint(run / "tight", models=TSCVX_MODELS)
+    loaded = load_checkpoint(run / "tight" / "best.pt", models=TSCVX_MODELS)
     z = torch.tensor(norm.encode_theta(theta), dtype=torch.float32)
     with torch.no_grad():
         logits = loaded.model(z, torch.tensor([1, 2, 3])).numpy()
@@ -142,6 +142,11 @@ def test_evaluation_on_the_test_split_writes_its_files(fake_pdg, tmp_path):
     assert overall["all_zeros_accuracy"] + overall["all_ones_accuracy"] == pytest.approx(1.0)
     assert set(metrics["tight"]["per_name"]) >= {"mass", "gimbal"}
     assert (run / "metrics_test.json").is_file() and (run / "tight_test.csv").is_file()
+    strict = evaluate_tscvx(run, fake_pdg, split="test", threshold=0.9)
+    assert strict["tight"]["overall"]["predicted_share"] <= overall["predicted_share"]
+    assert (run / "metrics_test_best_t0.9.json").is_file()
+    with pytest.raises(ValueError, match="split"):
+        evaluate_tscvx(run, fake_pdg, split="train ")
 
 
 def test_bad_data_and_arguments_are_refused(fake_pdg, toy_rdv, tmp_path):
@@ -206,3 +211,19 @@ def test_solution_metrics_match_hand_computed_errors():
     assert m["rmse_physical"]["r"] == pytest.approx(np.sqrt(4.0 / 3.0))
     assert m["rmse_physical"]["u"] == pytest.approx(1.0)
     assert m["rmse_physical"]["tf"] == pytest.approx(0.5)
+
+
+def test_command_line_errors_are_one_line(toy_rdv, fake_pdg, tmp_path, capsys):
+    base = ["train", "tscvx", "--out", str(tmp_path / "x"), "--no-progress"]
+    assert main([*base, "--data", str(toy_rdv)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("scpformer: error:") and "pdg6dof" in err[0]
+    assert main([*base, "--data", str(fake_pdg), "--folds", "0"]) == 2
+    assert "folds" in capsys.readouterr().err
+
+
+def test_bench_times_the_predictor_calls(capsys):
+    args = ["bench", "tscvx", "--repeats", "3", "--warmup", "1", "--batch", "2"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "predict_tight, batch 1" in out and "predict_solution, batch 2" in out

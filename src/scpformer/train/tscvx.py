@@ -88,6 +88,7 @@ from scpformer.train.tscvx_metrics import (
 
 NETWORKS = {"tight": TIGHT_KIND, "solution": SOLUTION_KIND}  # run sub-folder -> model kind
 CV_NAME = "cv.json"
+PLOT_EVERY = 10  # epochs between redrawings of loss.png (and the last epoch)
 
 # Training values per preset. paper: Sec. III.E.3 (batch 128, 4000 warm-up steps, two
 # epochs, K = 3); its learning rate is not given. small: measured here (see module docstring).
@@ -99,9 +100,12 @@ TSCVX_TRAIN_DEFAULTS: dict[str, dict[str, Any]] = {
 }  # fmt: skip
 TSCVX_EPOCHS = {  # (f2, f1) epochs per preset; f1 sees ~1/iterations as many items per epoch
     "paper": (2, 2),
-    "small": (4, 60),
+    "small": (4, 60),  # f2 reached its best validation loss at epoch 4 of 8 on the dev set
 }
 TSCVX_FOLDS = {"paper": 3, "small": 1}
+# f1's warm-up: it takes ~1/iterations as many steps per epoch as f2 (small: a few per epoch
+# on the dev set), so 200 steps would hold its learning rate low for most of the run.
+SOLUTION_WARMUP = {"paper": 4000, "small": 50}
 
 
 # ======================================================================================
@@ -155,13 +159,15 @@ def read_tscvx(folder: Path | str) -> tuple[TscvxArrays, TscvxNormalization]:
     for name, indices in splits.indices.items():
         split[indices] = name
     column = view.samples.column
+    flags = column("tight_flags")[positions]
+    iterations = np.minimum(column("iterations")[positions], flags.shape[1])  # rows stored
     arrays = TscvxArrays(
         theta=column("theta")[positions],
         x=column("x")[positions],
         u=column("u")[positions],
         tf=column("tf")[positions],
-        iterations=column("iterations")[positions].astype(np.int64),
-        flags=column("tight_flags")[positions],
+        iterations=iterations.astype(np.int64),
+        flags=flags,
         base_index=column("base_index")[positions],
         split=split[positions].astype(str),
     )
@@ -347,7 +353,8 @@ def train_tscvx(
         "tight": train_config(preset_name, model_defaults=TSCVX_TRAIN_DEFAULTS,
                               **{"epochs": epochs[0], **overrides}),
         "solution": train_config(preset_name, model_defaults=TSCVX_TRAIN_DEFAULTS,
-                                 **{**overrides, "epochs": solution_epochs or epochs[1]}),
+                                 **{"warmup_steps": SOLUTION_WARMUP[preset_name], **overrides,
+                                    "epochs": solution_epochs or epochs[1]}),
     }  # fmt: skip
     for name in networks:
         _check_new_or_resume(out / name, resume)
@@ -365,7 +372,7 @@ def train_tscvx(
             _write_run_config(out, context, results, configs)
         distributed.barrier(world)
         metrics = {}
-        if world.is_main and all((out / name / CHECKPOINT_NAME).is_file() for name in NETWORKS):
+        if world.is_main and all(_finished(out / name) for name in NETWORKS):
             metrics = evaluate_tscvx(out, data, split=report_split, arrays=(arrays, norm))
         return TscvxRunResult(run=out, networks=results, metrics=metrics,
                               report_split=report_split, world=world)  # fmt: skip
@@ -387,10 +394,21 @@ class _RunContext:
 
 
 def _check_new_or_resume(folder: Path, resume: bool) -> None:
-    if (folder / CHECKPOINT_NAME).is_file() and not resume:
+    """Refuse to overwrite a network's run (or one of its folds) without ``resume``."""
+    if not resume and folder.is_dir() and any(folder.rglob(CHECKPOINT_NAME)):
         raise ValueError(
             f"{folder} already holds a training run: pass --resume to continue it, or another --out"
         )
+
+
+def _finished(folder: Path) -> bool:
+    """Whether the network in ``folder`` has run all its epochs (another launch may still be
+    training it: ``--networks tight`` and ``--networks solution`` side by side)."""
+    if not (folder / CHECKPOINT_NAME).is_file():
+        return False
+    payload = read_checkpoint(folder)
+    epochs = from_plain(payload["extra"])["train_config"]["epochs"]
+    return int(payload["metrics"]["epoch"]) >= int(epochs)
 
 
 def _fold_folder(folder: Path, fold: int, folds: int) -> Path:
@@ -484,7 +502,8 @@ def _fit_fold(
         if state.improved:
             save_checkpoint(folder / BEST_NAME, **fields)
         write_metrics(folder, state.history)
-        plot_losses(folder, state.history, title=f"{kind} ({ctx.preset})")
+        if state.epoch % PLOT_EVERY == 0 or state.epoch == config.epochs:  # f1: many short epochs
+            plot_losses(folder, state.history, title=f"{kind} ({ctx.preset})")
 
     resume_state = None if previous is None else previous["extra"]
     state = fit(objective, train, validation, config, device=ctx.device, world=ctx.world,
@@ -554,16 +573,21 @@ def evaluate_tscvx(
     *,
     split: str = "test",
     threshold: float = 0.5,
+    checkpoint: str = "best",
     batch: int = 4096,
     arrays: tuple[TscvxArrays, TscvxNormalization] | None = None,
 ) -> dict[str, Any]:
     """Metrics of run ``run``'s networks on ``split`` of ``data`` (see tscvx_metrics).
 
-    Writes ``run/metrics_<split>.json`` and ``run/tight_<split>.csv`` and returns
-    ``{"tight": ..., "solution": ..., "split": split, "threshold": threshold}``.
+    The networks are ``checkpoint`` (``best`` or ``last``, see :func:`load_tscvx_predictor`).
+    Writes ``run/metrics_<split>.json`` and ``run/tight_<split>.csv`` (with a suffix
+    ``_<checkpoint>_t<threshold>`` unless ``best`` at 0.5) and returns
+    ``{"tight": ..., "solution": ..., "split": ..., "threshold": ..., "checkpoint": ...}``.
     """
+    if split not in SPLIT_NAMES:
+        raise ValueError(f"split must be one of {SPLIT_NAMES}, got {split!r}")
     run = Path(run)
-    predictor = load_tscvx_predictor(run, threshold=threshold)
+    predictor = load_tscvx_predictor(run, threshold=threshold, checkpoint=checkpoint)
     arrays, _ = read_tscvx(data) if arrays is None else arrays
     chosen = arrays.subset(arrays.split == split)
     if len(chosen) == 0:
@@ -579,6 +603,7 @@ def evaluate_tscvx(
     metrics = {
         "split": split,
         "threshold": threshold,
+        "checkpoint": checkpoint,
         "tight": tight_metrics(truth, predicted),
         "solution": solution_metrics(
             norm.encode_solution(x, u, tf),
@@ -587,11 +612,15 @@ def evaluate_tscvx(
             (chosen.x, chosen.u, chosen.tf),
         ),
     }
-    write_metrics_files(run, split, metrics)
+    tag = "" if threshold == 0.5 and checkpoint == "best" else f"_{checkpoint}_t{threshold:g}"
+    write_metrics_files(run, split, metrics, tag)
     return metrics
 
 
 def format_metrics(metrics: dict[str, Any]) -> str:
     """Printable summary of :func:`evaluate_tscvx`'s result."""
-    lines = [f"on the {metrics['split']} split (threshold {metrics['threshold']}):"]
+    lines = [
+        f"on the {metrics['split']} split ({metrics['checkpoint']} checkpoints, threshold "
+        f"{metrics['threshold']}):"
+    ]
     return "\n".join(lines + format_tight(metrics["tight"]) + format_solution(metrics["solution"]))

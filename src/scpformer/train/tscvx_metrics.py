@@ -184,13 +184,16 @@ def format_solution(metrics: dict[str, Any]) -> list[str]:
     ]
 
 
-def write_metrics_files(run: Path, split: str, metrics: dict[str, Any]) -> list[Path]:
-    """``run/metrics_<split>.json`` and, with tight metrics, ``run/tight_<split>.csv``."""
+def write_metrics_files(
+    run: Path, split: str, metrics: dict[str, Any], tag: str = ""
+) -> list[Path]:
+    """``run/metrics_<split><tag>.json`` and, with tight metrics, ``run/tight_<split><tag>.csv``
+    (``tag`` tells apart evaluations of one split, e.g. at another threshold)."""
     run.mkdir(parents=True, exist_ok=True)
-    written = [run / f"metrics_{split}.json"]
+    written = [run / f"metrics_{split}{tag}.json"]
     atomic_write_text(written[0], json.dumps(metrics, indent=2, default=float) + "\n")
     if "tight" in metrics:
-        path = run / f"tight_{split}.csv"
+        path = run / f"tight_{split}{tag}.csv"
         rows = [{"name": "all", **metrics["tight"]["overall"]}]
         rows += [{"name": k, **v} for k, v in metrics["tight"]["per_name"].items()]
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
