@@ -45,8 +45,10 @@ def is_default(model: Path | str | None) -> bool:
     return model is None or str(model) == DEFAULT_NAME
 
 
-def read_manifest(root: Path = PRETRAINED_DIR) -> dict[str, Any]:
-    """``root/manifest.json`` (``PretrainedError`` when missing or not a manifest)."""
+def read_manifest(root: Path | None = None) -> dict[str, Any]:
+    """``root/manifest.json`` (``PretrainedError`` when missing or not a manifest); ``root``
+    defaults to :data:`PRETRAINED_DIR`."""
+    root = PRETRAINED_DIR if root is None else root
     path = root / MANIFEST_NAME
     try:
         manifest = json.loads(path.read_text())
@@ -57,7 +59,7 @@ def read_manifest(root: Path = PRETRAINED_DIR) -> dict[str, Any]:
     return manifest
 
 
-def verify_model(name: str, root: Path = PRETRAINED_DIR) -> Path:
+def verify_model(name: str, root: Path | None = None) -> Path:
     """Check every file of model ``name`` against the manifest's SHA-256; return its folder.
 
     Raises
@@ -67,6 +69,7 @@ def verify_model(name: str, root: Path = PRETRAINED_DIR) -> Path:
     """
     from scpformer.data.storage import file_sha256
 
+    root = PRETRAINED_DIR if root is None else root
     models = read_manifest(root).get("models", {})
     if name not in models:
         raise PretrainedError(f"pretrained model {name!r} is not in {root / MANIFEST_NAME}")
@@ -86,7 +89,7 @@ def verify_model(name: str, root: Path = PRETRAINED_DIR) -> Path:
     return folder
 
 
-def default_model(family: str, root: Path = PRETRAINED_DIR) -> Path:
+def default_model(family: str, root: Path | None = None) -> Path:
     """The verified folder of the shipped model of ``family`` (see the module table)."""
     if family not in FAMILY_MODELS:
         raise PretrainedError(
