@@ -172,19 +172,20 @@ def run_solve(args: argparse.Namespace) -> int:
             save_solution(args.out, solution, instance)
             print(f"wrote {args.out}")
         if args.plot:
-            from scpformer.plotting.pdg6dof import plot_history, plot_trajectory
-            from scpformer.problems.pdg6dof.io import constants_record
-
-            plot_trajectory(
-                solution.t,
-                solution.trajectory.x,
-                solution.trajectory.u,
-                constants_record(instance),
-                path=args.plot,
-            )
-            plot_history([rec.summary() for rec in solution.history], path=history)
+            write_figures(args.plot, solution, instance)
             print(f"wrote {args.plot} and {history}")
     return 0 if solution.converged else 1
+
+
+def write_figures(plot: Path, solution: Solution, instance: PDGInstance) -> None:
+    """The trajectory figure at ``plot`` and the SCvx history beside it
+    (:func:`history_plot_path`)."""
+    from scpformer.plotting.pdg6dof import plot_history, plot_trajectory
+    from scpformer.problems.pdg6dof.io import constants_record
+
+    x, u = solution.trajectory.x, solution.trajectory.u
+    plot_trajectory(solution.t, x, u, constants_record(instance), path=plot)
+    plot_history([rec.summary() for rec in solution.history], path=history_plot_path(plot))
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
