@@ -28,7 +28,14 @@ import numpy as np
 
 from scpformer.cli.commands import command_help
 
-RENDEZVOUS_SEED = 0  # instances shown (sampled from each family's Table 1 ranges)
+# The instances shown, sampled from each family's Table 1 ranges. Rendezvous seed 4: its
+# convex guess violates the keep-out and cone constraints at 15 nodes (C = 15) where ART's
+# does at none, and the SCP from ART converges in 3 iterations instead of 6, at the same
+# cost (on seeds 0-11 ART saves iterations on some instances and costs some on others, and
+# 3 of 12 of its guesses leave the first subproblem infeasible: see docs/RESULTS.md for the
+# test-set statistics). Robust seed 0: the shipped robust ART's guess fails the Eq. 8 check
+# (as on all of seeds 0-39), so PS-ART falls back to the TPBVP, as the check is meant to.
+RENDEZVOUS_SEED = 4
 ROBUST_SEED = 0
 
 
@@ -77,7 +84,8 @@ def run_demo(args: argparse.Namespace) -> int:
     print_table(rows)
     figures = sorted(path.name for path in out.glob("*.png"))
     print(f"figures in {out}/: {', '.join(figures)}")
-    print(f"total {time.perf_counter() - start:.1f} s")
+    print(f"total {time.perf_counter() - start:.1f} s; one instance per problem (statistics "
+          "over test sets: docs/RESULTS.md)")  # fmt: skip
     return 0 if all(row.verified for row in rows) else 1
 
 
