@@ -26,8 +26,15 @@ def test_demo_solves_every_problem_verified_and_writes_the_figures(tmp_path, cap
     for name in ("CVX", "ART", "TPBVP", "ART", "straight line", "T-SCvx networks"):
         assert any(name in row for row in rows)
     figures = sorted(path.name for path in out.glob("*.png"))
-    assert figures == sorted([
-        "rendezvous_cvx.png", "rendezvous_art.png", "robust_ps_cvx.png", "robust_ps_art.png",
-        "landing_scvx.png", "landing_scvx_history.png", "landing_t_scvx.png",
-        "landing_t_scvx_history.png",
-    ])  # fmt: skip
+    assert figures == sorted(
+        [
+            "rendezvous_cvx.png",
+            "rendezvous_art.png",
+            "robust_ps_cvx.png",
+            "robust_ps_art.png",
+            "landing_scvx.png",
+            "landing_scvx_history.png",
+            "landing_t_scvx.png",
+            "landing_t_scvx_history.png",
+        ]
+    )

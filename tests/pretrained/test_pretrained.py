@@ -91,9 +91,18 @@ def test_slim_checkpoint_drops_the_training_state_and_loads_the_same_weights(tmp
     config = preset("art", "small")
     model = build_model("art", config)
     extra = {"optimizer": {"step": torch.zeros(3)}, "rng": [1, 2, 3]}
-    full = save_checkpoint(tmp_path / "run", model=model, kind="art", config=config,
-                           normalization=None, frame="rtn", family="rendezvous",
-                           manifest_digest="0" * 64, seed=3, extra=extra)  # fmt: skip
+    full = save_checkpoint(
+        tmp_path / "run",
+        model=model,
+        kind="art",
+        config=config,
+        normalization=None,
+        frame="rtn",
+        family="rendezvous",
+        manifest_digest="0" * 64,
+        seed=3,
+        extra=extra,
+    )
     slim = slim_checkpoint(tmp_path / "run", tmp_path / "slim")
     loaded = load_checkpoint(slim, family="rendezvous", kind="art")
     assert loaded.extra == {} and loaded.seed == 3

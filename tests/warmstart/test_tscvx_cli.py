@@ -36,10 +36,12 @@ def _one_error_line(capsys) -> str:
 
 
 def test_tscvx_without_a_model_loads_the_pretrained_default(monkeypatch):
-    from scpformer.cli.pdg6dof import warmstart_from_args, add_solve_parser
+    from scpformer.cli.pdg6dof import add_solve_parser, warmstart_from_args
 
     loaded = []
-    monkeypatch.setattr(TscvxWarmStart, "from_run", classmethod(lambda cls, run: loaded.append(run)))
+    monkeypatch.setattr(
+        TscvxWarmStart, "from_run", classmethod(lambda cls, run: loaded.append(run))
+    )
     parser = argparse.ArgumentParser()
     add_solve_parser(parser.add_subparsers())
     for model in ([], ["--model", "default"]):

@@ -59,9 +59,11 @@ def add_demo_parser(sub: argparse._SubParsersAction) -> None:
         description=__doc__.split("\n\n")[0] + " See `scpformer demo --help`.",
     )
     parser.add_argument(
-        "--out", type=Path, default=Path("scpformer-demo"),
+        "--out",
+        type=Path,
+        default=Path("scpformer-demo"),
         help="folder for the figures (default: ./scpformer-demo)",
-    )  # fmt: skip
+    )
     parser.set_defaults(handler=run_demo)
 
 
@@ -84,8 +86,10 @@ def run_demo(args: argparse.Namespace) -> int:
     print_table(rows)
     figures = sorted(path.name for path in out.glob("*.png"))
     print(f"figures in {out}/: {', '.join(figures)}")
-    print(f"total {time.perf_counter() - start:.1f} s; one instance per problem (statistics "
-          "over test sets: docs/RESULTS.md)")  # fmt: skip
+    print(
+        f"total {time.perf_counter() - start:.1f} s; one instance per problem (statistics "
+        "over test sets: docs/RESULTS.md)"
+    )
     return 0 if all(row.verified for row in rows) else 1
 
 
@@ -93,8 +97,14 @@ def print_table(rows: list[DemoRow]) -> None:
     """The comparison table, one line per solve."""
     header = ("problem", "warm start", "cost", "iterations", "time [s]", "verified")
     cells = [header] + [
-        (r.problem, r.warmstart, r.cost, str(r.iterations), f"{r.seconds:.2f}",
-         "yes" if r.verified else "no")  # fmt: skip
+        (
+            r.problem,
+            r.warmstart,
+            r.cost,
+            str(r.iterations),
+            f"{r.seconds:.2f}",
+            "yes" if r.verified else "no",
+        )
         for r in rows
     ]
     widths = [max(len(row[i]) for row in cells) for i in range(len(header))]
@@ -125,9 +135,10 @@ def rendezvous_rows(out: Path) -> list[DemoRow]:
     config = RendezvousSolverConfig()
     providers = {
         "CVX": lambda: RendezvousConvexWarmStart("convex", config),
-        "ART": lambda: ArtWarmStart.from_checkpoint(default_model("rendezvous"),
-                                                    family="rendezvous", config=config),
-    }  # fmt: skip
+        "ART": lambda: ArtWarmStart.from_checkpoint(
+            default_model("rendezvous"), family="rendezvous", config=config
+        ),
+    }
     rows = []
     for label, provider in providers.items():
         model = provider()  # loading the network is not part of the solve time
@@ -139,9 +150,17 @@ def rendezvous_rows(out: Path) -> list[DemoRow]:
         (warm, solution), seconds = _timed(run)
         figure = out / f"rendezvous_{label.lower()}.png"
         write_figure(figure, solution, instance, warm)
-        rows.append(DemoRow("rendezvous (ISS, Problem 3)", label,
-                            f"{1e3 * solution.cost:.1f} mm/s", solution.iterations, seconds,
-                            _verified(solution), figure))  # fmt: skip
+        rows.append(
+            DemoRow(
+                "rendezvous (ISS, Problem 3)",
+                label,
+                f"{1e3 * solution.cost:.1f} mm/s",
+                solution.iterations,
+                seconds,
+                _verified(solution),
+                figure,
+            )
+        )
     return rows
 
 
@@ -156,8 +175,9 @@ def robust_rows(out: Path) -> list[DemoRow]:
 
     instance = sample_instances(ROBUST_SEED, 1)[0]
     config = RobustSolverConfig()
-    art = ArtWarmStart.from_checkpoint(default_model("robust-rendezvous"),
-                                       family="robust-rendezvous", config=config, mode="chance")  # fmt: skip
+    art = ArtWarmStart.from_checkpoint(
+        default_model("robust-rendezvous"), family="robust-rendezvous", config=config, mode="chance"
+    )
     rows = []
     for label in ("PS-CVX", "PS-ART"):
 
@@ -173,9 +193,17 @@ def robust_rows(out: Path) -> list[DemoRow]:
         figure = out / f"robust_{label.lower().replace('-', '_')}.png"
         if solution.trajectory is not None:
             plot_solution(instance, solution.trajectory.x, solution.trajectory.u, figure)
-        rows.append(DemoRow("robust rendezvous (chance, Eq. 8)", name,
-                            f"{1e3 * solution.cost:.1f} mm/s", solution.iterations, seconds,
-                            _verified(solution), figure))  # fmt: skip
+        rows.append(
+            DemoRow(
+                "robust rendezvous (chance, Eq. 8)",
+                name,
+                f"{1e3 * solution.cost:.1f} mm/s",
+                solution.iterations,
+                seconds,
+                _verified(solution),
+                figure,
+            )
+        )
     return rows
 
 
@@ -195,9 +223,20 @@ def landing_rows(out: Path) -> list[DemoRow]:
         figure = out / f"landing_{label.lower().replace('-', '_')}.png"
         if solution.trajectory is not None:
             write_figures(figure, solution, instance)
-        fuel = instance.m0 - solution.trajectory.x[-1, 13] if solution.trajectory is not None else math.nan
-        rows.append(DemoRow("6-DoF Mars landing (nominal)",
-                            "straight line" if label == "SCvx" else "T-SCvx networks",
-                            f"{fuel:.4f} U_M fuel", solution.iterations, seconds,
-                            _verified(solution), figure))  # fmt: skip
+        fuel = (
+            instance.m0 - solution.trajectory.x[-1, 13]
+            if solution.trajectory is not None
+            else math.nan
+        )
+        rows.append(
+            DemoRow(
+                "6-DoF Mars landing (nominal)",
+                "straight line" if label == "SCvx" else "T-SCvx networks",
+                f"{fuel:.4f} U_M fuel",
+                solution.iterations,
+                seconds,
+                _verified(solution),
+                figure,
+            )
+        )
     return rows

@@ -48,8 +48,10 @@ def slim_run(name: str, run: Path, out: Path) -> list[Path]:
     """
     target = out / name
     if name == "tscvx":
-        files = [slim_checkpoint(best_checkpoint(run / net), target / net / CHECKPOINT_NAME)
-                 for net in TSCVX_NETWORKS]  # fmt: skip
+        files = [
+            slim_checkpoint(best_checkpoint(run / net), target / net / CHECKPOINT_NAME)
+            for net in TSCVX_NETWORKS
+        ]
         from scpformer.models.tscvx import load_tscvx_predictor
 
         load_tscvx_predictor(target)
@@ -82,8 +84,9 @@ def art_test_metrics(model_folder: Path, data: Path) -> dict[str, Any]:
     target = int(ckpt.config.to_dict().get("target_dim", 0) or 0) > 0
     tensors = _encoded(arrays, ckpt.normalization, target)
     with torch.no_grad():
-        loss, _ = evaluate(ckpt.model, tensors, TrainConfig(batch_size=64), World(),
-                           torch.device("cpu"))  # fmt: skip
+        loss, _ = evaluate(
+            ckpt.model, tensors, TrainConfig(batch_size=64), World(), torch.device("cpu")
+        )
     return {
         "test loss (Eq. 8, normalized)": round(float(loss), 4),
         "test sequences": len(tensors),
@@ -100,22 +103,26 @@ def tscvx_test_metrics(run: Path) -> dict[str, Any]:
     tight, solution = metrics["tight"]["overall"], metrics["solution"]
     return {
         "tight rows: accuracy (all-zeros baseline)": (
-            f"{tight['accuracy']:.3f} ({tight['all_zeros_accuracy']:.3f})"),
+            f"{tight['accuracy']:.3f} ({tight['all_zeros_accuracy']:.3f})"
+        ),
         "tight rows: precision / recall / F1": (
-            f"{tight['precision']:.3f} / {tight['recall']:.3f} / {tight['f1']:.3f}"),
+            f"{tight['precision']:.3f} / {tight['recall']:.3f} / {tight['f1']:.3f}"
+        ),
         "solution: MSE (standardized)": f"{solution['mse']:.4f}",
         "solution: mean abs. final mass error [U_M]": (
-            f"{solution['final_mass_abs_error_mean']:.4f}"),
+            f"{solution['final_mass_abs_error_mean']:.4f}"
+        ),
         "test samples": solution["samples"],
-    }  # fmt: skip
+    }
 
 
 def training_seconds(run: Path, name: str) -> float:
     """Wall time of the training, from ``metrics.csv`` (ART) or ``config.json`` (T-SCvx)."""
     if name == "tscvx":
         networks = json.loads((run / "config.json").read_text())["networks"]
-        return sum(float(net.get("train_seconds_this_launch", math.nan))
-                   for net in networks.values())  # fmt: skip
+        return sum(
+            float(net.get("train_seconds_this_launch", math.nan)) for net in networks.values()
+        )
     with (run / "metrics.csv").open() as fh:
         return sum(float(row["seconds"]) for row in csv.DictReader(fh))
 
@@ -144,9 +151,9 @@ def dataset_facts(data: Path) -> dict[str, Any]:
     if manifest.get("config", {}).get("mode"):
         facts["mode"] = manifest["config"]["mode"]
     if manifest.get("source"):
-        source = manifest["source"]
+        source, transform = manifest["source"], manifest["transform"]["name"]
         facts["augmented from"] = (
-            f"{source.get('n')} samples, seed {source.get('seed')} ({manifest['transform']['name']})"
+            f"{source.get('n')} samples, seed {source.get('seed')} ({transform})"
         )
     return facts
 
@@ -239,12 +246,17 @@ def package(name: str, run: Path, commands: Sequence[str], out: Path = PRETRAINE
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m scpformer.pretrained.package",
-                                     description=__doc__.split("\n\n")[0])  # fmt: skip
+    parser = argparse.ArgumentParser(
+        prog="python -m scpformer.pretrained.package", description=__doc__.split("\n\n")[0]
+    )
     parser.add_argument("name", choices=sorted(MODEL_FAMILIES))
     parser.add_argument("run", type=Path, help="the training run folder")
-    parser.add_argument("--commands", type=Path, required=True,
-                        help="file with the commands that made the data and the run, one a line")  # fmt: skip
+    parser.add_argument(
+        "--commands",
+        type=Path,
+        required=True,
+        help="file with the commands that made the data and the run, one a line",
+    )
     parser.add_argument("--out", type=Path, default=PRETRAINED_DIR)
     args = parser.parse_args(argv)
     commands = [line for line in args.commands.read_text().splitlines() if line.strip()]
