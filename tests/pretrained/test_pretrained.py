@@ -9,7 +9,6 @@ import torch
 
 import scpformer.pretrained as pretrained
 from scpformer.cli.main import main
-from scpformer.models import build_model, preset
 from scpformer.models.tscvx import load_tscvx_predictor
 from scpformer.pretrained import (
     FAMILY_MODELS,
@@ -19,7 +18,7 @@ from scpformer.pretrained import (
     verify_model,
 )
 from scpformer.pretrained.package import MAX_FILE_BYTES
-from scpformer.train.checkpoint import load_checkpoint, save_checkpoint, slim_checkpoint
+from scpformer.train.checkpoint import load_checkpoint
 
 
 def test_every_family_has_a_shipped_model_listed_in_the_manifest():
@@ -85,27 +84,3 @@ def test_a_missing_file_is_named(tampered):
 def test_an_unknown_family_has_no_default():
     with pytest.raises(PretrainedError, match="no pretrained model for family 'pdg3dof'"):
         default_model("pdg3dof")
-
-
-def test_slim_checkpoint_drops_the_training_state_and_loads_the_same_weights(tmp_path):
-    config = preset("art", "small")
-    model = build_model("art", config)
-    extra = {"optimizer": {"step": torch.zeros(3)}, "rng": [1, 2, 3]}
-    full = save_checkpoint(
-        tmp_path / "run",
-        model=model,
-        kind="art",
-        config=config,
-        normalization=None,
-        frame="rtn",
-        family="rendezvous",
-        manifest_digest="0" * 64,
-        seed=3,
-        extra=extra,
-    )
-    slim = slim_checkpoint(tmp_path / "run", tmp_path / "slim")
-    loaded = load_checkpoint(slim, family="rendezvous", kind="art")
-    assert loaded.extra == {} and loaded.seed == 3
-    assert load_checkpoint(full).extra.keys() == extra.keys()
-    for name, tensor in model.state_dict().items():
-        assert torch.equal(loaded.model.state_dict()[name], tensor)

@@ -52,6 +52,14 @@ class DemoRow:
     figure: Path
 
 
+def _row(
+    problem: str, warmstart: str, cost: str, solution: Any, seconds: float, figure: Path
+) -> DemoRow:
+    return DemoRow(
+        problem, warmstart, cost, solution.iterations, seconds, bool(solution.converged), figure
+    )
+
+
 def add_demo_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "demo",
@@ -120,10 +128,6 @@ def _timed(solve: Callable[[], Any]) -> tuple[Any, float]:
     return result, time.perf_counter() - start
 
 
-def _verified(solution: Any) -> bool:
-    return bool(solution.converged)
-
-
 def rendezvous_rows(out: Path) -> list[DemoRow]:
     """The ISS rendezvous from CVX and from ART (pretrained), with their figures."""
     from scpformer.cli.rendezvous import write_figure
@@ -150,17 +154,8 @@ def rendezvous_rows(out: Path) -> list[DemoRow]:
         (warm, solution), seconds = _timed(run)
         figure = out / f"rendezvous_{label.lower()}.png"
         write_figure(figure, solution, instance, warm)
-        rows.append(
-            DemoRow(
-                "rendezvous (ISS, Problem 3)",
-                label,
-                f"{1e3 * solution.cost:.1f} mm/s",
-                solution.iterations,
-                seconds,
-                _verified(solution),
-                figure,
-            )
-        )
+        cost = f"{1e3 * solution.cost:.1f} mm/s"
+        rows.append(_row("rendezvous (ISS, Problem 3)", label, cost, solution, seconds, figure))
     return rows
 
 
@@ -193,16 +188,9 @@ def robust_rows(out: Path) -> list[DemoRow]:
         figure = out / f"robust_{label.lower().replace('-', '_')}.png"
         if solution.trajectory is not None:
             plot_solution(instance, solution.trajectory.x, solution.trajectory.u, figure)
+        cost = f"{1e3 * solution.cost:.1f} mm/s"
         rows.append(
-            DemoRow(
-                "robust rendezvous (chance, Eq. 8)",
-                name,
-                f"{1e3 * solution.cost:.1f} mm/s",
-                solution.iterations,
-                seconds,
-                _verified(solution),
-                figure,
-            )
+            _row("robust rendezvous (chance, Eq. 8)", name, cost, solution, seconds, figure)
         )
     return rows
 
@@ -218,25 +206,14 @@ def landing_rows(out: Path) -> list[DemoRow]:
     instance, config = PDGInstance(), PDGSolverConfig()
     tscvx = TscvxWarmStart.from_run(default_model("pdg6dof"))
     rows = []
-    for label, guess in (("SCvx", "straight_line"), ("T-SCvx", tscvx)):
+    guesses = {"straight line": "straight_line", "T-SCvx networks": tscvx}
+    for label, guess in guesses.items():
         solution, seconds = _timed(lambda guess=guess: solve(instance, config, guess=guess))
-        figure = out / f"landing_{label.lower().replace('-', '_')}.png"
+        figure = out / ("landing_scvx.png" if guess == "straight_line" else "landing_t_scvx.png")
+        fuel = math.nan
         if solution.trajectory is not None:
             write_figures(figure, solution, instance)
-        fuel = (
-            instance.m0 - solution.trajectory.x[-1, 13]
-            if solution.trajectory is not None
-            else math.nan
-        )
-        rows.append(
-            DemoRow(
-                "6-DoF Mars landing (nominal)",
-                "straight line" if label == "SCvx" else "T-SCvx networks",
-                f"{fuel:.4f} U_M fuel",
-                solution.iterations,
-                seconds,
-                _verified(solution),
-                figure,
-            )
-        )
+            fuel = instance.m0 - solution.trajectory.x[-1, 13]
+        cost = f"{fuel:.4f} U_M fuel"
+        rows.append(_row("6-DoF Mars landing (nominal)", label, cost, solution, seconds, figure))
     return rows
