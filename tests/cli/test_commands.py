@@ -65,7 +65,9 @@ def test_every_registered_command_builds_with_the_help_it_is_listed_with():
 def test_commands_are_listed_in_their_registration_order(capsys):
     assert main(["no-such-command"]) == 2
     err = capsys.readouterr().err
-    expected = "'solve', 'bench', 'generate', 'dataset', 'train', 'experiment', 'report', 'export'"
+    expected = (
+        "'solve', 'bench', 'generate', 'dataset', 'train', 'experiment', 'report', 'demo', 'export'"
+    )
     assert f"invalid choice: 'no-such-command' (choose from {expected})" in err
 
 

@@ -69,6 +69,18 @@ def test_round_trip_restores_weights_configuration_normalization_and_identity(
     assert key.dtype == np.uint32 and len(key) == 624
 
 
+def test_a_slim_copy_drops_the_training_state_and_loads_the_same_model(tmp_path, normalization):
+    model = _save(tmp_path / "run", normalization)
+    slim = ckpt.slim_checkpoint(tmp_path / "run", tmp_path / "slim")
+    assert slim == tmp_path / "slim" / "checkpoint.pt"
+    loaded = _load(slim)
+    assert loaded.extra == {} and _load(tmp_path / "run").extra
+    assert (loaded.seed, loaded.n_steps, loaded.metrics["epoch"]) == (7, 8, 3)
+    for name, value in model.state_dict().items():
+        torch.testing.assert_close(loaded.model.state_dict()[name], value, rtol=0, atol=0)
+    assert slim.stat().st_size < (tmp_path / "run" / "checkpoint.pt").stat().st_size
+
+
 def test_a_new_run_folder_gets_its_checkpoint_file(tmp_path, normalization):
     _save(tmp_path / "run", normalization)
     assert (tmp_path / "run" / "checkpoint.pt").is_file()

@@ -7,6 +7,7 @@ import pytest
 from warmstart_standins import AffineNormalization, replay_model
 
 from scpformer.cli.main import main
+from scpformer.pretrained import default_model
 from scpformer.problems.rendezvous import linear_model, sample_instances, solve
 from scpformer.problems.robust_rendezvous import RobustInstance, solve_tpbvp
 from scpformer.warmstart import ArtWarmStart
@@ -28,12 +29,16 @@ def checkpoint(monkeypatch):
     return asked
 
 
-@pytest.mark.parametrize("family", ["rendezvous", "robust-rendezvous"])
-def test_art_without_a_model_is_a_usage_error(family, capsys):
-    assert main(["solve", family, "--warmstart", "art"]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("scpformer: error: --warmstart art needs --model RUN")
-    assert err.count("\n") == 1
+@pytest.mark.parametrize("model", [[], ["--model", "default"]])
+def test_art_without_a_model_uses_the_verified_pretrained_default(model, checkpoint, capsys):
+    instance = sample_instances(np.random.default_rng(0), 1)[0]
+    cvx = solve(instance, "convex", verify=False).trajectory
+    checkpoint["u"], checkpoint["states"] = cvx.u, linear_model(instance).rtn(cvx.x)[:100]
+    argv = ["solve", "rendezvous", "--seed", "0", "--no-verify", "--warmstart", "art",
+            "--art-mode", "transformer", "--rtg", "-0.3", *model]  # fmt: skip
+    assert main(argv) == 0
+    assert checkpoint["path"] == str(default_model("rendezvous"))
+    assert checkpoint["path"].endswith("art-rendezvous")
 
 
 def test_art_flags_without_art_are_a_usage_error(capsys, tmp_path):

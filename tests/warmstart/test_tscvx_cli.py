@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import argparse
+
 import pytest
 
 from scpformer.cli.main import main
+from scpformer.pretrained import default_model
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import solve
 from scpformer.warmstart.tscvx import TscvxWarmStart
@@ -32,9 +35,18 @@ def _one_error_line(capsys) -> str:
     return lines[0]
 
 
-def test_tscvx_without_a_model_is_a_usage_error(capsys):
-    assert main(["solve", "pdg6dof", "--warmstart", "tscvx"]) == 2
-    assert "--warmstart tscvx needs --model" in _one_error_line(capsys)
+def test_tscvx_without_a_model_loads_the_pretrained_default(monkeypatch):
+    from scpformer.cli.pdg6dof import add_solve_parser, warmstart_from_args
+
+    loaded = []
+    monkeypatch.setattr(
+        TscvxWarmStart, "from_run", classmethod(lambda cls, run: loaded.append(run))
+    )
+    parser = argparse.ArgumentParser()
+    add_solve_parser(parser.add_subparsers())
+    for model in ([], ["--model", "default"]):
+        warmstart_from_args(parser.parse_args(["pdg6dof", "--warmstart", "tscvx", *model]))
+    assert loaded == [default_model("pdg6dof")] * 2
 
 
 def test_a_missing_run_folder_is_a_one_line_error(tmp_path, capsys):

@@ -66,6 +66,10 @@ COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
         "gather docs/results/*/results.json into docs/RESULTS.md",
         "scpformer.cli.report:add_report_parser",
     ),
+    ("", "demo"): (
+        "solve three problems with classical and pretrained learned warm starts, in a minute",
+        "scpformer.cli.demo:add_demo_parser",
+    ),
     ("", "export"): (
         "export a run's networks to ONNX and check them against PyTorch",
         "scpformer.cli.export:add_export_parser",

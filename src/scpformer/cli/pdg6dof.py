@@ -79,22 +79,28 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
         help="straight_line, or tscvx: T-SCvx (Algorithm 2) with the networks of --model "
         "(default: straight_line)",
     )
-    group.add_argument("--model", type=Path, metavar="RUN", help="T-SCvx training run folder")
+    group.add_argument(
+        "--model",
+        type=Path,
+        metavar="RUN",
+        help="T-SCvx training run folder, or 'default': the pretrained networks shipped with "
+        "scpformer (default: default)",
+    )
     add_config_arguments(parser)
     parser.set_defaults(handler=run_solve)
 
 
 def warmstart_from_args(args: argparse.Namespace) -> object:
-    """``"straight_line"`` or the T-SCvx provider of ``--warmstart tscvx --model RUN``."""
+    """``"straight_line"`` or the T-SCvx provider of ``--warmstart tscvx [--model RUN]``
+    (without ``--model``, or with ``default``: the shipped, checksum-verified networks)."""
     if args.warmstart != "tscvx":
         if args.model is not None:
             raise ValueError("--model: used with --warmstart tscvx only")
         return args.warmstart
-    if args.model is None:
-        raise ValueError("--warmstart tscvx needs --model RUN (a T-SCvx training run folder)")
+    from scpformer.pretrained import resolve_model
     from scpformer.warmstart.tscvx import TscvxWarmStart
 
-    return TscvxWarmStart.from_run(args.model)
+    return TscvxWarmStart.from_run(resolve_model(args.model, "pdg6dof"))
 
 
 def print_summary(solution: Solution, instance: PDGInstance) -> None:
@@ -166,19 +172,20 @@ def run_solve(args: argparse.Namespace) -> int:
             save_solution(args.out, solution, instance)
             print(f"wrote {args.out}")
         if args.plot:
-            from scpformer.plotting.pdg6dof import plot_history, plot_trajectory
-            from scpformer.problems.pdg6dof.io import constants_record
-
-            plot_trajectory(
-                solution.t,
-                solution.trajectory.x,
-                solution.trajectory.u,
-                constants_record(instance),
-                path=args.plot,
-            )
-            plot_history([rec.summary() for rec in solution.history], path=history)
+            write_figures(args.plot, solution, instance)
             print(f"wrote {args.plot} and {history}")
     return 0 if solution.converged else 1
+
+
+def write_figures(plot: Path, solution: Solution, instance: PDGInstance) -> None:
+    """The trajectory figure at ``plot`` and the SCvx history beside it
+    (:func:`history_plot_path`)."""
+    from scpformer.plotting.pdg6dof import plot_history, plot_trajectory
+    from scpformer.problems.pdg6dof.io import constants_record
+
+    x, u = solution.trajectory.x, solution.trajectory.u
+    plot_trajectory(solution.t, x, u, constants_record(instance), path=plot)
+    plot_history([rec.summary() for rec in solution.history], path=history_plot_path(plot))
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:

@@ -208,17 +208,19 @@ def run_solve(args: argparse.Namespace) -> int:
             save_solution(args.out, solution, instance)
             print(f"wrote {args.out}")
         if args.plot:
-            _plot(args.plot, solution, instance, warm)
+            write_figure(args.plot, solution, instance, warm)
             print(f"wrote {args.plot}")
     return 0 if solution.converged else 1
 
 
-def _plot(
+def write_figure(
     path: Path,
     solution: Solution,
     instance: RendezvousInstance,
     warm: WarmStartResult | None,
 ) -> None:
+    """The trajectory figure of ``solution`` (RTN, keep-out zone, ROE, impulses) with the
+    warm start's trajectory drawn beside it."""
     from scpformer.plotting.rendezvous import plot_trajectory
     from scpformer.problems.rendezvous.io import constants_record
 

@@ -23,7 +23,11 @@ def add_warmstart_arguments(
         help=f"{help_names}, or art: the transformer of --model (default: {default})",
     )
     group.add_argument(
-        "--model", type=Path, metavar="RUN", help="ART training run folder or checkpoint file"
+        "--model",
+        type=Path,
+        metavar="RUN",
+        help="ART training run folder or checkpoint file, or 'default': the pretrained model "
+        "shipped with scpformer (default: default)",
     )
     group.add_argument(
         "--art-mode",
@@ -38,7 +42,11 @@ def add_warmstart_arguments(
 
 
 def art_provider(args: argparse.Namespace, family: str, **kwargs: Any) -> WarmStart | None:
-    """The ART provider of ``--warmstart art --model RUN``, or None for a named warm start."""
+    """The ART provider of ``--warmstart art [--model RUN]``, or None for a named warm start.
+
+    Without ``--model`` (or with ``--model default``) the family's pretrained model shipped
+    in :mod:`scpformer.pretrained` is used, after its checksum is verified.
+    """
     art_flags = {"--model": args.model, "--art-mode": args.art_mode, "--rtg": args.rtg,
                  "--ctg": args.ctg}  # fmt: skip
     if args.warmstart != "art":
@@ -46,10 +54,10 @@ def art_provider(args: argparse.Namespace, family: str, **kwargs: Any) -> WarmSt
         if given:
             raise ValueError(f"{', '.join(given)}: used with --warmstart art only")
         return None
-    if args.model is None:
-        raise ValueError("--warmstart art needs --model RUN (a training run or checkpoint file)")
+    from scpformer.pretrained import resolve_model
+
     return ArtWarmStart.from_checkpoint(
-        args.model,
+        resolve_model(args.model, family),
         family=family,
         art_mode=args.art_mode or "dynamics",
         rtg=args.rtg,

@@ -121,6 +121,31 @@ def save_checkpoint(
         "metrics": to_plain(dict(metrics or {})),
         "extra": to_plain(dict(extra or {})),
     }
+    return _write_payload(path, payload)
+
+
+def slim_checkpoint(source: Path | str, destination: Path | str) -> Path:
+    """Write a weights-only copy of a checkpoint: the training state dropped, weights fp32.
+
+    The copy keeps everything :func:`load_checkpoint` needs (format, kind, configuration,
+    normalization, frame, family, dataset digest, version, seed, ``n_steps``, metrics) and
+    drops ``extra`` (optimizer, schedule and RNG states for ``--resume``), so it loads with
+    the same loaders but cannot resume training. ``source`` is a file or a run folder;
+    ``destination`` a file or a folder (then ``destination/checkpoint.pt``). Returns the file
+    written.
+    """
+    payload = read_checkpoint(source)
+    weights = {}
+    for name, tensor in payload["state_dict"].items():
+        weights[name] = tensor.float() if tensor.is_floating_point() else tensor
+    slim = {**payload, "state_dict": weights, "extra": {}}
+    destination = checkpoint_path(destination)
+    destination.parent.mkdir(parents=True, exist_ok=True)
+    return _write_payload(destination, slim)
+
+
+def _write_payload(path: Path, payload: dict[str, Any]) -> Path:
+    """``torch.save`` to a temp file beside ``path``, fsync, then rename over ``path``."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         with tmp.open("wb") as fh:

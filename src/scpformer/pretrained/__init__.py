@@ -1,0 +1,103 @@
+"""Pretrained models shipped in the package, and the checks that guard them.
+
+One folder per model beside this file, each with weights-only checkpoints (the loaders of
+:mod:`scpformer.train.checkpoint` read them) and a ``MODEL_CARD.md``; ``manifest.json`` holds
+the SHA-256 of every weights file. :func:`default_model` returns the folder of a problem
+family's model after checking every file of it against the manifest, so ``--model default``
+(or no ``--model`` with ``--warmstart art|tscvx``) never loads a modified file.
+
+=================  ====================  ================================================
+folder             family                loaded by
+=================  ====================  ================================================
+``art-rendezvous`` ``rendezvous``        ``--warmstart art`` (ART, RTN frame)
+``art-robust``     ``robust-rendezvous`` ``--warmstart art`` (robust ART, chance, RTN)
+``tscvx``          ``pdg6dof``           ``--warmstart tscvx`` (``tight/``, ``solution/``)
+=================  ====================  ================================================
+
+``scripts/build_pretrained.sh`` rebuilds them from seeds; ``python -m
+scpformer.pretrained.package`` packages trained runs into this layout.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+PRETRAINED_DIR = Path(__file__).resolve().parent
+MANIFEST_NAME = "manifest.json"
+MANIFEST_FORMAT = "scpformer.pretrained"
+DEFAULT_NAME = "default"  # the --model value that selects the shipped model
+#: problem family -> folder of its pretrained model
+FAMILY_MODELS = {
+    "rendezvous": "art-rendezvous",
+    "robust-rendezvous": "art-robust",
+    "pdg6dof": "tscvx",
+}
+
+
+class PretrainedError(ValueError):
+    """A shipped model that is missing, unlisted or does not match its checksum."""
+
+
+def is_default(model: Path | str | None) -> bool:
+    """Whether ``--model`` asks for the shipped model (not given, or ``default``)."""
+    return model is None or str(model) == DEFAULT_NAME
+
+
+def read_manifest(root: Path | None = None) -> dict[str, Any]:
+    """``root/manifest.json`` (``PretrainedError`` when missing or not a manifest); ``root``
+    defaults to :data:`PRETRAINED_DIR`."""
+    root = PRETRAINED_DIR if root is None else root
+    path = root / MANIFEST_NAME
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise PretrainedError(f"pretrained models: cannot read {path} ({err})") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != MANIFEST_FORMAT:
+        raise PretrainedError(f"pretrained models: {path} is not a pretrained-model manifest")
+    return manifest
+
+
+def verify_model(name: str, root: Path | None = None) -> Path:
+    """Check every file of model ``name`` against the manifest's SHA-256; return its folder.
+
+    Raises
+    ------
+    PretrainedError
+        One line naming the file that is missing or differs from its checksum.
+    """
+    from scpformer.data.storage import file_sha256
+
+    root = PRETRAINED_DIR if root is None else root
+    models = read_manifest(root).get("models", {})
+    if name not in models:
+        raise PretrainedError(f"pretrained model {name!r} is not in {root / MANIFEST_NAME}")
+    folder = root / name
+    for relative, expected in models[name]["files"].items():
+        path = folder / relative
+        if not path.is_file():
+            raise PretrainedError(f"pretrained model {name}: {path} is missing; reinstall "
+                                  "scpformer or run scripts/build_pretrained.sh")  # fmt: skip
+        found = file_sha256(path)
+        if found != expected:
+            raise PretrainedError(
+                f"pretrained model {name}: {path} has SHA-256 {found[:16]}..., the manifest "
+                f"lists {expected[:16]}... (modified or corrupt; reinstall scpformer or run "
+                "scripts/build_pretrained.sh)"
+            )
+    return folder
+
+
+def default_model(family: str, root: Path | None = None) -> Path:
+    """The verified folder of the shipped model of ``family`` (see the module table)."""
+    if family not in FAMILY_MODELS:
+        raise PretrainedError(
+            f"no pretrained model for family {family!r}; shipped: {sorted(FAMILY_MODELS)}"
+        )
+    return verify_model(FAMILY_MODELS[family], root)
+
+
+def resolve_model(model: Path | str | None, family: str) -> Path:
+    """``--model``: the shipped, verified model of ``family`` when default, else ``model``."""
+    return default_model(family) if is_default(model) else Path(model)

@@ -1,0 +1,86 @@
+"""The pretrained models shipped in the package: checksums, loading, and the slim copies."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+import torch
+
+import scpformer.pretrained as pretrained
+from scpformer.cli.main import main
+from scpformer.models.tscvx import load_tscvx_predictor
+from scpformer.pretrained import (
+    FAMILY_MODELS,
+    PretrainedError,
+    default_model,
+    read_manifest,
+    verify_model,
+)
+from scpformer.pretrained.package import MAX_FILE_BYTES
+from scpformer.train.checkpoint import load_checkpoint
+
+
+def test_every_family_has_a_shipped_model_listed_in_the_manifest():
+    listed = read_manifest()["models"]
+    assert set(listed) == set(FAMILY_MODELS.values())
+    for family, name in FAMILY_MODELS.items():
+        assert listed[name]["family"] == family
+        assert (pretrained.PRETRAINED_DIR / name / "MODEL_CARD.md").is_file()
+
+
+@pytest.mark.parametrize("family", ["rendezvous", "robust-rendezvous"])
+def test_default_art_models_verify_and_load_without_training_state(family):
+    ckpt = load_checkpoint(default_model(family), family=family, kind="art")
+    assert ckpt.frame == "rtn" and ckpt.normalization is not None
+    assert ckpt.extra == {}
+    assert all(p.dtype == torch.float32 for p in ckpt.model.parameters())
+
+
+def test_default_tscvx_networks_verify_and_load():
+    predictor = load_tscvx_predictor(default_model("pdg6dof"))
+    assert predictor.n_rows == 7 * predictor.n_nodes
+
+
+def test_shipped_files_are_a_few_megabytes_at_most():
+    for name, entry in read_manifest()["models"].items():
+        for relative in entry["files"]:
+            assert (pretrained.PRETRAINED_DIR / name / relative).stat().st_size < MAX_FILE_BYTES
+
+
+@pytest.fixture
+def tampered(tmp_path, monkeypatch):
+    """A copy of the shipped models with one byte of the rendezvous weights flipped."""
+    root = tmp_path / "pretrained"
+    shutil.copytree(pretrained.PRETRAINED_DIR, root, ignore=shutil.ignore_patterns("*.py*"))
+    path = root / "art-rendezvous" / "checkpoint.pt"
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+    monkeypatch.setattr(pretrained, "PRETRAINED_DIR", root)
+    return path
+
+
+def test_a_tampered_file_is_a_one_line_error_naming_it(tampered):
+    with pytest.raises(PretrainedError, match="SHA-256") as info:
+        verify_model("art-rendezvous")
+    assert str(tampered) in str(info.value) and "\n" not in str(info.value)
+    verify_model("art-robust")  # the other models still verify
+
+
+def test_a_tampered_default_stops_the_solve_with_one_error_line(tampered, capsys):
+    assert main(["solve", "rendezvous", "--warmstart", "art"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("scpformer: error: pretrained model art-rendezvous")
+    assert "checkpoint.pt" in err[0]
+
+
+def test_a_missing_file_is_named(tampered):
+    tampered.unlink()
+    with pytest.raises(PretrainedError, match="is missing"):
+        default_model("rendezvous")
+
+
+def test_an_unknown_family_has_no_default():
+    with pytest.raises(PretrainedError, match="no pretrained model for family 'pdg3dof'"):
+        default_model("pdg3dof")
