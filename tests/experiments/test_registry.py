@@ -11,6 +11,10 @@ PAPER_ITEMS = {
     "robust-warmstart": "Figs. 5-6",
     "robust-trajectory": "Figs. 7-8",
     "robust-posthoc": "Figs. 9-10",
+    "tscvx-training": "Table 3",
+    "tscvx-solve-time": "Fig. 2",
+    "tscvx-trajectory": "Fig. 3",
+    "tscvx-lookup": "Tables 4-5, Fig. 4",
 }
 
 

@@ -191,6 +191,7 @@ def run_train_tscvx(args: argparse.Namespace) -> int:
         print(format_metrics(result.metrics))
     split = result.report_split
     print(f"files: config.json, tight/, solution/, metrics_{split}.json in {result.run}")
+    return 0
 
 
 # -- lookup-table baselines of T-SCvx (paper Sec. IV.C) -------------------------------------------
