@@ -97,10 +97,9 @@ def warmstart_from_args(args: argparse.Namespace) -> object:
         if args.model is not None:
             raise ValueError("--model: used with --warmstart tscvx only")
         return args.warmstart
+    from scpformer.cli.warmstart import single_thread_inference
     from scpformer.pretrained import resolve_model
     from scpformer.warmstart.tscvx import TscvxWarmStart
-
-    from scpformer.cli.warmstart import single_thread_inference
 
     single_thread_inference()
     return TscvxWarmStart.from_run(resolve_model(args.model, "pdg6dof"))
