@@ -27,6 +27,7 @@ from scpformer.experiments.prediction_metrics import load_eval_set, measure_pred
 from scpformer.models.lookup import (
     LOOKUP_JSON,
     LOOKUP_NPZ,
+    InterpolationTable,
     LookupConfig,
     LookupRunError,
     fit_lookup,
@@ -204,3 +205,27 @@ def test_measurements_of_a_kdtree_on_its_own_training_split_are_exact(fake_pdg):
 
 def test_iterations_stay_within_iter_max(train):
     assert train.item_k.min() == 1 and train.item_k.max() <= ITER_MAX
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"n_components": 0}, r"n_components must be >= 1"),
+        ({"max_points": -1}, r"max_points must be >= 0"),
+        ({"threshold": 1.0}, r"threshold must be in \(0, 1\)"),
+        ({"leaf_size": 0}, r"leaf_size must be >= 1"),
+    ],
+)
+def test_bad_lookup_settings_raise_naming_the_field(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        LookupConfig(**kwargs)
+
+
+def test_unknown_kind_raises(train):
+    with pytest.raises(ValueError, match=r"kind must be one of \('kdtree', 'interp'\)"):
+        fit_lookup("tree", train)
+
+
+def test_interpolation_needs_more_points_than_dimensions(train):
+    with pytest.raises(ValueError, match=r"needs more than 3 points"):
+        InterpolationTable(np.zeros((3, 3)), np.zeros((3, 2)))
