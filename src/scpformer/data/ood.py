@@ -36,9 +36,10 @@ class MahalanobisReference:
 
     def distance(self, inputs: np.ndarray) -> np.ndarray:
         """d_M of each row of ``inputs`` (B, d) -> (B,)."""
-        delta = np.atleast_2d(np.asarray(inputs, dtype=float)) - self.mean
-        if delta.shape[1] != len(self.mean):
-            raise ValueError(f"inputs must have {len(self.mean)} columns, got {delta.shape[1]}")
+        inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+        if inputs.ndim != 2 or inputs.shape[1] != len(self.mean):
+            raise ValueError(f"inputs must have {len(self.mean)} columns, got shape {inputs.shape}")
+        delta = inputs - self.mean
         squared = np.einsum("bi,ij,bj->b", delta, self.precision, delta)
         return np.sqrt(np.maximum(squared, 0.0))
 

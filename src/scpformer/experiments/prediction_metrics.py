@@ -177,11 +177,10 @@ def memory_bytes(predictor: Any) -> int:
     """``predictor.memory_bytes()``, else the bytes of its torch modules' tensors, else -1."""
     if callable(getattr(predictor, "memory_bytes", None)):
         return int(predictor.memory_bytes())
-    try:
-        from torch import nn
-    except ImportError:  # pragma: no cover - torch is a dependency
-        return -1
-    modules = [v for v in vars(predictor).values() if isinstance(v, nn.Module)]
+    from torch import nn
+
+    attributes = getattr(predictor, "__dict__", {}).values()
+    modules = [v for v in attributes if isinstance(v, nn.Module)]
     if not modules:
         return -1
     tensors = [t for m in modules for t in (*m.parameters(), *m.buffers())]
