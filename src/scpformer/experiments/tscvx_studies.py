@@ -469,21 +469,18 @@ def run_training(options: RunOptions, *, command: str = "", name: str) -> Path:
 
 
 def last_losses(folder: Path) -> dict[str, float]:
-    """Training and validation loss of the last epoch in ``folder/metrics.csv`` (or of the
-    last fold's folder below it)."""
+    """Training and validation loss at the best-validation epoch of ``folder/metrics.csv`` (of
+    the last fold's folder below it): the epoch of the delivered ``best.pt``."""
     candidates = sorted(folder.rglob("metrics.csv"))
-    if not candidates:
-        return {"train": math.nan, "val": math.nan, "epochs": 0}
-    with candidates[-1].open(newline="") as handle:
-        records = list(csv.DictReader(handle))
+    records: list[dict[str, str]] = []
+    if candidates:
+        with candidates[-1].open(newline="") as handle:
+            records = list(csv.DictReader(handle))
     if not records:
-        return {"train": math.nan, "val": math.nan, "epochs": 0}
-    last = records[-1]
-    return {
-        "train": float(last["train_loss"]),
-        "val": float(last["val_loss"]),
-        "epochs": len(records),
-    }
+        return {"train": math.nan, "val": math.nan, "epochs": 0, "best_epoch": 0}
+    best = min(records, key=lambda r: float(r["val_loss"]))
+    return {"train": float(best["train_loss"]), "val": float(best["val_loss"]),
+            "epochs": len(records), "best_epoch": int(best["epoch"])}  # fmt: skip
 
 
 def parameter_counts(run_dir: Path) -> dict[str, int]:
@@ -506,7 +503,7 @@ def training_comparisons(metrics: dict, losses: dict, params: dict) -> list[rep.
             quantity="constraint NN train / validation loss",
             paper="0.024 / 0.024",
             ours=f"{rep.fmt(t['train'])} / {rep.fmt(t['val'])}",
-            note="paper: MSE; ours: weighted BCE",
+            note=f"paper: MSE; ours: weighted BCE, epoch {t['best_epoch']} of {t['epochs']}",
         ),
         rep.Comparison(
             quantity="constraint NN test binary accuracy",
@@ -535,6 +532,7 @@ def training_comparisons(metrics: dict, losses: dict, params: dict) -> list[rep.
             quantity="solution NN train / validation MSE",
             paper="0.975 / 1.092",
             ours=f"{rep.fmt(s['train'])} / {rep.fmt(s['val'])}",
+            note=f"epoch {s['best_epoch']} of {s['epochs']}",
         ),
         rep.Comparison(
             quantity="solution NN test MSE", paper="1.040", ours=rep.fmt(solution["mse"])
