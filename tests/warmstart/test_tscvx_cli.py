@@ -66,7 +66,7 @@ def test_a_corrupt_run_folder_is_a_one_line_error(tmp_path, capsys):
 
 def test_model_without_tscvx_is_refused(tmp_path, capsys):
     assert main(["solve", "pdg6dof", "--model", str(tmp_path)]) == 2
-    assert "--warmstart tscvx only" in _one_error_line(capsys)
+    assert "--warmstart tscvx, kdtree or interp only" in _one_error_line(capsys)
 
 
 @pytest.mark.slow
@@ -84,3 +84,11 @@ def test_tscvx_solve_runs_algorithm_2_with_the_runs_predictor(tmp_path, monkeypa
     assert status == 0, out
     assert loaded["run"] == str(tmp_path)
     assert "T-SCvx rows kept" in out and "converged" in out
+
+
+@pytest.mark.parametrize("kind", ["kdtree", "interp"])
+def test_a_lookup_warm_start_needs_its_own_run(tmp_path, capsys, kind):
+    assert main(["solve", "pdg6dof", "--warmstart", kind]) == 2
+    assert f"--warmstart {kind} needs --model RUN" in _one_error_line(capsys)
+    assert main(["solve", "pdg6dof", "--warmstart", kind, "--model", str(tmp_path)]) == 2
+    assert "not a T-SCvx run" in _one_error_line(capsys)

@@ -74,35 +74,43 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     group = parser.add_argument_group("warm start")
     group.add_argument(
         "--warmstart",
-        choices=("straight_line", "tscvx"),
+        choices=("straight_line", "tscvx", "kdtree", "interp"),
         default="straight_line",
-        help="straight_line, or tscvx: T-SCvx (Algorithm 2) with the networks of --model "
+        help="straight_line, or T-SCvx (Algorithm 2) with the predictor of --model: tscvx (the "
+        "networks), kdtree or interp (the lookup tables of `scpformer train kdtree|interp`) "
         "(default: straight_line)",
     )
     group.add_argument(
         "--model",
         type=Path,
         metavar="RUN",
-        help="T-SCvx training run folder, or 'default': the pretrained networks shipped with "
-        "scpformer (default: default)",
+        help="predictor run folder; for tscvx also 'default': the pretrained networks shipped "
+        "with scpformer (default for tscvx: default; kdtree and interp need a run)",
     )
     add_config_arguments(parser)
     parser.set_defaults(handler=run_solve)
 
 
 def warmstart_from_args(args: argparse.Namespace) -> object:
-    """``"straight_line"`` or the T-SCvx provider of ``--warmstart tscvx [--model RUN]``
-    (without ``--model``, or with ``default``: the shipped, checksum-verified networks)."""
-    if args.warmstart != "tscvx":
+    """``"straight_line"`` or the T-SCvx provider of ``--warmstart tscvx|kdtree|interp
+    [--model RUN]`` (tscvx without ``--model``, or with ``default``: the shipped,
+    checksum-verified networks; the lookup tables need their run folder)."""
+    if args.warmstart == "straight_line":
         if args.model is not None:
-            raise ValueError("--model: used with --warmstart tscvx only")
+            raise ValueError("--model: used with --warmstart tscvx, kdtree or interp only")
         return args.warmstart
     from scpformer.cli.warmstart import single_thread_inference
+    from scpformer.models.predictors import load_predictor
     from scpformer.pretrained import resolve_model
     from scpformer.warmstart.tscvx import TscvxWarmStart
 
-    single_thread_inference()
-    return TscvxWarmStart.from_run(resolve_model(args.model, "pdg6dof"))
+    if args.warmstart == "tscvx":
+        single_thread_inference()
+        return TscvxWarmStart.from_run(resolve_model(args.model, "pdg6dof"))
+    if args.model is None:
+        raise ValueError(f"--warmstart {args.warmstart} needs --model RUN "
+                         f"(made by `scpformer train {args.warmstart}`)")  # fmt: skip
+    return TscvxWarmStart(load_predictor(args.model, args.warmstart))
 
 
 def print_summary(solution: Solution, instance: PDGInstance) -> None:
