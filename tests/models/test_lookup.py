@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from fake_pdg6dof import (
+from fake_affine_pdg6dof import (
     BASE,
     DIRECTIONS,
     ITER_MAX,
