@@ -582,7 +582,27 @@ def run_trajectory(options: RunOptions, *, command: str = "", name: str) -> Path
     report = new_report(name, f"{PAPER} Fig. 3", command, settings, study)
     report.figures += trajectory_figures(instance, solution, cold, predictor, options.out)
     report.sections.append(("Instance", trajectory_summary(int(position), solution, cold)))
+    report.comparisons = trajectory_comparisons(instance, solution, cold)
     return report.write(options.out)
+
+
+def trajectory_comparisons(instance: Any, solution: Any, cold: Any) -> list[rep.Comparison]:
+    """Fig. 3 has no numbers; ours: the instance's solves and propellant gap to cold SCvx."""
+    from scpformer.problems.pdg6dof.problem import propellant_gap
+
+    gap = propellant_gap(instance, solution.cost, cold.cost)
+    return [
+        rep.Comparison(
+            quantity="subproblem solves, cold SCvx / T-SCvx",
+            paper="n/a (figure only)",
+            ours=f"{cold.iterations} / {solution.iterations}",
+        ),
+        rep.Comparison(
+            quantity="T-SCvx propellant beyond cold SCvx's",
+            paper="n/a (figure only)",
+            ours=_pct(gap),
+        ),
+    ]
 
 
 def trajectory_figures(instance, solution, cold, predictor, out: Path) -> list[tuple[str, str]]:

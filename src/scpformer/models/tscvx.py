@@ -478,7 +478,9 @@ def load_tscvx_predictor(
     """The predictor of run folder ``run_dir`` (``RUN/tight`` and ``RUN/solution``).
 
     ``checkpoint``: ``best`` (each network's epoch of least validation loss, ``best.pt``) or
-    ``last`` (its last epoch, ``checkpoint.pt``).
+    ``last`` (its last epoch, ``checkpoint.pt``). A packaged run
+    (:mod:`scpformer.pretrained`) keeps one weights-only ``checkpoint.pt`` per network, made
+    from ``best.pt``; ``best`` loads it when there is no ``best.pt``.
 
     Raises
     ------
@@ -493,9 +495,13 @@ def load_tscvx_predictor(
             f"checkpoint must be one of {tuple(CHECKPOINT_CHOICES)}, got {checkpoint!r}"
         )
     run, file = Path(run_dir), CHECKPOINT_CHOICES[checkpoint]
+    folders = {TIGHT_KIND: "tight", SOLUTION_KIND: "solution"}
+    paths = {kind: run / folder / file for kind, folder in folders.items()}
+    if checkpoint == "best" and not any(p.is_file() for p in paths.values()):
+        paths = {kind: p.with_name(CHECKPOINT_CHOICES["last"]) for kind, p in paths.items()}
     loaded = {
-        kind: load_checkpoint(run / folder / file, kind=kind, family=FAMILY, models=TSCVX_MODELS)
-        for kind, folder in ((TIGHT_KIND, "tight"), (SOLUTION_KIND, "solution"))
+        kind: load_checkpoint(path, kind=kind, family=FAMILY, models=TSCVX_MODELS)
+        for kind, path in paths.items()
     }
     return TscvxPredictor(
         loaded[TIGHT_KIND].model,
