@@ -4,13 +4,14 @@
 # the script after an interruption and finished work is kept (generate, train --resume and
 # experiment run all skip what is done).
 #
-#   scripts/reproduce_results.sh            # everything, default sizes (~2 h on 2 CPU cores)
+#   scripts/reproduce_results.sh            # everything, default sizes (~3.5 h on 2 CPU cores)
 #   DATA=/tmp/d RUNS=/tmp/r scripts/reproduce_results.sh
 #
 # Environment (defaults in brackets): DATA [/work/data] dataset root, RUNS [$DATA/runs] model
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
 # instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] epochs of the
-# rendezvous models, ROBUST_EPOCHS [12] of the robust ones, RAY [unset] Ray address.
+# rendezvous models, ROBUST_EPOCHS [12] of the robust ones, N_PDG [480] 6-DoF base instances
+# (seed PDG_SEED [2]; x8 rotations), RAY [unset] Ray address.
 set -euo pipefail
 
 DATA=${DATA:-/work/data}
@@ -20,6 +21,10 @@ WORKERS=${WORKERS:-2}
 SEED=${SEED:-0}
 N_RDV=${N_RDV:-3000}
 N_ROB=${N_ROB:-1200}
+N_PDG=${N_PDG:-480}
+PDG_SEED=${PDG_SEED:-2}
+PDG=$DATA/pdg
+PDG8=$DATA/pdg8
 RDV=$DATA/rdv$N_RDV
 ROB=$DATA/rob$N_ROB
 EPOCHS_FLAG=${EPOCHS:+--epochs $EPOCHS}
@@ -79,5 +84,27 @@ for name in robust-trajectory robust-posthoc; do
   run scpformer experiment run "$name" --model "$RUNS/art-robust-small" --data "$ROB" \
     --workers "$WORKERS" --seed "$SEED" $RAY_FLAG --out "$OUT/$name"
 done
+# 5. T-SCvx paper: 6-DoF dataset (feasible preset), eight rotations about Up, the networks,
+#    the lookup tables, and the four experiments (Table 3, Figs. 2-4, Tables 4-5)
+if [ ! -f "$PDG8/splits.h5" ]; then
+  run scpformer generate pdg6dof --n "$N_PDG" --seed "$PDG_SEED" --out "$PDG" \
+    --workers "$WORKERS" --shard-size 16 --time-limit 40
+  run scpformer dataset augment "$PDG" --out "$PDG8" --workers "$WORKERS"
+  run scpformer dataset split "$PDG8" --fractions 0.8 0.1 0.1 --seed 0
+fi
+if [ -f "$RUNS/tscvx-small/tight/checkpoint.pt" ]; then resume=--resume; else resume=; fi
+# shellcheck disable=SC2086
+run scpformer train tscvx --data "$PDG8" --out "$RUNS/tscvx-small" --preset small \
+  --threads 1 --report-split test $resume
+[ -f "$RUNS/kdtree/lookup.json" ] || run scpformer train kdtree --data "$PDG8" --out "$RUNS/kdtree"
+[ -f "$RUNS/interp/lookup.json" ] || run scpformer train interp --data "$PDG8" \
+  --out "$RUNS/interp" --n-components 6
+pdg=(--data "$PDG8" --workers "$WORKERS" --seed "$SEED")
+for name in tscvx-training tscvx-solve-time tscvx-trajectory; do
+  run scpformer experiment run "$name" --model "$RUNS/tscvx-small" "${pdg[@]}" --out "$OUT/$name"
+done
+run scpformer experiment run tscvx-lookup --model "$RUNS/tscvx-small" --model "$RUNS/kdtree" \
+  --model "$RUNS/interp" "${pdg[@]}" --out "$OUT/tscvx-lookup"
+
 # one page: the paper's numbers beside ours for every experiment above
 run scpformer report --results "$OUT" --out "$(dirname "$OUT")/RESULTS.md"

@@ -97,18 +97,30 @@ class TscvxStudy:
     runs: dict[str, Path]  # kind (tscvx, kdtree, interp) -> run folder
 
     def provenance(self) -> list[str]:
-        """The commands that made the dataset and the runs."""
-        lines = dataset_commands(self.data)
-        if (self.data / "augment.json").is_file() or "transformed" in _manifest_kind(self.data):
-            lines.append(f"# {self.data} is rotation-augmented (`scpformer dataset augment`)")
-        return lines + [train_command(kind, run) for kind, run in self.runs.items()]
+        """The commands that made the dataset (and its rotated source) and the runs."""
+        return [*augmented_commands(self.data)] + [
+            train_command(kind, run, self.data) for kind, run in self.runs.items()
+        ]
 
 
-def _manifest_kind(folder: Path) -> str:
+def augmented_commands(folder: Path) -> list[str]:
+    """``generate`` (of the source), ``dataset augment`` and ``dataset split`` of ``folder``;
+    the plain :func:`dataset_commands` for a dataset that was not augmented."""
     try:
-        return str(json.loads((folder / "manifest.json").read_text()).get("kind", ""))
+        manifest = json.loads((folder / "manifest.json").read_text())
     except (OSError, ValueError):
-        return ""
+        return dataset_commands(folder)
+    source = manifest.get("source") or {}
+    if manifest.get("kind") != "transformed" or not source.get("path"):
+        return dataset_commands(folder)
+    lines = [line for line in dataset_commands(folder) if not line.startswith("scpformer gen")]
+    generate = (f"scpformer generate {source.get('family')} --n {source.get('n')} "
+                f"--seed {source.get('seed')} --out {source['path']}")  # fmt: skip
+    angles = manifest.get("transform", {}).get("config", {}).get("angles_deg", [])
+    augment = (
+        f"scpformer dataset augment {source['path']} --out {folder}  # {len(angles)} rotations"
+    )
+    return [generate, augment, *lines]
 
 
 def open_tscvx_study(options: RunOptions, kinds: Sequence[str] | None = None) -> TscvxStudy:
@@ -132,16 +144,21 @@ def open_tscvx_study(options: RunOptions, kinds: Sequence[str] | None = None) ->
     return TscvxStudy(data, manifest.config, runs)
 
 
-def train_command(kind: str, run: Path) -> str:
+def train_command(kind: str, run: Path, data: Path) -> str:
     """The ``scpformer train`` line of a run, from its ``config.json`` or ``lookup.json``."""
-    name = "lookup.json" if kind != "tscvx" else "config.json"
+    if kind == "tscvx":
+        try:
+            preset = json.loads((run / "config.json").read_text()).get("preset")
+        except (OSError, ValueError):
+            return f"# {run}: no readable config.json (command unknown)"
+        return f"scpformer train tscvx --data {data} --out {run} --preset {preset}"
     try:
-        config = json.loads((run / name).read_text())
-    except (OSError, ValueError):
-        return f"# {run}: no readable {name} (command unknown)"
-    preset = config.get("preset") or config.get("config", {}).get("preset")
-    line = f"scpformer train {kind} --data {config.get('data', '?')} --out {run}"
-    return line + (f" --preset {preset}" if preset else "")
+        config = json.loads((run / "lookup.json").read_text())["config"]
+    except (OSError, ValueError, KeyError):
+        return f"# {run}: no readable lookup.json (command unknown)"
+    points = config.get("max_points", 0)
+    return (f"scpformer train {kind} --data {data} --out {run} --n-components "
+            f"{config.get('n_components')} --max-points {points}")  # fmt: skip
 
 
 def solver_config(config: dict[str, Any]) -> Any:
