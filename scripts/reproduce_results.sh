@@ -78,6 +78,10 @@ run scpformer train art --data "$ROB" --out "$RUNS/art-robust-roe-small" --prese
 run scpformer experiment run robust-warmstart --model "$RUNS/art-robust-small" \
   --model "$RUNS/art-robust-roe-small" --data "$ROB" --workers "$WORKERS" --seed "$SEED" \
   $RAY_FLAG --out "$OUT/robust-warmstart"
+# Table 3's forecast rows for the robust ART (against the passively safe SCvx* twin)
+# shellcheck disable=SC2086
+run scpformer experiment run robust-forecast --model "$RUNS/art-robust-small" --data "$ROB" \
+  --workers "$WORKERS" --seed "$SEED" $RAY_FLAG --out "$OUT/robust-forecast"
 # the instance with the largest ART gain, and the post hoc check (RTN model, as the paper)
 for name in robust-trajectory robust-posthoc; do
   # shellcheck disable=SC2086

@@ -72,3 +72,28 @@ def test_conditioning_sweeps_requested_values_and_records_realized_ones(
         assert len(row["cost_realized_m_s"].split()) == len(row["cost_requested_m_s"].split())
     assert (out / "fig3_conditioning.png").is_file()
     assert "realized vs requested C(t_1)" in (out / "report.md").read_text()
+
+
+def test_robust_forecast_compares_the_robust_art_with_the_passively_safe_twin(
+    tmp_path, tiny_robust
+):
+    data, run = tiny_robust
+    out = tmp_path / "robust-forecast"
+    argv = ["experiment", "run", "robust-forecast", "--model", str(run), "--data", str(data),
+            "--n", "1", "--workers", "1", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    with (out / "results.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 1
+    for row in rows:
+        assert float(row["art_dynamics_cost_mm_s"]) > 0.0
+        assert float(row["true_cost_mm_s"]) > 0.0
+    text = (out / "report.md").read_text()
+    assert "passively safe" in text and "ps` twin" not in text
+
+
+def test_a_rendezvous_run_is_refused_by_the_robust_forecast(tmp_path, tiny_robust, tiny_runs):
+    data, _ = tiny_robust
+    argv = ["experiment", "run", "robust-forecast", "--model", str(tiny_runs["art"]),
+            "--data", str(data), "--out", str(tmp_path / "o")]  # fmt: skip
+    assert main(argv) == 2

@@ -6,6 +6,7 @@ from scpformer.experiments import EXPERIMENTS, RunOptions, get_experiment
 PAPER_ITEMS = {
     "art-forecast-tpbvp": "Table 2",
     "art-forecast-scp": "Table 3",
+    "robust-forecast": "Table 3's rows on the robust data",
     "art-conditioning": "Fig. 3",
     "art-warmstart": "Figs. 4-6",
     "robust-warmstart": "Figs. 5-6",

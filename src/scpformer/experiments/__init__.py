@@ -56,6 +56,14 @@ EXPERIMENTS: dict[str, Experiment] = {
             models="ART, GRU and LSTM runs (any order; kinds read from the checkpoints)",
         ),
         Experiment(
+            name="robust-forecast",
+            reproduces="ART paper Table 3's rows on the robust data",
+            summary="robust ART's forecasts of the passively safe SCvx* solutions (issue 12)",
+            module="scpformer.experiments.forecast_study",
+            default_n=120,
+            models="ART (and GRU/LSTM) runs trained on a robust-rendezvous dataset",
+        ),
+        Experiment(
             name="art-conditioning",
             reproduces=f"{_ART} Fig. 3",
             summary="realized vs requested constraint-to-go and reward-to-go",
