@@ -81,12 +81,9 @@ def run_demo(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ValueError(f"--out {out}: cannot create the folder ({err.strerror})") from None
-    import torch
+    from scpformer.cli.warmstart import single_thread_inference
 
-    # Batch-1 inference of these small networks is fastest on one thread: on the 2-core
-    # development machine under load, ART's 100-step rollout took 0.1 s on one thread and
-    # 13-37 s on two (OpenMP threads waiting for each other at every small operation).
-    torch.set_num_threads(1)
+    single_thread_inference()
     start = time.perf_counter()
     rows = []
     for section in (rendezvous_rows, robust_rows, landing_rows):
