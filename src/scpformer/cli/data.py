@@ -101,8 +101,13 @@ def _add_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-verify",
         action="store_true",
-        help="skip the nonlinear replay of both twins (about 4x faster; statuses then rest on "
+        help="skip the nonlinear replay of the twins (about 4x faster; statuses then rest on "
         "the linear model alone)",
+    )
+    parser.add_argument(
+        "--no-tpbvp-twin",
+        action="store_true",
+        help="store the Problem 2 and 3 twins only, not the Problem 1 (TPBVP) twin of Table 2",
     )
     add_dataclass_arguments(
         parser, SampleRanges, prefix="range", title="sampling ranges of theta (Table 1)"
@@ -124,6 +129,7 @@ def _build_rendezvous(args: argparse.Namespace) -> DatasetFamily:
         solver=config_from_args(args),
         warmstart=args.warmstart,
         verify=not args.no_verify,
+        tpbvp_twin=not args.no_tpbvp_twin,
     )
     return RendezvousFamily(config)
 

@@ -1,9 +1,12 @@
 """The ISS rendezvous family (ART paper, Sec. 4) as a dataset family.
 
-Each sample is one base instance theta solved twice, as ART trains on both trajectories: the
-convex Problem 2 (twin ``cvx``) and Problem 3 by the SCP of Section 4 (twin ``scp``), which
-starts from the warm start named by ``RendezvousDataConfig.warmstart`` (by default the convex
-solution itself). The sample's ``status`` is Problem 3's (or the engine's, e.g. ``timeout``).
+Each sample is one base instance theta solved as ART trains on it: the convex Problem 2
+(twin ``cvx``) and Problem 3 by the SCP of Section 4 (twin ``scp``), which starts from the
+warm start named by ``RendezvousDataConfig.warmstart`` (by default the convex solution itself).
+With ``RendezvousDataConfig.tpbvp_twin`` (the default) it also holds the convex Problem 1
+(twin ``tpbvp``), the reference of the paper's Table 2 and its CVX-TPBVP warm start; datasets
+made before that twin existed have ``cvx`` and ``scp`` only and load as they are. The
+sample's ``status`` is Problem 3's (or the engine's, e.g. ``timeout``).
 
 theta (13,) holds the instance as sampled, in the order of :data:`THETA_NAMES`: the initial
 mean ROE ``a dalpha(t_0)`` (6) [m], the horizon [orbits] and the target's mean elements
@@ -94,8 +97,8 @@ THETA_NAMES: tuple[str, ...] = (
     "target_M_deg",
 )
 TARGET_KEYS = ("a_m", "e", "i_deg", "raan_deg", "argp_deg", "M_deg")
-TWINS: tuple[str, ...] = ("scp", "cvx")  # Problem 3 and Problem 2 twins
-TWIN_PROBLEM = {"scp": "scp", "cvx": "convex"}  # twin prefix -> problem of solve()
+TWINS: tuple[str, ...] = ("scp", "cvx", "tpbvp")  # Problem 3, 2 and 1 twins
+TWIN_PROBLEM = {"scp": "scp", "cvx": "convex", "tpbvp": "tpbvp"}  # prefix -> solve() problem
 STATE_FRAMES = ("roe", "rtn")
 
 
@@ -108,17 +111,28 @@ class RendezvousDataConfig:
     target: TargetOrbit = field(default_factory=TargetOrbit)  # target (ISS) mean orbit
     solver: RendezvousSolverConfig = field(default_factory=RendezvousSolverConfig)  # SCP
     warmstart: str = "convex"  # initial reference of Problem 3: convex (Problem 2) or tpbvp
-    verify: bool = True  # replay both twins through the nonlinear propagator
+    verify: bool = True  # replay every twin through the nonlinear propagator
+    tpbvp_twin: bool = True  # also store the Problem 1 (TPBVP) twin
 
     def __post_init__(self) -> None:
         if self.warmstart not in WARMSTARTS:
             raise ValueError(f"warmstart must be one of {WARMSTARTS}, got {self.warmstart!r}")
         object.__setattr__(self, "verify", bool(self.verify))
+        object.__setattr__(self, "tpbvp_twin", bool(self.tpbvp_twin))
+
+    @property
+    def twins(self) -> tuple[str, ...]:
+        """The twins a sample stores (prefixes of :data:`TWINS`)."""
+        return TWINS if self.tpbvp_twin else TWINS[:2]
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> RendezvousDataConfig:
-        """Rebuild from :func:`dataclasses.asdict` output (e.g. a manifest's ``config``)."""
-        return dataclass_from_dict(cls, data)
+        """Rebuild from :func:`dataclasses.asdict` output (e.g. a manifest's ``config``).
+
+        A config without ``tpbvp_twin`` is one of a dataset made before the Problem 1 twin
+        existed: it rebuilds with ``tpbvp_twin=False``, the schema that dataset has.
+        """
+        return dataclass_from_dict(cls, {"tpbvp_twin": False, **data})
 
 
 def theta_vector(instance: RendezvousInstance) -> np.ndarray:
@@ -239,7 +253,11 @@ class RendezvousFamily:
     config: RendezvousDataConfig = field(default_factory=RendezvousDataConfig)
     name: ClassVar[str] = "rendezvous"
     success_statuses: ClassVar[frozenset[str]] = frozenset({Status.CONVERGED.value})
-    twins: ClassVar[tuple[str, ...]] = TWINS  # trajectory twins per sample (ART view)
+
+    @property
+    def twins(self) -> tuple[str, ...]:
+        """Trajectory twins per sample (ART view)."""
+        return self.config.twins
 
     @property
     def n_nodes(self) -> int:
@@ -251,7 +269,7 @@ class RendezvousFamily:
 
     def schema(self) -> tuple[Field, ...]:
         n, f64 = self.n_nodes, "float64"
-        twins = tuple(f for p in TWINS for f in twin_schema(p, n))
+        twins = tuple(f for p in self.twins for f in twin_schema(p, n))
         return (
             Field(name="theta", dtype=f64, shape=(13,), normalize=True, doc="instance parameters"),
             Field(name="cost", dtype=f64, doc="Problem 3 cost sum |dv|_2 [m/s]"),
@@ -270,7 +288,8 @@ class RendezvousFamily:
 
     def warm_up(self) -> None:
         sc, solver = self.config.scenario, self.config.solver.scp.solver
-        kinds = {"convex", "scp", "tpbvp" if self.config.warmstart == "tpbvp" else "convex"}
+        tpbvp = self.config.warmstart == "tpbvp" or self.config.tpbvp_twin
+        kinds = {"convex", "scp", "tpbvp" if tpbvp else "convex"}
         for kind in sorted(kinds):
             compiled_subproblem(kind, sc.n_nodes, sc.n_waypoint, solver)
 
@@ -283,20 +302,24 @@ class RendezvousFamily:
 
     def solve(self, instance: RendezvousInstance) -> SampleResult:
         cvx, cvx_time = self._timed(instance, "convex", None)
-        warm, warm_time = self._warm_start(instance, cvx, cvx_time)
+        tpbvp = self._timed(instance, "tpbvp", None) if self.config.tpbvp_twin else None
+        warm, warm_time = self._warm_start(instance, cvx, cvx_time, tpbvp)
         scp, scp_time = self._timed(instance, "scp", warm)
         model = linear_model(instance)
         fields = {
             **self.encode_instance(instance),
             **twin_fields("cvx", instance, model, cvx, cvx_time),
             **twin_fields("scp", instance, model, scp, scp_time),
+            **(twin_fields("tpbvp", instance, model, *tpbvp) if tpbvp else {}),
             **self._warm_fields(warm),
             "cost": scp.cost,
             "iterations": scp.iterations,
         }
         if "cvx_ctg" in fields:
             fields["c_cvx_t1"] = int(fields["cvx_ctg"][0])
-        solve_time = cvx_time + scp_time + (warm_time if warm is not cvx else 0.0)
+        stored = [cvx_time, scp_time] + ([tpbvp[1]] if tpbvp else [])
+        separate = warm is not cvx and (tpbvp is None or warm is not tpbvp[0])
+        solve_time = sum(stored) + (warm_time if separate else 0.0)
         return SampleResult(scp.status.value, scp.message, fields, solve_time)
 
     def _timed(
@@ -309,10 +332,16 @@ class RendezvousFamily:
         return solution, time.perf_counter() - start
 
     def _warm_start(
-        self, instance: RendezvousInstance, cvx: Solution, cvx_time: float
+        self,
+        instance: RendezvousInstance,
+        cvx: Solution,
+        cvx_time: float,
+        tpbvp: tuple[Solution, float] | None,
     ) -> tuple[Solution, float]:
         if self.config.warmstart == "convex":
             return cvx, cvx_time
+        if tpbvp is not None:  # the stored Problem 1 twin is the warm start
+            return tpbvp
         start = time.perf_counter()
         warm = solve(instance, "tpbvp", config=self.config.solver, verify=False)
         return warm, time.perf_counter() - start
@@ -333,6 +362,7 @@ def build(config: Mapping[str, Any] | None = None) -> RendezvousFamily:
 
 SPEC = FamilySpec(
     name="rendezvous",
-    summary="ISS rendezvous in ROE: convex (Problem 2) and SCP (Problem 3) twins (ART dataset)",
+    summary="ISS rendezvous in ROE: TPBVP (Problem 1), convex (Problem 2) and SCP (Problem 3) "
+    "twins (ART dataset)",
     build=build,
 )
