@@ -26,7 +26,7 @@ from scpformer.data.rendezvous_family import (
     instance_from_theta,
     theta_vector,
 )
-from scpformer.problems.rendezvous import RendezvousScenario, linear_model
+from scpformer.problems.rendezvous import RendezvousScenario, linear_model, solve
 from scpformer.problems.rendezvous.instance import SampleRanges
 
 pytestmark = pytest.mark.slow  # every test solves rendezvous instances (~0.3 s each)
@@ -177,3 +177,27 @@ def test_cli_generates_describes_verifies_and_splits_a_rendezvous_dataset(tmp_pa
     assert "ok:" in capsys.readouterr().out
     assert main([*argv, "--warmstart", "tpbvp"]) == 2  # another configuration, same folder
     assert "(config.warmstart: 'convex' there, 'tpbvp' here)" in capsys.readouterr().err
+
+
+def test_the_tpbvp_twin_is_a_direct_problem_1_solve(rdv_dataset):
+    data = all_columns(rdv_dataset.folder)
+    for i in range(N_RDV):
+        instance = RendezvousFamily().sample(instance_rng(RDV_SEED, i))
+        direct = solve(instance, "tpbvp", verify=False)
+        assert data["tpbvp_status"][i] == direct.status.value == "converged"
+        np.testing.assert_allclose(data["tpbvp_dv"][i], direct.trajectory.u, atol=1e-9)
+        np.testing.assert_allclose(data["tpbvp_roe"][i], direct.trajectory.x, atol=1e-6)
+        assert data["tpbvp_cost"][i] == pytest.approx(direct.cost, rel=1e-9)
+        # no waypoint, cone or keep-out zone: never dearer than Problem 2
+        assert data["tpbvp_cost"][i] <= data["cvx_cost"][i] * (1 + 1e-6)
+
+
+def test_a_manifest_from_before_the_tpbvp_twin_rebuilds_without_it():
+    config = RendezvousFamily().config_dict()
+    del config["tpbvp_twin"]  # what datasets made before the twin existed hold
+    old = build_family("rendezvous", config)
+    assert old.twins == ("scp", "cvx") and old == RendezvousFamily(
+        RendezvousDataConfig(tpbvp_twin=False)
+    )
+    names = {f.name for f in full_schema(old)}
+    assert "cvx_roe" in names and not any(n.startswith("tpbvp_") for n in names)

@@ -44,6 +44,17 @@ def test_items_are_art_sequences_of_both_twins(split_rdv):
     }
 
 
+def test_the_tpbvp_twin_is_served_only_when_named_with_its_own_statistics(split_rdv):
+    folder, splits = split_rdv
+    view = ArtSequenceDataset(folder, "train", twins=["tpbvp"])
+    assert view.twins == ("tpbvp",) and len(view) == len(splits.indices["train"])
+    samples = storage.ShardedSamples(folder)
+    position = int(view.items[0, 0])
+    mean, std = pooled_stats([splits.stats["tpbvp_rtn"]])
+    expected = (samples.read("tpbvp_rtn", position)[:100] - mean[:100]) / std[:100]
+    np.testing.assert_allclose(view[0]["state"], expected, rtol=1e-5, atol=1e-5)
+
+
 def test_raw_items_are_the_stored_sequences(split_rdv):
     folder, _ = split_rdv
     samples = storage.ShardedSamples(folder)

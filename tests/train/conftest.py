@@ -54,6 +54,15 @@ def toy_rdv_no_val(tmp_path_factory, toy_unsplit):
 
 
 @pytest.fixture(scope="session")
+def toy_rdv_tpbvp(tmp_path_factory):
+    """Toy rendezvous data that also holds the Problem 1 twin (``tpbvp``), split."""
+    family = ToyRendezvousFamily(twins=("scp", "cvx", "tpbvp"))
+    folder = _generate(tmp_path_factory, family, "toy-tpbvp")
+    make_splits(folder, SplitConfig(fractions=(0.5, 0.25, 0.25), seed=1))
+    return folder
+
+
+@pytest.fixture(scope="session")
 def toy_robust(tmp_path_factory):
     """Toy robust-rendezvous data (twins ps/cvx), split with a validation split."""
     family = ToyRendezvousFamily(name="robust-rendezvous", twins=("ps", "cvx"))

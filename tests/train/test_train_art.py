@@ -176,3 +176,21 @@ def test_robust_rendezvous_models_get_the_target_token(toy_robust, tmp_path):
     assert result.data.train.tensors["target"].shape[1:] == (6,)
     loaded = load_checkpoint(tmp_path / "run", family="robust-rendezvous", models=STANDIN_MODELS)
     assert loaded.config.target_dim == 6
+
+
+def test_training_learns_from_the_named_twins_only_and_resumes_with_them(toy_rdv_tpbvp, tmp_path):
+    default = _load(toy_rdv_tpbvp)
+    assert default.twins == ("scp", "cvx")  # the Problem 1 twin is a reference by default
+    tpbvp = _load(toy_rdv_tpbvp, twins=["tpbvp"])
+    view = ArtSequenceDataset(toy_rdv_tpbvp, "train", twins=["tpbvp"], normalize=False)
+    assert tpbvp.twins == ("tpbvp",) and len(tpbvp.train) == len(view)
+    result = train("art", data=toy_rdv_tpbvp, out=tmp_path / "run", twins=["tpbvp"],
+                   models=STANDIN_MODELS, overrides=FAST | {"epochs": 1}, progress=False)  # fmt: skip
+    assert result.data.twins == ("tpbvp",)
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["twins"] == ["tpbvp"]
+    resumed = train("art", data=toy_rdv_tpbvp, out=tmp_path / "run", resume=True,
+                    models=STANDIN_MODELS, overrides=FAST | {"epochs": 2}, progress=False)  # fmt: skip
+    assert resumed.data.twins == ("tpbvp",) and resumed.resumed_from == 1
+    with pytest.raises(ValueError, match=r"learned from twins \('tpbvp',\), not \('cvx',\)"):
+        train("art", data=toy_rdv_tpbvp, out=tmp_path / "run", resume=True, twins=["cvx"],
+              models=STANDIN_MODELS, overrides=FAST | {"epochs": 3}, progress=False)  # fmt: skip

@@ -55,6 +55,15 @@ def test_bad_data_is_a_one_line_error(toy_unsplit, toy_other_family, tmp_path, c
     one_line_error(capsys, "reads rendezvous or robust-rendezvous data, not pdg6dof")
     assert _train("lstm", "--data", str(toy_unsplit), *out, "--lr", "-1") == 2
     one_line_error(capsys, "lr must be positive")
+    assert _train("art", "--data", str(toy_unsplit), *out, "--twin", "tpbvp") == 2
+    one_line_error(capsys, "no splits in")
+
+
+def test_an_unknown_twin_is_a_one_line_error(toy_rdv, tmp_path, capsys):
+    out = ["--out", str(tmp_path / "run")]
+    assert _train("art", "--data", str(toy_rdv), *out, "--twin", "tpbvp") == 2
+    one_line_error(capsys, "twins must be a non-empty subset of ('scp', 'cvx'), got ('tpbvp',)")
+    assert not (tmp_path / "run").exists()
     assert not (tmp_path / "run").exists()
 
 

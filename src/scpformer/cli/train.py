@@ -51,6 +51,15 @@ def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
         help="state frame of the sequences (default: rtn; a resumed run keeps its own)",
     )
     parser.add_argument(
+        "--twin",
+        action="append",
+        default=None,
+        metavar="TWIN",
+        help="trajectory twin to learn from, repeatable: cvx (Problem 2), scp (Problem 3), "
+        "tpbvp (Problem 1, Table 2), ps (robust) (default: the dataset's cvx and scp, or ps "
+        "and cvx; a resumed run keeps its own)",
+    )
+    parser.add_argument(
         "--resume", action="store_true", help="continue the run in --out from its checkpoint"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -68,6 +77,7 @@ def run_train(args: argparse.Namespace) -> int:
         out=args.out,
         preset=args.preset,
         frame=args.frame,
+        twins=args.twin,
         overrides=overrides(args, TrainConfig),
         resume=args.resume,
         progress=not args.no_progress,
@@ -84,6 +94,7 @@ def summary(result) -> str:
         f"{result.run}: {state.epoch} epoch(s) of {result.train_config.epochs}"
         + (f" (resumed after epoch {result.resumed_from})" if result.resumed_from else ""),
         f"data: {len(data.train)} training / {len(data.validation)} validation sequences "
+        f"of twin(s) {', '.join(data.twins)} "
         f"({data.train_instances} / {data.validation_instances} instances), read in "
         f"{data.read_seconds:.2f} s; validation: {data.validation_source}",
     ]

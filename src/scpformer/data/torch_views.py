@@ -140,6 +140,9 @@ class SolutionDataset(_StoredView):
 # -- ART (rendezvous families) -------------------------------------------------------------------
 ART_FAMILIES = ("rendezvous", "robust-rendezvous")
 ART_FRAMES = ("rtn", "roe")
+# Twins stored as references (the rendezvous Problem 1 twin: Table 2, the CVX-TPBVP warm start),
+# served only when asked for by name: ART learns from Problems 2 and 3 (ART paper Sec. 3).
+REFERENCE_TWINS = ("tpbvp",)
 
 
 def art_twins(manifest: Manifest) -> tuple[str, ...]:
@@ -148,6 +151,11 @@ def art_twins(manifest: Manifest) -> tuple[str, ...]:
     suffixes = ("_status", "_roe", "_rtn", "_dv", "_rtg", "_ctg")
     prefixes = [f.name[: -len("_dv")] for f in manifest.schema if f.name.endswith("_dv")]
     return tuple(p for p in prefixes if all(p + s in names for s in suffixes))
+
+
+def training_twins(manifest: Manifest) -> tuple[str, ...]:
+    """The twins ART learns from unless told otherwise: the stored ones but the references."""
+    return tuple(p for p in art_twins(manifest) if p not in REFERENCE_TWINS)
 
 
 def pooled_stats(stats: Sequence[Stats]) -> tuple[np.ndarray, np.ndarray]:
@@ -171,9 +179,11 @@ def pooled_stats(stats: Sequence[Stats]) -> tuple[np.ndarray, np.ndarray]:
 class ArtSequenceDataset(_StoredView):
     """ART sequences (reward-to-go, constraint-to-go, state, action) of the rendezvous twins.
 
-    Every sample of a rendezvous dataset holds two trajectories of one instance, the convex
-    (``cvx``, Problem 2) and the SCP (``scp``, Problem 3) twin; ART trains on both. Twins share
-    the sample, hence its ``base_index``, so grouped splits never separate them.
+    Every sample of a rendezvous dataset holds trajectories of one instance, the convex
+    (``cvx``, Problem 2) and the SCP (``scp``, Problem 3) twin, which ART trains on, and in
+    newer datasets the TPBVP (``tpbvp``, Problem 1) twin, served only when ``twins`` names it
+    (:data:`REFERENCE_TWINS`). Twins share the sample, hence its ``base_index``, so grouped
+    splits never separate them.
 
     One item per (sample, twin) whose own status (``p_status``) is wanted, with N impulses:
 
@@ -192,8 +202,8 @@ class ArtSequenceDataset(_StoredView):
 
     All but ``twin`` and ``base_index`` are float32. With ``normalize``, ``state``, ``action``
     and ``theta`` are standardized per element with statistics of the training split only
-    (``dataset split``); states and actions use the statistics pooled over every twin of the
-    dataset, so that one physical state has one normalized value whichever twin it is in.
+    (``dataset split``); states and actions use the statistics pooled over the twins the view
+    serves, so that one physical state has one normalized value whichever twin it is in.
     ``rtg`` and ``ctg`` are served raw, as ART conditions on them. With ``pairs`` there is one
     item per sample whose requested twins all have a wanted status, holding every key above
     prefixed by the twin (``scp_state``, ``cvx_state``, ...) plus ``base_index``.
@@ -207,7 +217,8 @@ class ArtSequenceDataset(_StoredView):
     frame
         State representation: ``rtn`` (Psi x, [m, m/s]) or ``roe`` (a dalpha, [m]).
     twins
-        Which twins to serve (default: every twin of the dataset).
+        Which twins to serve (default: :func:`training_twins`, every stored twin but the
+        Problem 1 reference).
     normalize, statuses
         As in the other views; ``statuses`` applies to each twin's own status.
     pairs
@@ -234,7 +245,7 @@ class ArtSequenceDataset(_StoredView):
         if frame not in ART_FRAMES:
             raise ValueError(f"frame must be one of {ART_FRAMES}, got {frame!r}")
         stored = art_twins(manifest)
-        self.twins = stored if twins is None else tuple(twins)
+        self.twins = training_twins(manifest) if twins is None else tuple(twins)
         unknown = sorted(set(self.twins) - set(stored))
         if unknown or not self.twins:
             raise ValueError(f"twins must be a non-empty subset of {stored}, got {self.twins}")
@@ -242,7 +253,7 @@ class ArtSequenceDataset(_StoredView):
         self.n_steps = manifest.field(f"{self.twins[0]}_dv").shape[0]
         self.items = self._items()  # (items, 2): sample position, twin number (-1: pair)
         self.base_index = self.samples.column("base_index")  # small indexing column
-        self._stats = self._pooled(stored) if normalize else {}
+        self._stats = self._pooled(self.twins) if normalize else {}
 
     def _items(self) -> np.ndarray:
         ok = np.stack([self._status_mask(f"{p}_status") & self.in_split for p in self.twins])

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from scpformer.data.splits import STD_FLOOR
-from scpformer.data.torch_views import ArtSequenceDataset, art_twins
+from scpformer.data.torch_views import ArtSequenceDataset
 
 KEYS = ("state", "action", "rtg", "ctg", "target")
 _ARRAYS = ("state_mean", "state_std", "action_mean", "action_std", "target_mean", "target_std")
@@ -171,7 +171,7 @@ class ArtNormalization:
         """
         if view.splits is None:
             raise ValueError("the view has no splits: run `scpformer dataset split` first")
-        stats = view._stats or view._pooled(art_twins(view.samples.manifest))
+        stats = view._stats or view._pooled(view.twins)
         (state_mean, state_std), (action_mean, action_std) = stats["state"], stats["action"]
         state_std = _per_step_floor(state_mean, state_std)
         action_std = _per_step_floor(action_mean, action_std)

@@ -25,6 +25,7 @@ import dataclasses
 import json
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -64,6 +65,7 @@ class ArtData:
     normalization: Any  # ArtNormalization, from the training split
     family: str
     frame: str
+    twins: tuple[str, ...]  # the trajectory twins learned from
     digest: str  # sha256 of manifest.json
     splits_digest: str  # sha256 of splits.h5 (which instances are training ones)
     n_steps: int  # N: impulses per trajectory
@@ -128,12 +130,18 @@ def load_art_data(
     validation_fraction: float,
     seed: int,
     target: bool = False,
+    twins: Sequence[str] | None = None,
 ) -> ArtData:
-    """Read, split and normalize a rendezvous dataset for training (see the module docstring)."""
+    """Read, split and normalize a rendezvous dataset for training (see the module docstring).
+
+    ``twins`` names the trajectory twins to learn from (default: the dataset's training twins,
+    :func:`~scpformer.data.torch_views.training_twins`).
+    """
     start = time.perf_counter()
     folder = Path(folder)
-    train_view = ArtSequenceDataset(folder, "train", frame=frame, normalize=False)
-    val_view = ArtSequenceDataset(folder, "validation", frame=frame, normalize=False)
+    views = {"frame": frame, "normalize": False, "twins": twins}
+    train_view = ArtSequenceDataset(folder, "train", **views)
+    val_view = ArtSequenceDataset(folder, "validation", **views)
     train = read_sequences(train_view)
     if len(train["base_index"]) == 0:
         raise DatasetError(f"the training split of {folder} holds no solved trajectory")
@@ -157,6 +165,7 @@ def load_art_data(
         normalization=normalization,
         family=train_view.samples.manifest.family,
         frame=frame,
+        twins=train_view.twins,
         digest=manifest_digest(folder),
         splits_digest=file_sha256(folder / SPLITS_NAME),
         n_steps=train_view.n_steps,
@@ -197,6 +206,7 @@ def train_sequence_model(
     out: Path | str,
     preset: str | None = None,
     frame: str | None = None,
+    twins: Sequence[str] | None = None,
     overrides: dict[str, Any] | None = None,
     resume: bool = False,
     models: Any | None = None,
@@ -215,6 +225,10 @@ def train_sequence_model(
         keeps its own).
     frame
         ``rtn`` or ``roe`` (default ``rtn``; a resumed run keeps its own).
+    twins
+        Trajectory twins to learn from, e.g. ``("tpbvp",)`` for the ART paper's Table 2
+        (default: the dataset's training twins, ``cvx`` and ``scp`` for rendezvous data; a
+        resumed run keeps its own).
     overrides
         :class:`TrainConfig` fields to change (None values ignored), e.g. ``epochs``, ``lr``.
     resume
@@ -242,13 +256,14 @@ def train_sequence_model(
     previous = _previous_run(out, kind, frame, resume)
     if previous is not None:
         frame, preset, config = _resumed_settings(previous, preset, overrides)
+        twins = _resumed_twins(previous, twins)
     else:
         frame, preset = frame or "rtn", preset or "small"
         config = train_config(preset, model_defaults=api.TRAIN_DEFAULTS, **overrides)
     world, device = distributed.start(config.device)
     try:
-        return _run(kind, api, Path(data), out, preset, frame, config, previous, world, device,
-                    progress)  # fmt: skip
+        return _run(kind, api, Path(data), out, preset, (frame, twins), config, previous, world,
+                    device, progress)  # fmt: skip
     finally:
         distributed.stop(world)
 
@@ -289,19 +304,31 @@ def _resumed_settings(
     return previous["frame"], stored_preset, dataclasses.replace(stored, **kept)
 
 
+def _resumed_twins(previous: dict[str, Any], twins: Sequence[str] | None) -> tuple[str, ...] | None:
+    """The twins of a resumed run: the ones it named (None: the dataset's default twins, also for
+    runs that predate the choice); asking for others is an error."""
+    stored = previous["extra"].get("twins")
+    stored = None if stored is None else tuple(stored)
+    if twins is not None and tuple(twins) != stored:
+        what = "the dataset's default twins" if stored is None else f"twins {stored}"
+        raise ValueError(f"the run to resume learned from {what}, not {tuple(twins)}")
+    return stored
+
+
 def _run(
     kind: str,
     api: Any,
     data_folder: Path,
     out: Path,
     preset: str,
-    frame: str,
+    selection: tuple[str, Sequence[str] | None],
     config: TrainConfig,
     previous: dict[str, Any] | None,
     world: distributed.World,
     device: torch.device,
     progress: bool,
 ) -> RunResult:
+    frame, twins = selection  # state frame and trajectory twins learned from
     seed_everything(config.seed)
     if previous is not None:
         model_config = api.config_from_dict(kind, from_plain(previous["config"]))
@@ -315,6 +342,7 @@ def _run(
         validation_fraction=config.validation_fraction,
         seed=config.seed,
         target=wants_target,
+        twins=twins,
     )
     if previous is not None:
         stored = (previous["manifest_digest"], previous["extra"].get("splits_digest"))
@@ -332,6 +360,7 @@ def _run(
         "data": str(data_folder.resolve()),
         "family": data.family,
         "frame": frame,
+        "twins": list(data.twins),
         "manifest_digest": data.digest,
         "splits_digest": data.splits_digest,
         "n_steps": data.n_steps,
@@ -359,6 +388,7 @@ def _run(
             "preset": preset,
             "train_config": config.to_dict(),
             "splits_digest": data.splits_digest,
+            "twins": None if twins is None else list(twins),  # None: the dataset's default
         }
         fields = dict(
             model=model,
