@@ -28,6 +28,16 @@ def tiny_data(tmp_path_factory):
     return out
 
 
+@pytest.fixture(scope="session")
+def tiny_data_without_tpbvp(tmp_path_factory):
+    """4 rendezvous instances of a dataset without the Problem 1 twin (as made before it)."""
+    family = RendezvousFamily(RendezvousDataConfig(verify=False, tpbvp_twin=False))
+    out = tmp_path_factory.mktemp("exp-old") / "ds"
+    generate(family, GenerateConfig(n=4, out=out, shard_size=4, workers=1, seed=11))
+    make_splits(out, SplitConfig(fractions=(0.5, 0.0, 0.5), seed=0))
+    return out
+
+
 def _random_run(folder, data, kind):
     import torch
 

@@ -46,10 +46,32 @@ def test_table_3_compares_every_model_in_both_modes_with_the_scp_twin(
     assert (out / "forecast.png").is_file()
 
 
-def test_table_2_says_the_tpbvp_twin_is_missing(tmp_path, tiny_data, tiny_runs):
-    code, out = _run(tmp_path, tiny_data, tiny_runs, "art-forecast-tpbvp", kinds=("art",))
+def test_table_2_compares_with_the_tpbvp_twin_conditioned_on_its_own_cost(
+    tmp_path, tiny_data, tiny_runs
+):
+    from scpformer.experiments.runner import read_fields
+
+    code, out = _run(tmp_path, tiny_data, tiny_runs, "art-forecast-tpbvp", kinds=("art", "gru"))
     assert code == 0
-    assert "dataset has no `tpbvp` twin" in (out / "report.md").read_text()
+    with (out / "results.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 2
+    positions = [int(r["index"]) for r in rows]
+    for row, f in zip(rows, read_fields(tiny_data, positions, ["tpbvp_cost"]), strict=True):
+        assert float(row["true_cost_mm_s"]) == pytest.approx(1e3 * f["tpbvp_cost"])
+        assert float(row["art_dynamics_cost_mm_s"]) > 0.0
+    text = (out / "report.md").read_text()
+    assert "Table 2: ours / paper" in text and "226.14" in text  # the paper's ART cost
+    assert "R(t_1) = -J_TPBVP (dataset's tpbvp_cost)" in text
+
+
+def test_table_2_says_the_tpbvp_twin_is_missing(tmp_path, tiny_data_without_tpbvp, tiny_runs):
+    code, out = _run(
+        tmp_path, tiny_data_without_tpbvp, tiny_runs, "art-forecast-tpbvp", kinds=("art",)
+    )
+    assert code == 0
+    text = (out / "report.md").read_text()
+    assert "dataset has no `tpbvp` twin" in text and "--twin tpbvp" in text
     assert not (out / "results.csv").exists()
 
 

@@ -2,18 +2,22 @@
 
 On test-split instances, every given model (ART, GRU, LSTM; kinds read from the checkpoints)
 generates the whole trajectory transformer-only (Algorithm 1) and with the dynamics in the
-loop (Algorithm 2), one instance per call, conditioned on ``R(t_1) = -J_CVX`` (the dataset's
-Problem 2 cost: the deployable conditioning of the paper's Sec. 3) and ``C(t_1) = 0``. Each
-prediction is compared with the twin the table names by
+loop (Algorithm 2), one instance per call. Table 3 conditions on ``R(t_1) = -J_CVX`` (the
+dataset's Problem 2 cost: the deployable conditioning of the paper's Sec. 3) and
+``C(t_1) = 0``. Table 2's models learn the Problem 1 (TPBVP) twin, which has no keep-out zone
+and a lower cost than Problem 2, so they are conditioned on that convex problem's own values,
+``R(t_1) = -J_TPBVP`` and ``C(t_1) = C_TPBVP(t_1)`` (the paper does not say what it used).
+Each prediction is compared with the twin the table names by
 :func:`scpformer.experiments.forecast.forecast_metrics`; "True" is the optimizer's own cost
 and solve time as stored in the dataset (measured while the dataset was generated).
 
-Table 2 needs the Problem 1 (TPBVP) twin: the rendezvous family stores the Problem 2 and
-Problem 3 twins only, so on such a dataset ``art-forecast-tpbvp`` writes a report saying so.
+Table 2 needs the Problem 1 (TPBVP) twin, which rendezvous datasets made before it existed
+lack: on such a dataset ``art-forecast-tpbvp`` writes a report saying so.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -61,6 +65,9 @@ FAMILY = {  # dataset family of each experiment
     "art-forecast-scp": "rendezvous",
     "robust-forecast": "robust-rendezvous",
 }
+# (cost field, constraint-to-go field or None for C(t_1) = 0) each twin's models condition on
+CONDITIONING = {"tpbvp": ("tpbvp_cost", "tpbvp_ctg"), "scp": ("cvx_cost", None),
+                "ps": ("cvx_cost", None)}  # fmt: skip
 MODES = ("transformer", "dynamics")
 KINDS = ("gru", "lstm", "art")
 METRICS = tuple(f.name for f in fields(ForecastMetrics) if f.name != "true_cost_mm_s")
@@ -126,11 +133,13 @@ def columns(kinds: tuple[str, ...]) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class Task:
-    """One test instance: its position, theta, ``J_CVX`` and the true twin."""
+    """One test instance: its position, theta, ``J_CVX``, the conditioning and the true twin."""
 
     index: int
     theta: np.ndarray
     j_cvx: float
+    rtg0: float  # R(t_1)
+    ctg0: float  # C(t_1)
     true_roe: np.ndarray
     true_rtn: np.ndarray
     true_dv: np.ndarray
@@ -169,8 +178,8 @@ class ForecastSolver(ModelSolver):
                     adapter,
                     frame=ckpt.frame,
                     art_mode=mode,
-                    rtg0=np.array([-task.j_cvx]),
-                    ctg0=np.zeros(1),
+                    rtg0=np.array([task.rtg0]),
+                    ctg0=np.array([task.ctg0]),
                 )
                 x, u = rollout.x[0], rollout.u[0]
                 metrics = forecast_metrics(
@@ -217,7 +226,7 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
         n=int(positions.size),
         kinds=list(kinds),
         twin=twin,
-        conditioning="R(t_1) = -J_CVX (dataset's cvx_cost), C(t_1) = 0",
+        conditioning=conditioning_text(twin),
     )
     check_settings(options.out, settings)
     report = rep.Report(
@@ -231,9 +240,12 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
     if f"{twin}_roe" not in {f.name for f in manifest.schema}:
         report.sections.append(("Not run", missing_twin_text(name, twin)))
         return report.write(options.out)
+    cost_field, ctg_field = CONDITIONING[twin]
     names = [
         "theta",
         "cvx_cost",
+        cost_field,
+        *([ctg_field] if ctg_field else []),
         f"{twin}_roe",
         f"{twin}_rtn",
         f"{twin}_dv",
@@ -243,8 +255,8 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
     ]
     tasks = []
     for p, f in zip(positions, read_fields(data, positions, names), strict=True):
-        if f[f"{twin}_status"] != "converged" or not np.isfinite(f["cvx_cost"]):
-            continue  # no true trajectory to compare with
+        if f[f"{twin}_status"] != "converged" or not np.isfinite(f[cost_field]):
+            continue  # no true trajectory to compare with, or no conditioning
         true_time = float(f[f"{twin}_solve_time"]) + (
             float(f["cvx_solve_time"]) if twin in ("scp", "ps") else 0.0
         )
@@ -253,6 +265,8 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
                 int(p),
                 np.asarray(f["theta"]),
                 float(f["cvx_cost"]),
+                -float(f[cost_field]),
+                float(f[ctg_field][0]) if ctg_field else 0.0,
                 np.asarray(f[f"{twin}_roe"]),
                 np.asarray(f[f"{twin}_rtn"]),
                 np.asarray(f[f"{twin}_dv"]),
@@ -268,7 +282,8 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
         (
             "Instances",
             f"{len(rows)} of {positions.size} selected test "
-            f"instances (those with a converged {twin} twin: {len(tasks)}).",
+            f"instances (those with a converged {twin} twin: {len(tasks)}). "
+            + learned_twins_text(study.models, twin),
         )
     )
     if rows:
@@ -279,11 +294,34 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
 def missing_twin_text(name: str, twin: str) -> str:
     return (
         f"{TABLE[name]} compares predictions with {PROBLEM[twin]} solutions, and this "
-        f"dataset has no `{twin}` twin: the rendezvous family stores the Problem 2 "
-        "(`cvx`) and Problem 3 (`scp`) twins only. Adding the Problem 1 twin to the "
-        "family (and training on it) is left for later; `art-forecast-scp` (Table 3) "
-        "runs on this dataset."
+        f"dataset has no `{twin}` twin: it was made before the rendezvous family stored the "
+        "Problem 1 twin (it holds `cvx` and `scp` only). Generate a new dataset (the family "
+        "stores `tpbvp` by default), train the models on it with `--twin tpbvp` and rerun; "
+        "`art-forecast-scp` (Table 3) runs on this dataset."
     )
+
+
+def conditioning_text(twin: str) -> str:
+    """What the models are conditioned on, for the settings and the report."""
+    cost, ctg = CONDITIONING[twin]
+    name = "J_CVX" if cost == "cvx_cost" else f"J_{twin.upper()}"
+    where = f"C(t_1) = {twin.upper()}'s C(t_1) (dataset's {ctg}[0])" if ctg else "C(t_1) = 0"
+    return f"R(t_1) = -{name} (dataset's {cost}), {where}"
+
+
+def learned_twins_text(models: list[Path] | tuple[Path, ...], twin: str) -> str:
+    """Which twins each model learned from (``RUN/config.json``), flagging other twins."""
+    parts = []
+    for run in models:
+        folder = Path(run) if Path(run).is_dir() else Path(run).parent
+        try:
+            learned = json.loads((folder / "config.json").read_text()).get("twins")
+        except (OSError, ValueError):
+            learned = None
+        names = ", ".join(learned) if learned else "unknown (run predates the record)"
+        flag = "" if learned == [twin] or twin != "tpbvp" else " (not the table's twin alone)"
+        parts.append(f"`{folder.name}` learned from {names}{flag}")
+    return "Models: " + "; ".join(parts) + "."
 
 
 def means(rows: list[dict[str, str]], kinds: tuple[str, ...]) -> dict[str, dict[str, float]]:

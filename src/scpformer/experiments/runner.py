@@ -446,7 +446,10 @@ def dataset_commands(folder: Path) -> list[str]:
         line += f" --shard-size {manifest.shard_size}"
     try:
         defaults = build_family(manifest.family).config_dict()
-        changed = _differences(defaults, manifest.config)
+        # rebuilt: values a manifest predates take the ones that dataset was made with
+        changed = _differences(
+            defaults, build_family(manifest.family, manifest.config).config_dict()
+        )
     except Exception:  # an unknown or changed family: say nothing about its options
         changed = []
     commands = [line]
@@ -487,6 +490,7 @@ def model_command(run: Path) -> str:
         f"--out {folder}",
         f"--preset {config.get('preset', '?')}",
         f"--frame {config.get('frame', '?')}",
+        *(f"--twin {twin}" for twin in config.get("twin_option") or ()),
     ]
     for key, flag in (
         ("epochs", "--epochs"),

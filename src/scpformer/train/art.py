@@ -361,6 +361,7 @@ def _run(
         "family": data.family,
         "frame": frame,
         "twins": list(data.twins),
+        "twin_option": None if twins is None else list(twins),  # --twin (None: the default)
         "manifest_digest": data.digest,
         "splits_digest": data.splits_digest,
         "n_steps": data.n_steps,
