@@ -184,13 +184,15 @@ def test_training_learns_from_the_named_twins_only_and_resumes_with_them(toy_rdv
     tpbvp = _load(toy_rdv_tpbvp, twins=["tpbvp"])
     view = ArtSequenceDataset(toy_rdv_tpbvp, "train", twins=["tpbvp"], normalize=False)
     assert tpbvp.twins == ("tpbvp",) and len(tpbvp.train) == len(view)
-    result = train("art", data=toy_rdv_tpbvp, out=tmp_path / "run", twins=["tpbvp"],
-                   models=STANDIN_MODELS, overrides=FAST | {"epochs": 1}, progress=False)  # fmt: skip
-    assert result.data.twins == ("tpbvp",)
+
+    def run(epochs, **kwargs):
+        overrides = FAST | {"epochs": epochs}
+        return train("art", data=toy_rdv_tpbvp, out=tmp_path / "run", models=STANDIN_MODELS,
+                     overrides=overrides, progress=False, **kwargs)  # fmt: skip
+
+    assert run(1, twins=["tpbvp"]).data.twins == ("tpbvp",)
     assert json.loads((tmp_path / "run" / "config.json").read_text())["twins"] == ["tpbvp"]
-    resumed = train("art", data=toy_rdv_tpbvp, out=tmp_path / "run", resume=True,
-                    models=STANDIN_MODELS, overrides=FAST | {"epochs": 2}, progress=False)  # fmt: skip
+    resumed = run(2, resume=True)
     assert resumed.data.twins == ("tpbvp",) and resumed.resumed_from == 1
     with pytest.raises(ValueError, match=r"learned from twins \('tpbvp',\), not \('cvx',\)"):
-        train("art", data=toy_rdv_tpbvp, out=tmp_path / "run", resume=True, twins=["cvx"],
-              models=STANDIN_MODELS, overrides=FAST | {"epochs": 3}, progress=False)  # fmt: skip
+        run(3, resume=True, twins=["cvx"])
