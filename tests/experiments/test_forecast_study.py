@@ -1,5 +1,6 @@
 import csv
 
+import numpy as np
 import pytest
 
 from scpformer.cli.main import main
@@ -93,7 +94,28 @@ def test_conditioning_sweeps_requested_values_and_records_realized_ones(
         assert requested[0] == "0.0" and len(row["ctg_realized"].split()) == len(requested)
         assert len(row["cost_realized_m_s"].split()) == len(row["cost_requested_m_s"].split())
     assert (out / "fig3_conditioning.png").is_file()
-    assert "realized vs requested C(t_1)" in (out / "report.md").read_text()
+    text = (out / "report.md").read_text()
+    assert "realized vs requested C(t_1)" in text and "median per-instance slope" in text
+    assert "Why the cost follows the request weakly" in text
+
+
+def test_the_cost_sweep_lies_mostly_inside_the_dataset_range():
+    from scpformer.experiments.conditioning import SWEEP, cost_sweep
+
+    sweep = np.array(cost_sweep((0.2, 0.3)))
+    assert sweep.size == SWEEP and np.all(np.diff(sweep) > 0)
+    inside = (sweep >= 0.2) & (sweep <= 0.3)
+    assert inside.sum() == SWEEP - 4 and sweep[0] == pytest.approx(0.1)
+    assert sweep[-1] == pytest.approx(0.45)
+
+
+def test_the_median_slope_recovers_each_instances_response():
+    from scpformer.experiments.conditioning import median_slope
+
+    requested = np.array([1.0, 2.0, 3.0, 4.0])
+    realized = np.stack([5.0 + s * requested for s in (0.1, 0.5, 2.0)])  # offsets differ
+    assert median_slope(requested, realized) == pytest.approx(0.5)
+    assert np.isnan(median_slope(requested[:1], realized[:, :1]))
 
 
 def test_robust_forecast_compares_the_robust_art_with_the_passively_safe_twin(
