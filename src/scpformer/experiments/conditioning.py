@@ -143,6 +143,8 @@ def twin_spread(folder: Path) -> dict[str, float]:
     columns = training_columns(folder)
     cost, ctg = columns["cost"], columns["ctg"]
     ok = np.isfinite(cost).all(axis=1)
+    if not ok.any():
+        raise ValueError(f"--data {folder}: no training instance with both twins solved")
     within = 100.0 * np.abs(cost[ok, 1] - cost[ok, 0]) / cost[ok, 0]
     return {
         "cost_within_median_pct": float(np.median(within)),
@@ -206,8 +208,9 @@ def why_text(folder: Path) -> str:
     """What the training data teaches about R(t_1), measured on the training split."""
     t = twin_spread(folder)
     return (
-        "ART learns R(t_1) only from how the trajectories of the training data differ for "
-        "similar states. Ours has two twins per instance (Problems 2 and 3), and their costs "
+        "A likely reason, measured on the training split: ART can learn to follow R(t_1) "
+        "only from training trajectories whose cost differs for the same or similar states. "
+        "Ours has two twins per instance (Problems 2 and 3), and their costs "
         f"differ by a median of {rep.fmt(t['cost_within_median_pct'])}% (90th percentile "
         f"{rep.fmt(t['cost_within_p90_pct'])}%), while J_CVX varies between instances with a "
         f"std of {rep.fmt(1e3 * t['cost_between_std_m_s'])} mm/s: within one instance R(t_1) "
