@@ -318,7 +318,7 @@ def learned_twins_text(models: list[Path] | tuple[Path, ...], twin: str) -> str:
             learned = json.loads((folder / "config.json").read_text()).get("twins")
         except (OSError, ValueError):
             learned = None
-        names = ", ".join(learned) if learned else "unknown (run predates the record)"
+        names = ", ".join(learned) if learned else "cvx, scp (run predates the record: the default)"
         flag = "" if learned == [twin] or twin != "tpbvp" else " (not the table's twin alone)"
         parts.append(f"`{folder.name}` learned from {names}{flag}")
     return "Models: " + "; ".join(parts) + "."
