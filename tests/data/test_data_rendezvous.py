@@ -201,3 +201,13 @@ def test_a_manifest_from_before_the_tpbvp_twin_rebuilds_without_it():
     )
     names = {f.name for f in full_schema(old)}
     assert "cvx_roe" in names and not any(n.startswith("tpbvp_") for n in names)
+
+
+def test_cli_can_skip_the_tpbvp_twin(tmp_path):
+    out = tmp_path / "ds"
+    argv = ["generate", "rendezvous", "--n", "1", "--out", str(out), "--workers", "1"]
+    assert main([*argv, "--no-tpbvp-twin", "--no-verify", "--quiet"]) == 0
+    manifest = storage.read_manifest(out)
+    assert manifest.config["tpbvp_twin"] is False
+    names = {f.name for f in manifest.schema}
+    assert "scp_dv" in names and "tpbvp_dv" not in names
