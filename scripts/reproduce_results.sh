@@ -10,7 +10,7 @@
 # Environment (defaults in brackets): DATA [/work/data] dataset root, RUNS [$DATA/runs] model
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
 # instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] epochs of the
-# rendezvous models, TPBVP_EPOCHS ["art:6 gru:8 lstm:8"] of the Table 2 models (Problem 1
+# rendezvous models, TPBVP_EPOCHS ["art:6 gru:4 lstm:4"] of the Table 2 models (Problem 1
 # twin), ROBUST_EPOCHS [12] of the robust ones, N_PDG [480] 6-DoF base instances
 # (seed PDG_SEED [2]; x8 rotations), RAY [unset] Ray address.
 set -euo pipefail
@@ -28,7 +28,7 @@ PDG=$DATA/pdg
 PDG8=$DATA/pdg8
 RDV=$DATA/rdv$N_RDV
 TPB=$DATA/rdv-tpbvp
-TPBVP_EPOCHS=${TPBVP_EPOCHS:-art:6 gru:8 lstm:8}
+TPBVP_EPOCHS=${TPBVP_EPOCHS:-art:6 gru:4 lstm:4}
 ROB=$DATA/rob$N_ROB
 EPOCHS_FLAG=${EPOCHS:+--epochs $EPOCHS}
 RAY_FLAG=${RAY:+--ray $RAY}
