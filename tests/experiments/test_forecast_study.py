@@ -64,7 +64,7 @@ def test_table_2_compares_with_the_tpbvp_twin_conditioned_on_its_own_cost(
     text = (out / "report.md").read_text()
     assert "Table 2: ours / paper" in text and "226.14" in text  # the paper's ART cost
     assert "R(t_1) = -J_TPBVP (dataset's tpbvp_cost)" in text
-    assert "Table 2: the convex solve is faster | 0.44 vs 0.28 s" in text
+    assert "(Table 2: the convex solve is faster) | 0.44 vs 0.28 s" in text
 
 
 def test_table_2_says_the_tpbvp_twin_is_missing(tmp_path, tiny_data_without_tpbvp, tiny_runs):
