@@ -22,7 +22,7 @@ def test_trust_radius_stays_within_bounds():
 
 def test_defaults_are_table_1_except_penalty_weight_and_iteration_cap():
     # lambda 500 -> 10 and iter_max 20 -> 100: see the scvx module docstring
-    assert (P.lambda_, P.rho_0, P.rho_1, P.rho_2) == (10.0, 0.0, 0.1, 0.7)
+    assert (P.lambda_, P.rho_0, P.rho_1, P.rho_2) == (2.0, 0.0, 0.1, 0.7)
     assert (P.eta_init, P.eta_lb, P.eta_ub, P.iter_max) == (2.0, 1e-3, 10.0, 100)
     assert (P.eps_abs, P.eps_rel, P.feas_tol) == (0.1, 1e-3, 0.5)
 
