@@ -34,11 +34,13 @@ from scpformer.problems.robust_rendezvous.montecarlo import propagate_drift_trut
 from scpformer.problems.robust_rendezvous.plan_dynamics import linearize_dynamics
 from scpformer.problems.robust_rendezvous.problem import replay
 from scpformer.problems.robust_rendezvous.safety import (
+    _arc_h,
     covariance_at_tstar,
     drift_geometry,
     evaluate_safety,
     linear_model,
     plan_safety,
+    sample_peaks,
 )
 from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig
 from scpformer.problems.robust_rendezvous.subproblem import ConicResult, SafetySubproblem
@@ -371,8 +373,8 @@ def test_chance_solution_passes_the_monte_carlo_check_at_the_design_level(solved
         results[mode] = monte_carlo(instance, sol.trajectory.x, sol.trajectory.u, cfg)
     assert results["chance"].passes()
     assert results["chance"].p_design.mean() < SOLVED.uncertainty.delta
-    assert not results["deterministic"].passes()
-    assert results["deterministic"].p_design.max() > 0.1
+    assert not results["deterministic"].passes()  # its arcs touch the ellipsoid at t*
+    assert results["deterministic"].p_design.max() > 10 * SOLVED.uncertainty.delta
 
 
 def test_chance_solution_passes_monte_carlo_in_the_truth_model_at_its_active_nodes(solved):
@@ -427,3 +429,21 @@ def test_the_papers_stm_model_remains_available_and_is_reported(tpbvp):
     assert sol.verification.node_violations["model_residual_m"] < 1e-3  # obeys the STM
     with pytest.raises(ValueError, match="dynamics must be one of"):
         RobustSolverConfig(dynamics="exact")
+
+
+def test_sample_peaks_ranks_local_maxima_and_pads_with_the_highest():
+    h = np.array([[0.0, 2.0, 1.0, 3.0, 0.5, 0.6], [5.0, 4.0, 3.0, 2.0, 1.0, 0.0]])
+    np.testing.assert_array_equal(sample_peaks(h, 3), [[3, 1, 5], [0, 0, 0]])
+
+
+def test_every_dip_of_an_arc_between_samples_is_refined(tpbvp):
+    """A second dip deeper than every sample is found: h is the max of a 2 s grid of each arc
+    (the chance margin included), whichever local maximum of the samples it sits next to."""
+    x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
+    model, geo = linear_model(INSTANCE), drift_geometry(INSTANCE)
+    ev = evaluate_safety(geo, model, x, u, INSTANCE, "chance")
+    tau = np.arange(0.0, INSTANCE.t_safety_s, 2.0)
+    dense = np.stack(
+        [_arc_h(geo, ev.y, np.full(ev.y.shape[0], t), ev.X, INSTANCE.uncertainty.q) for t in tau]
+    ).max(axis=0)
+    np.testing.assert_allclose(ev.h, dense, atol=1e-5)

@@ -11,7 +11,8 @@ Stages (robust ART paper, Section 5, "Dataset generation"):
    stage 2 did not converge). Not in the paper: when this run fails, stage 3 is run once more
    from stage 1 (the PS-CVX warm start) and the converged one is kept; on 50 sampled
    instances (seed 1, chance) the stage-2 warm start alone converged on 68% of them, the
-   stage-1 warm start alone on 78%, and the two together on 82%.
+   stage-1 warm start alone on 78%, and the two together on 82%. Stage 3 of this procedure
+   may take ``RobustSolverConfig.three_stage_iter_max`` (60) solves instead of Table 1's 20.
 
 The final feasible solution is kept: :func:`solve` returns stage 3 when it converged, and
 otherwise the latest converged earlier stage, with ``extras["stage"]`` naming the stage that
@@ -465,6 +466,8 @@ def solve(
         warm = ca if from_ca else warm
         details = {"passive_safety_from": "collision_avoidance" if from_ca else "tpbvp"}
         result = replace(result, record=replace(result.record, details=details))
+    if warmstart == "three_stage":
+        config = _three_stage_config(config)
     final = solve_safety(instance, warm, config, mode, verify=verify)
     if not final.converged and from_ca:
         retry = solve_safety(instance, stages["tpbvp"], config, mode, verify=verify)
@@ -474,6 +477,12 @@ def solve(
     return _with_record(
         _assemble(instance, mode, stages, "passive_safety", config.dynamics), result
     )
+
+
+def _three_stage_config(config: RobustSolverConfig) -> RobustSolverConfig:
+    """``config`` with stage 3's cap raised to ``config.three_stage_iter_max`` solves."""
+    iter_max = max(config.scvx.iter_max, config.three_stage_iter_max)
+    return replace(config, scvx=replace(config.scvx, iter_max=iter_max))
 
 
 def _warm_start(instance: RobustInstance, warmstart: Any, config: RobustSolverConfig,
