@@ -47,7 +47,7 @@ def test_infeasible_instance_reports_its_status(tmp_path, capsys):
 def test_help_documents_the_defaults_and_table_1_where_they_differ(capsys):
     assert main(["solve", "pdg6dof", "--help"]) == 0
     out = " ".join(capsys.readouterr().out.split())
-    assert "penalty weight lambda (Table 1: 500, see the module docstring) (default: 10.0)" in out
+    assert "penalty weight lambda (Table 1: 500, see the module docstring) (default: 2.0)" in out
     assert "--const-T-max" in out
 
 
