@@ -77,14 +77,21 @@ def test_analyse_writes_both_figures_and_names_every_model(tmp_path):
     assert "max_iterations" in outcomes and "1 (33%)" in outcomes
 
 
+def test_tiles_start_at_the_acceptance_region_and_grow_outwards():
+    e_r = np.array([-4.0, 0.0, 20.0])
+    e_c = np.array([0.0, 3.0, 7.0])
+    r_edges, c_edges = tile_edges(e_r, e_c)
+    np.testing.assert_allclose(r_edges, [-11.5, -1.5, 3.5, 13.5, 33.5])  # widths 10, 5, 10, 20
+    np.testing.assert_allclose(c_edges, [-0.5, 0.5, 1.5, 2.5, 4.5, 8.5])  # {0} {1} {2} {3,4} ...
+
+
 def test_tile_means_average_each_tile_and_leave_empty_tiles_nan():
-    e_r = np.array([-1.0, -0.9, 2.0, np.nan])
+    e_r = np.array([-1.0, -0.9, 5.0, np.nan])
     e_c = np.array([0.0, 0.0, 2.0, 1.0])
     values = np.array([1.0, 3.0, 10.0, 5.0])
-    edges = tile_edges(e_r, e_c, n_r=2)
-    np.testing.assert_allclose(edges[1], [-0.5, 0.5, 1.5, 2.5])  # unit tiles on integers
+    edges = tile_edges(e_r, e_c)
     grid = tile_means(e_r, e_c, values, edges)
-    assert grid.shape == (3, 2)  # (E_C tiles, E_R tiles)
+    assert grid.shape == (3, 2)  # (E_C tiles {0} {1} {2}, E_R tiles [-1.5, 3.5] [3.5, 13.5])
     assert grid[0, 0] == pytest.approx(2.0) and grid[2, 1] == pytest.approx(10.0)
     assert math.isnan(grid[1, 0]) and math.isnan(grid[1, 1])  # the NaN E_R row is left out
 
@@ -105,3 +112,21 @@ def test_best_instance_takes_the_largest_gain_over_every_model():
 def test_best_instance_says_so_when_nothing_converged():
     rows = [_row(0, 1.0, 1.2, 1.1, art_status="max_iterations", cvx_status="max_iterations")]
     assert best_instance(rows, ("rtn",))[0] == -1
+
+
+def test_posthoc_counts_a_rejected_guess_as_no_gain_and_writes_figures_per_model(tmp_path):
+    from scpformer.experiments.robust_posthoc import analyse_posthoc
+
+    rows = [dict(r) for r in ROWS]
+    rows[0]["chance_art_rtn_would_accept"] = "False"  # its 100 mm/s gain is dropped
+    rows[0]["chance_art_rtn_E_R"] = "0.2"
+    report = rep.Report(name="robust-posthoc", reproduces="Figs. 9-10", command="", settings={})
+    analyse_posthoc(rows, ("rtn",), report, tmp_path)
+    assert (tmp_path / "fig9_posthoc_rtn.png").is_file()
+    assert (tmp_path / "fig10_posthoc_histogram_rtn.png").is_file()
+    table = report.sections[0][1].splitlines()
+    without, checked = table[2].split(" | "), table[3].split(" | ")
+    assert without[1] == "50" and checked[1] == "0"  # mean gain [mm/s]: (100 + 0) / 2, then 0
+    ours = {c.quantity: c.ours for c in report.comparisons}
+    rescued = "PS-ART-C (RTN) without the check: converged where PS-CVX-C did not, and the reverse"
+    assert ours[rescued] == "0 vs 1"
