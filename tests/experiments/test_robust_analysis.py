@@ -12,6 +12,7 @@ from scpformer.experiments.robust_studies import (
     bin_stats,
     cost_differences,
     status_counts,
+    with_check,
 )
 
 
@@ -130,3 +131,15 @@ def test_posthoc_counts_a_rejected_guess_as_no_gain_and_writes_figures_per_model
     ours = {c.quantity: c.ours for c in report.comparisons}
     rescued = "PS-ART-C (RTN) without the check: converged where PS-CVX-C did not, and the reverse"
     assert ours[rescued] == "0 vs 1"
+
+
+def test_with_check_replaces_a_rejected_art_run_by_the_cvx_started_one():
+    rows = [dict(r) for r in ROWS]
+    rows[2]["chance_art_rtn_would_accept"] = "False"  # ART hit max_iterations; CVX converged
+    checked = with_check(rows, "chance", ("rtn",))
+    assert checked[2]["chance_art_rtn_status"] == "converged"
+    assert checked[2]["chance_art_rtn_cost"] == rows[2]["chance_cvx_cost"]
+    assert checked[2]["chance_art_rtn_accepted"] == "False"
+    assert checked[0] == rows[0] and rows[2]["chance_art_rtn_status"] == "max_iterations"
+    stats = bin_stats(checked, "chance", ("rtn",), np.ones(3, dtype=bool))
+    assert stats["art_rtn_infeasible_pct"] == 0.0
