@@ -647,7 +647,8 @@ def _figure(
                 axes[5].axvline(v, color="red", ls=":")
     axes[5].set_xlabel("J_SCP,CVX - J_SCP,ART [m/s]")
     axes[5].set_ylabel("instances")
-    axes[5].legend(fontsize=7)
+    if axes[5].get_legend_handles_labels()[0]:
+        axes[5].legend(fontsize=7)
     number = "5" if mode == "deterministic" else "6"
     file = rep.save_figure(fig, out / f"fig{number}_{mode}.png")
     return file, f"Fig. {number}: {mode} passive safety, SCvx* from CVX and ART"
