@@ -59,7 +59,7 @@ def test_a_rendezvous_dataset_is_refused_by_robust_warmstart(
 @pytest.mark.parametrize(
     ("name", "files"),
     [
-        ("robust-posthoc", ("fig9_posthoc.png", "fig10_posthoc_histogram.png")),
+        ("robust-posthoc", ("fig9_posthoc_rtn.png", "fig10_posthoc_histogram_rtn.png")),
         ("robust-trajectory", ()),
     ],
 )

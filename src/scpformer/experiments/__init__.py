@@ -93,7 +93,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             summary="the instance with the largest ART gain: warm starts, drift arcs, Eq. 15",
             module="scpformer.experiments.robust_studies",
             default_n=30,
-            models="one ART run",
+            models="ART runs trained on RTN and/or ROE states (one per frame)",
         ),
         Experiment(
             name="robust-posthoc",
@@ -101,7 +101,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             summary="E_R and E_C of the post hoc check and the SCP outcome with/without it",
             module="scpformer.experiments.robust_studies",
             default_n=60,
-            models="one ART run",
+            models="ART runs trained on RTN and/or ROE states (one per frame)",
         ),
         Experiment(
             name="tscvx-training",

@@ -159,11 +159,14 @@ class Report:
         return out / REPORT_NAME
 
 
-def new_figure(ncols: int = 2, width: float = 10.0, height: float = 4.0) -> tuple[Figure, Any]:
-    """A matplotlib Figure (Agg canvas, no pyplot state) with ``ncols`` axes."""
+def new_figure(
+    ncols: int = 2, width: float = 10.0, height: float = 4.0, nrows: int = 1
+) -> tuple[Figure, Any]:
+    """A matplotlib Figure (Agg canvas, no pyplot state) with ``nrows`` x ``ncols`` axes
+    (a flat array of ``ncols`` axes when ``nrows`` is 1)."""
     figure = Figure(figsize=(width, height), layout="constrained")
     FigureCanvasAgg(figure)
-    axes = figure.subplots(1, ncols)
+    axes = figure.subplots(nrows, ncols)
     return figure, axes
 
 
