@@ -447,3 +447,22 @@ def test_every_dip_of_an_arc_between_samples_is_refined(tpbvp):
         [_arc_h(geo, ev.y, np.full(ev.y.shape[0], t), ev.X, INSTANCE.uncertainty.q) for t in tau]
     ).max(axis=0)
     np.testing.assert_allclose(ev.h, dense, atol=1e-5)
+
+
+@pytest.mark.parametrize("expand", [True, False])
+def test_a_guess_far_from_the_boundary_state_grows_the_trust_radius_instead_of_failing(
+    tpbvp, expand
+):
+    """A guess whose interior misses the dynamics by 3 km (a learned warm start) makes the
+    first subproblem infeasible at r = 100 m; SCvx* then grows r by alpha_2 and goes on."""
+    far = Trajectory(x=tpbvp.trajectory.x.copy(), u=tpbvp.trajectory.u, p=np.zeros(0))
+    far.x[1:-1, 1] += 3000.0  # a*dlambda of every interior node
+    params = dataclasses.replace(RobustSolverConfig().scvx, expand_on_infeasible=expand)
+    sol = solve_safety(INSTANCE, far, RobustSolverConfig(scvx=params), "deterministic")
+    if expand:
+        first = sol.history[0]
+        assert first.solver_status == "infeasible" and not first.accepted
+        assert sol.history[1].trust_radius == pytest.approx(3.0 * first.trust_radius)
+        assert sol.status is not Status.SOLVER_FAILED
+    else:
+        assert sol.status is Status.SOLVER_FAILED and "infeasible" in sol.message

@@ -66,7 +66,7 @@ from scpformer.scp.solution import (
     Verification,
     verified_status,
 )
-from scpformer.validation import check_finite, check_positive
+from scpformer.validation import check_bool, check_finite, check_positive
 
 __all__ = [
     "AugmentedLagrangianProblem",
@@ -112,6 +112,7 @@ class SCvxStarParameters:
     rho_1: float = 0.25  # rho_1: shrink below this ratio
     rho_2: float = 0.7  # rho_2: grow at or above this ratio
     iter_max: int = 20  # maximum number of subproblem solves
+    expand_on_infeasible: bool = True  # grow r by alpha_2 on an infeasible subproblem (not paper)
     solver: str = "clarabel"  # conic solver, one of scpformer.scp.conic.SOLVERS
 
     def __post_init__(self) -> None:
@@ -135,6 +136,7 @@ class SCvxStarParameters:
             )
         if self.w_init > self.w_max:
             raise ValueError(f"w_init must not exceed w_max, got {self.w_init} > {self.w_max}")
+        check_bool("expand_on_infeasible", self.expand_on_infeasible)
         check_solver(self.solver)
 
 
@@ -370,6 +372,8 @@ class SCvxStar:
             r=state.r,
             solver=p.solver,
         )
+        if sub.status == "infeasible" and p.expand_on_infeasible and state.r < p.r_max:
+            return self._expanded(state, sub, k, t0)
         if not sub.ok or sub.z is None:
             reason = f"iteration {k}: conic solver status {sub.status!r} {sub.message}".strip()
             return StepResult(replace(state, iteration=k), None, None, Status.SOLVER_FAILED, reason)
@@ -425,6 +429,27 @@ class SCvxStar:
                 break
         solution = _finish(problem, state, status, message, history, start, init_time)
         return SCvxStarResult(solution=solution, records=tuple(records), state=state)
+
+    def _expanded(
+        self, state: SCvxStarState, sub: SubproblemResult, k: int, t0: float
+    ) -> StepResult:
+        """A rejected iteration that grows the trust radius by ``alpha_2`` (up to ``r_max``).
+
+        Not in Oguri's algorithm: an infeasible subproblem (a reference that misses a fixed
+        boundary state by more than the radius lets the last impulses reach) says the radius
+        is too small, not that the problem is infeasible.
+        """
+        nan = math.nan
+        record = IterationRecord(
+            iteration=k, accepted=False, cost=nan, penalty=nan, J=nan, L=nan, rho=nan,
+            trust_radius=state.r, virtual_control_norm=nan, step_norm=nan,
+            tight_flags=state.evaluation.flags(), time_discretization=0.0,
+            time_solver=sub.solver_time, time_total=time.perf_counter() - t0,
+            solver_status=sub.status,
+        )  # fmt: skip
+        star = SCvxStarRecord(k, nan, nan, state.evaluation.chi, state.w, state.delta, False)
+        r_next = min(self.params.alpha_2 * state.r, self.params.r_max)
+        return StepResult(replace(state, iteration=k, r=r_next), record, star, None)
 
     @staticmethod
     def _costs(

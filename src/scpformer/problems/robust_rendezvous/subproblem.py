@@ -21,8 +21,10 @@ a switch of ``t*`` to a neighbouring sample (``K = 1`` is Eq. 17 as printed).
 
 The buffers ``zeta`` of the inequality rows are the virtual buffers of Eq. 17 (the
 dynamics and boundary conditions are linear, hence exact, so SCvx* has no equality
-constraints ``g`` here). The state trust region skips the two fixed boundary nodes so that a
-reference that misses them (a learned warm start) still gives a feasible subproblem. ``s_u``
+constraints ``g`` here). The state trust region skips the two fixed boundary nodes, but a
+reference that misses ``x_f`` by more than the last impulses can reach within the radius (a
+learned warm start, kilometres off) still gives an infeasible subproblem; SCvx* then grows the
+radius (``SCvxStarParameters.expand_on_infeasible``). ``s_u``
 is 1 m/s per unit of ``r`` by default (the paper's single radius ``rho`` for both).
 
 Proximal term (not in Eq. 17). The fuel cost is degenerate (many plans cost within 1e-5 m/s
