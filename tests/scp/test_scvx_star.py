@@ -195,9 +195,22 @@ def test_iteration_limit_is_a_status():
 
 
 def test_conic_solver_failure_is_a_status_with_the_reason():
-    result = SCvxStar(PARAMS).solve(CircleProblem(contradictory=True), _point(GUESS))
+    strict = replace(PARAMS, expand_on_infeasible=False)
+    result = SCvxStar(strict).solve(CircleProblem(contradictory=True), _point(GUESS))
     assert result.solution.status is Status.SOLVER_FAILED
     assert "infeasible" in result.solution.message and result.solution.iterations == 0
+
+
+def test_an_infeasible_subproblem_grows_the_radius_to_r_max_before_failing():
+    """Each infeasible solve is a rejected iteration with r grown by alpha_2; a problem that
+    stays infeasible at r_max ends as a solver failure with the reason."""
+    result = SCvxStar(PARAMS).solve(CircleProblem(contradictory=True), _point(GUESS))
+    radii = [r.trust_radius for r in result.solution.history]
+    assert result.solution.status is Status.SOLVER_FAILED
+    assert "infeasible" in result.solution.message
+    assert radii[0] == PARAMS.r_init and not any(r.accepted for r in result.solution.history)
+    expected = [min(PARAMS.r_init * PARAMS.alpha_2**k, PARAMS.r_max) for k in range(len(radii))]
+    assert radii == pytest.approx(expected) and radii[-1] < PARAMS.r_max
 
 
 # ----------------------------------------------------------------------------------------
