@@ -466,8 +466,7 @@ def solve(
         warm = ca if from_ca else warm
         details = {"passive_safety_from": "collision_avoidance" if from_ca else "tpbvp"}
         result = replace(result, record=replace(result.record, details=details))
-    if warmstart == "three_stage":
-        config = _three_stage_config(config)
+        config = _three_stage_config(config)  # stage 3 of the procedure gets more solves
     final = solve_safety(instance, warm, config, mode, verify=verify)
     if not final.converged and from_ca:
         retry = solve_safety(instance, stages["tpbvp"], config, mode, verify=verify)

@@ -13,8 +13,8 @@ Notation (nodes as in :mod:`.scenario`)
   ``argmax_tau (1 + beta(tau) - d(tau))``, located to ``T_STAR_TOL_S`` by golden-section
   searches around the ``N_REFINED`` highest local maxima of the sampled ``1 + beta_ij - d_ij``
   (:func:`sample_peaks`, :func:`refine_worst_instant`), each evaluated as one more column
-  next to the samples; in the
-  deterministic case (``beta = 0``) this is the paper's minimum-separation instant (Eq. 16).
+  next to the samples; in the deterministic case (``beta = 0``) this is the paper's
+  minimum-separation instant (Eq. 16).
 * Drift model (:class:`DriftGeometry`): the STM about the target with ``Psi`` (the paper),
   or, with the plan's nonlinear mean dynamics, the mean-ROE flow linearized about ``y_bar_i``
   (``G`` then holds its Jacobian) and the map ``D(t)`` from mean ROE to the OSCULATING relative
@@ -397,8 +397,7 @@ def evaluate_safety(
     The design samples of each drift arc are evaluated, and (``T_safety > 0``) the worst
     instant of the continuous arc is located around each of the highest sampled peaks
     (:func:`sample_peaks`, :func:`refine_worst_instant`) and appended as more columns, so
-    that ``h`` is the
-    constraint at the arc's true worst instant, with its margin.
+    that ``h`` is the constraint at the arc's true worst instant, with its margin.
 
     Parameters
     ----------
