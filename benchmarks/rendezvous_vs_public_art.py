@@ -83,6 +83,7 @@ import statistics
 import sys
 import time
 import types
+import warnings
 from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
@@ -235,6 +236,7 @@ class Run:
     x: np.ndarray | None = None  # (N+1, 6) final states, theirs only (for our check)
     dv: np.ndarray | None = None  # (N, 3)
     final_dv: float = math.nan  # |a_N| of theirs [m/s]
+    inaccurate: int = 0  # their SCP subproblems solved "optimal_inaccurate" (cvxpy's warning)
 
 
 def run_theirs(ocp: types.ModuleType, inp: PublicInputs) -> Run:
@@ -249,14 +251,19 @@ def run_theirs(ocp: types.ModuleType, inp: PublicInputs) -> Run:
     mid = time.perf_counter()
     if feas_cvx != "optimal":
         return Run(mid - start, math.nan, 0.0, math.nan, 0, f"cvx {feas_cvx}")
-    with contextlib.redirect_stdout(io.StringIO()) as said:  # their "unfeasible scp" print
+    with (
+        contextlib.redirect_stdout(io.StringIO()) as said,  # their "unfeasible scp" print
+        warnings.catch_warnings(record=True) as caught,  # cvxpy: "may be inaccurate"
+    ):
+        warnings.simplefilter("always")
         s, a, feas, iters, _, _ = ocp.solve_scp(
             inp.stm, inp.cim, inp.psi, inp.s0, inp.dock_param, s_cvx, inp.n_time
         )
+    inaccurate = sum("inaccurate" in str(w.message) for w in caught)
     end = time.perf_counter()
     if s is None:
         status = f"scp {feas}" + (f" ({said.getvalue().strip()})" if said.getvalue() else "")
-        return Run(end - start, end - mid, 0.0, math.nan, iters, status)
+        return Run(end - start, end - mid, 0.0, math.nan, iters, status, inaccurate=inaccurate)
     ended = "converged" if iters < ocp.iter_max_SCP else "K reached"
     return Run(
         total=end - start,
@@ -268,6 +275,7 @@ def run_theirs(ocp: types.ModuleType, inp: PublicInputs) -> Run:
         x=s.T.copy(),
         dv=a[:, :-1].T.copy(),
         final_dv=float(np.linalg.norm(a[:, -1])),
+        inaccurate=inaccurate,
     )
 
 
@@ -348,6 +356,7 @@ def instance_rows(
             row[f"{name}_iterations"] = rs[-1].iterations
             row[f"{name}_status"] = rs[-1].status
         row["theirs_final_dv_mm_s"] = 1e3 * by_variant["theirs"][-1].final_dv
+        row["theirs_inaccurate_subproblems"] = by_variant["theirs"][-1].inaccurate
         row["theirs_passes_our_check"] = passes[k]
         row["theirs_cost_over_ours"] = row["theirs_cost_mm_s"] / row["ours_check_cost_mm_s"]
         for what in ("total", "scp"):
@@ -380,6 +389,7 @@ def outcome_counts(rows: list[dict[str, Any]]) -> dict[str, int]:
         "theirs_converged": sum(r["theirs_status"].startswith("converged") for r in rows),
         "theirs_returned_plan": sum(r["theirs_passes_our_check"] != "-" for r in rows),
         "theirs_passes_our_check": sum(r["theirs_passes_our_check"] == "yes" for r in rows),
+        "theirs_with_inaccurate": sum(r["theirs_inaccurate_subproblems"] > 0 for r in rows),
     }
 
 
@@ -415,7 +425,9 @@ def markdown(
         f"{counts['ours_converged_verified']} (converged without the check: "
         f"{counts['ours_nocheck_converged']}); theirs stopped before K on "
         f"{counts['theirs_converged']}, returned a plan on {counts['theirs_returned_plan']}, "
-        f"and that plan passes our replay check on {counts['theirs_passes_our_check']}.",
+        f"and that plan passes our replay check on {counts['theirs_passes_our_check']}; "
+        f"ECOS returned `optimal_inaccurate` on some SCP subproblem (accepted by their loop) "
+        f"on {counts['theirs_with_inaccurate']}.",
         "",
         "| # | ours verified ms | ours no check ms | theirs ms (SCP) | cost ours / theirs mm/s "
         "| iterations ours / theirs | status ours / theirs | theirs passes our check |",
