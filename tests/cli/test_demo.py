@@ -23,7 +23,7 @@ def test_demo_solves_every_problem_verified_and_writes_the_figures(tmp_path, cap
     assert table[0].split()[:2] == ["problem", "warm"]
     rows = [line for line in table[2:8]]
     assert [row.split()[-1] for row in rows] == ["yes"] * 6
-    for name in ("CVX", "ART", "TPBVP", "ART", "straight line", "T-SCvx networks"):
+    for name in ("CVX", "ART", "TPBVP", "ART", "cubic profile", "T-SCvx networks"):
         assert any(name in row for row in rows)
     figures = sorted(path.name for path in out.glob("*.png"))
     assert figures == sorted(

@@ -7,6 +7,7 @@ from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import SOFT_BOX_FACTOR, PDGProblem, PDGSolverConfig
 from scpformer.problems.pdg6dof.reduced import ReducedSubproblem
+from scpformer.problems.pdg6dof.subproblem import MASS_QUADRATURE
 from scpformer.scp.solution import Trajectory
 
 N = 50
@@ -104,6 +105,7 @@ def test_leaving_rows_out_gives_fewer_rows_cones_and_columns(linearized):
     sol = reduced.solve(keep, 10.0, keep_box=False)
     assert sol.status == "optimal"
     small = reduced.last_size
-    assert small.cones == 0 < full.cones
+    mass_row_cones = len(MASS_QUADRATURE[0]) * (N - 1)  # Eq. 4a's norms, kept in every solve
+    assert small.cones == mass_row_cones < full.cones
     assert small.rows < full.rows - 6 * N - 700  # rows, cones and the safeguard box
     assert small.columns == full.columns - 4 * N  # the four norms' epigraph variables

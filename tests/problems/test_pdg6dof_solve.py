@@ -124,7 +124,7 @@ def test_a_run_stopped_by_the_iteration_cap_says_so_and_returns_its_verified_ite
     from scpformer.problems.pdg6dof.problem import PDGSolverConfig
     from scpformer.scp.scvx import SCvxParameters
 
-    capped = solve(PDGInstance(), PDGSolverConfig(scvx=SCvxParameters(iter_max=12)))
+    capped = solve(PDGInstance(), PDGSolverConfig(scvx=SCvxParameters(iter_max=6)))
     assert capped.status is Status.MAX_ITERATIONS
     accepted = [rec for rec in capped.history if rec.accepted]
     assert capped.cost == pytest.approx(accepted[-1].cost)

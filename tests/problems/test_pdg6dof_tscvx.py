@@ -76,18 +76,18 @@ def test_all_rows_dropped_still_converge_to_the_optimum_through_repairs(cold):
 
 
 @pytest.mark.slow
-def test_a_garbage_solution_guess_falls_back_to_the_straight_line(cold):
+def test_a_garbage_solution_guess_falls_back_to_the_cubic_profile(cold):
     rng = np.random.default_rng(0)
     garbage = (rng.normal(size=(N, 14)) * 5, rng.normal(size=(N, 3)) * 5, 30.0)
     predictor = OraclePredictor(cold, flags=np.zeros(7 * N, dtype=bool), guess=garbage)
     solution = solve(PDGInstance(), guess=TscvxWarmStart(predictor))
     record = solution.extras["warmstart"]
-    assert not record["accepted"] and record["used"] == "straight_line"
+    assert not record["accepted"] and record["used"] == "cubic_profile"
     assert solution.status is Status.CONVERGED, solution.message
     assert _gap(solution, cold) <= 5e-3
 
 
-def test_a_nan_prediction_is_replaced_by_the_straight_line():
+def test_a_nan_prediction_is_replaced_by_the_cubic_profile():
     nan = (np.full((N, 14), np.nan), np.zeros((N, 3)), 5.0)
     predictor = OraclePredictor(None, guess=nan)
     result = TscvxWarmStart(predictor).guess(PDGInstance())

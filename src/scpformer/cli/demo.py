@@ -7,7 +7,7 @@ pretrained models of :mod:`scpformer.pretrained`):
   ART (Algorithm 2, R(t_1) = -J_CVX, C(t_1) = 0);
 * the chance-constrained, passively safe rendezvous (robust ART paper): SCvx* from the
   convex TPBVP (PS-CVX) and from ART after the post hoc check of Eq. 8 (PS-ART);
-* the 6-DoF Mars landing (T-SCvx paper): SCvx from the straight line and T-SCvx
+* the 6-DoF Mars landing (T-SCvx paper): SCvx from the cubic-profile guess and T-SCvx
   (Algorithm 2) from the networks' solution and tight constraints.
 
 It prints one table (problem, warm start, cost, iterations, wall time of warm start plus
@@ -193,7 +193,7 @@ def robust_rows(out: Path) -> list[DemoRow]:
 
 
 def landing_rows(out: Path) -> list[DemoRow]:
-    """The nominal 6-DoF landing with SCvx (straight line) and T-SCvx (pretrained)."""
+    """The nominal 6-DoF landing with SCvx (cubic-profile guess) and T-SCvx (pretrained)."""
     from scpformer.cli.pdg6dof import write_figures
     from scpformer.pretrained import default_model
     from scpformer.problems.pdg6dof.instance import PDGInstance
@@ -203,10 +203,10 @@ def landing_rows(out: Path) -> list[DemoRow]:
     instance, config = PDGInstance(), PDGSolverConfig()
     tscvx = TscvxWarmStart.from_run(default_model("pdg6dof"))
     rows = []
-    guesses = {"straight line": "straight_line", "T-SCvx networks": tscvx}
+    guesses = {"cubic profile": "cubic_profile", "T-SCvx networks": tscvx}
     for label, guess in guesses.items():
         solution, seconds = _timed(lambda guess=guess: solve(instance, config, guess=guess))
-        figure = out / ("landing_scvx.png" if guess == "straight_line" else "landing_t_scvx.png")
+        figure = out / ("landing_scvx.png" if guess == "cubic_profile" else "landing_t_scvx.png")
         fuel = math.nan
         if solution.trajectory is not None:
             write_figures(figure, solution, instance)

@@ -74,11 +74,11 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
     group = parser.add_argument_group("warm start")
     group.add_argument(
         "--warmstart",
-        choices=("straight_line", "tscvx", "kdtree", "interp"),
-        default="straight_line",
-        help="straight_line, or T-SCvx (Algorithm 2) with the predictor of --model: tscvx (the "
-        "networks), kdtree or interp (the lookup tables of `scpformer train kdtree|interp`) "
-        "(default: straight_line)",
+        choices=("cubic_profile", "straight_line", "tscvx", "kdtree", "interp"),
+        default="cubic_profile",
+        help="cubic_profile or straight_line (analytic guesses), or T-SCvx (Algorithm 2) with "
+        "the predictor of --model: tscvx (the networks), kdtree or interp (the lookup tables "
+        "of `scpformer train kdtree|interp`) (default: cubic_profile)",
     )
     group.add_argument(
         "--model",
@@ -92,10 +92,10 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def warmstart_from_args(args: argparse.Namespace) -> object:
-    """``"straight_line"`` or the T-SCvx provider of ``--warmstart tscvx|kdtree|interp
+    """An analytic guess's name or the T-SCvx provider of ``--warmstart tscvx|kdtree|interp
     [--model RUN]`` (tscvx without ``--model``, or with ``default``: the shipped,
     checksum-verified networks; the lookup tables need their run folder)."""
-    if args.warmstart == "straight_line":
+    if args.warmstart in ("cubic_profile", "straight_line"):
         if args.model is not None:
             raise ValueError("--model: used with --warmstart tscvx, kdtree or interp only")
         return args.warmstart

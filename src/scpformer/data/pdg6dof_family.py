@@ -14,7 +14,7 @@ cost           ()           C = -m(t_f) of the returned iterate (Eq. 2)
 iterations     ()           subproblem solves k = 1..iterations
 tf, t          (), (N,)     final time [U_T] and node times
 x, u           (N,14),(N,3) states (r, v, q, omega [rad/U_T], m) and body-frame thrust
-guess_*        as x, u, tf  the warm start SCvx started from (straight-line guess)
+guess_*        as x, u, tf  the warm start SCvx started from (cubic-profile guess)
 tight_flags    (I, R)       tight rows g >= -tight_tol at SCvx iteration k (row k - 1)
 accepted       (I,)         whether iteration k's step was accepted
 verified       ()           nonlinear verification passed
@@ -49,7 +49,7 @@ from scpformer.data.family import (
 from scpformer.data.storage import ShardedSamples
 from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
-from scpformer.problems.pdg6dof.guess import straight_line_guess
+from scpformer.problems.pdg6dof.guess import cubic_profile_guess
 from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
 from scpformer.problems.pdg6dof.problem import PDGSolverConfig, solve
 from scpformer.scp.solution import Solution, Status, Trajectory
@@ -180,7 +180,7 @@ class PDG6DoFFamily:
         return {"theta": theta_vector(instance)}
 
     def solve(self, instance: PDGInstance) -> SampleResult:
-        x_g, u_g, tf_g = straight_line_guess(instance, self.n_nodes)
+        x_g, u_g, tf_g = cubic_profile_guess(instance, self.n_nodes)
         guess = Trajectory(x=x_g, u=u_g, p=np.array([tf_g]))
         start = time.perf_counter()
         solution = solve(instance, self.config.solver, guess=guess)

@@ -30,7 +30,9 @@ RESULTS_JSON_NAME = "results.json"  # the comparison rows, machine-readable
 # Where our rendezvous formulation differs from the public ART code (every rendezvous report).
 RENDEZVOUS_DIFFERENCES: tuple[str, ...] = (
     "Approach cone vertex: ours sits 5 m behind the docking port "
-    "(`RendezvousScenario.cone_vertex_setback_m = 5`); the public ART code puts it at the port. "
+    "(`RendezvousScenario.cone_vertex_setback_m = 5`); the ART paper's public code "
+    "(`art-aeroconf24`) puts it at the port (the later `transformermpc-ral24` code sets it 5 m "
+    "back, as we do). "
     "With the vertex at the port Problem 2 is infeasible in our model (the last coast arc "
     "cannot lie in the cone), so we keep the setback. Issue 13 measured its cost (not repeated "
     "by these experiments): on 20 instances from the ART code's own sampler, moving that "

@@ -102,21 +102,32 @@ class RobustTpbvpWarmStart:
         return _result("tpbvp", solution, ctg, start)
 
 
+ANALYTIC_GUESSES = ("cubic_profile", "straight_line")  # the 6-DoF guesses of pdg6dof.guess
+
+
 @dataclass(frozen=True)
 class StraightLineWarmStart:
-    """The straight-line guess of the 6-DoF problem with ``n_nodes`` nodes."""
+    """An analytic guess of the 6-DoF problem with ``n_nodes`` nodes: ``profile`` is
+    ``"straight_line"`` (Szmuk & Acikmese) or ``"cubic_profile"`` (the solver's default)."""
 
     n_nodes: int = 50
+    profile: str = "straight_line"
+
+    def __post_init__(self) -> None:
+        if self.profile not in ANALYTIC_GUESSES:
+            raise ValueError(
+                f"profile must be one of {', '.join(ANALYTIC_GUESSES)}, got {self.profile!r}"
+            )
 
     def guess(self, instance: Any) -> WarmStartResult:
-        from scpformer.problems.pdg6dof.guess import straight_line_trajectory
+        from scpformer.problems.pdg6dof import guess as analytic
         from scpformer.problems.pdg6dof.instance import PDGInstance
 
         check_instance(instance, PDGInstance, "pdg6dof")
         start = time.perf_counter()
-        z = straight_line_trajectory(instance, self.n_nodes)
+        z = getattr(analytic, f"{self.profile}_trajectory")(instance, self.n_nodes)
         record = WarmStartRecord(
-            source="straight_line",
+            source=self.profile,
             time_s=time.perf_counter() - start,
             cost=-float(z.x[-1, 13]),  # C(z) = -m_N (T-SCvx paper, Eq. 2)
             constraint_to_go=math.nan,

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
-from scpformer.problems.pdg6dof.guess import straight_line_trajectory
+from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory, straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import PDGProblem, PDGSolverConfig
 from scpformer.problems.pdg6dof.tscvx import (
@@ -75,14 +75,15 @@ class TscvxWarmStart:
         start = time.perf_counter()
         from scpformer.data.pdg6dof_family import theta_vector
 
-        fallback = straight_line_trajectory(instance, config.n_nodes)
+        fallback = cubic_profile_trajectory(instance, config.n_nodes)  # the default cold start
+        yardstick = straight_line_trajectory(instance, config.n_nodes)
         try:
             x, u, tf = self.predictor.predict_solution(theta_vector(instance))
             predicted = consistent_guess(instance, x, u, tf, config.n_nodes)
         except ValueError as err:
             return self._result(fallback, False, f"prediction unusable: {err}", {}, start)
         scores = _penalized_costs(instance, config, {"prediction": predicted,
-                                                     "straight_line": fallback})  # fmt: skip
+                                                     "straight_line": yardstick})  # fmt: skip
         details = {f"J_{name}": value for name, value in scores.items()}
         bound = self.params.guess_factor * max(abs(scores["straight_line"]), 1.0)
         if not scores["prediction"] <= bound:
@@ -126,7 +127,7 @@ class TscvxWarmStart:
             constraint_to_go=math.nan,
             accepted=accepted,
             reason=reason,
-            fallback_source=None if accepted else "straight_line",
+            fallback_source=None if accepted else "cubic_profile",
             details=details,
         )
         return WarmStartResult(trajectory, timed(record, start))

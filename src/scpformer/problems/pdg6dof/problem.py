@@ -18,7 +18,7 @@ from scipy.integrate import solve_ivp
 
 from scpformer.dynamics import powered_descent as pd
 from scpformer.problems.pdg6dof import constraints as con
-from scpformer.problems.pdg6dof.guess import straight_line_trajectory
+from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.subproblem import (
     SubproblemSolution,
@@ -105,7 +105,8 @@ class PDGProblem:
         return pd.jacobians(self.model, x, u)
 
     def initial_guess(self) -> Trajectory:
-        return straight_line_trajectory(self.instance, self.config.n_nodes)
+        """The default cold start: the cubic-profile guess (:mod:`.guess`)."""
+        return cubic_profile_trajectory(self.instance, self.config.n_nodes)
 
     def node_times(self, z: Trajectory) -> np.ndarray:
         return np.linspace(0.0, float(z.p[0]), self.config.n_nodes)
@@ -303,7 +304,8 @@ def solve(
         Formulation and algorithm settings (default: Table 1).
     guess
         Initial guess: a :class:`Trajectory`, a warm start provider (:mod:`scpformer.warmstart`),
-        its ``WarmStartResult`` or ``"straight_line"``; default the straight-line guess. A
+        its ``WarmStartResult``, ``"cubic_profile"`` or ``"straight_line"``; default the
+        cubic-profile guess (:func:`~scpformer.problems.pdg6dof.guess.cubic_profile_guess`). A
         provider's record is returned in ``extras["warmstart"]``. A
         :class:`~scpformer.warmstart.tscvx.TscvxWarmStart` runs T-SCvx (Algorithm 2,
         :func:`~scpformer.problems.pdg6dof.tscvx.solve_tscvx`) instead of SCvx.
@@ -335,10 +337,13 @@ def solve(
         guess = default if guess is None else check_trajectory("guess", guess, default)
         return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
     from scpformer.warmstart.base import as_provider
-    from scpformer.warmstart.convex import StraightLineWarmStart
+    from scpformer.warmstart.convex import ANALYTIC_GUESSES, StraightLineWarmStart
     from scpformer.warmstart.tscvx import TscvxWarmStart
 
-    named = {"straight_line": lambda: StraightLineWarmStart(config.n_nodes)}
+    named = {
+        profile: lambda profile=profile: StraightLineWarmStart(config.n_nodes, profile)
+        for profile in ANALYTIC_GUESSES
+    }
     provider = as_provider(guess, named)
     if isinstance(provider, TscvxWarmStart):  # the predicted tight rows too: Algorithm 2
         return provider.solve(instance, config, eta_init=eta_init)

@@ -11,11 +11,29 @@ Subproblem (Eq. 7 with Eqs. 10-11):
 
     min   -m_N + lambda (|nu|_1 + sum s) [+ |W (z - z_bar)|^2, soft trust region, see below]
     s.t.  X_{k+1} = A_k X_k + Bm_k U_k + Bp_k U_{k+1} + S_k sigma + z_k + nu_k       (10)
+                                                               (rows r, v, q, omega)
+          m_{k+1} <= m_k - sigma_bar alpha dtau I_k(U) + S_k^m sigma + c_k + nu_k^m (4a)
           T_min - d_k . U_k <= s_k,  d_k = U_bar_k / |U_bar_k|                       (11, 6a)
           convex rows of 5a-5d, 6a (upper), 6b at every node
           boundary conditions 3b-3i (terminal attitude: see TerminalAttitude note)
           tf_min <= sigma <= tf_max                                                   (3a)
           |X - X_bar|_inf, |U - U_bar|_inf, |sigma - sigma_bar| <= eta   (q_tr = inf, Table 1)
+
+The mass row is not linearized (not in the paper; measurements in the README, "The mass row").
+The mass rate of Eq. 4a, ``-alpha |u| - beta``, does not depend on the state, so over an
+interval ``m_{k+1} = m_k - sigma dtau (alpha I_k + beta)`` with ``I_k`` the mean of ``|u|`` along
+the first-order hold -- and RK4 applied to a state-independent rate is Simpson's rule, so the
+discretization computes ``I_k`` as the composite Simpson sum over the RK4 stages (points 0,
+1/4, 1/2, 3/4, 1 of the interval for the default two steps). ``I_k(U)`` is convex in
+``(U_k, U_{k+1})``, so the row above is a convex (second-order cone) constraint that is exact in
+the thrust and linear only in ``sigma``; ``c_k`` makes it hold with equality at the reference.
+Linearizing ``|u|`` instead tells the subproblem that turning the thrust vector costs no
+propellant to first order: every step then turns it as far as the trust region allows, the
+burned propellant shows up as mass defects, and the ratio test rejects the step or the cost
+creeps. The inequality is lossless: burning more than the engine needs lowers ``m_N`` (the
+objective), and a lighter vehicle never pays back what it burned (the rocket equation), so
+the row holds with equality at the optimum; the nonlinear evaluation of each iterate would
+charge any slack as a mass defect anyway.
 
 With ``soft=True`` the objective also holds the penalized (soft) trust region of Reynolds,
 Szmuk et al.: ``sum_i w_i (z_i - z_bar_i)^2`` with one weight per variable group (position,
@@ -65,6 +83,23 @@ STATE_GROUPS: tuple[tuple[str, int, int], ...] = (
 )
 
 
+MASS = 13  # column of the mass in the state
+MASS_QUADRATURE = (  # points s_j and weights w_j of composite Simpson on [0, 1], two steps
+    (0.0, 0.25, 0.5, 0.75, 1.0),
+    (1.0 / 12.0, 4.0 / 12.0, 2.0 / 12.0, 4.0 / 12.0, 1.0 / 12.0),
+)
+
+
+def mean_thrust(u: np.ndarray) -> np.ndarray:
+    """``sum_j w_j |(1 - s_j) u_k + s_j u_{k+1}|`` per interval (K,): the mean thrust magnitude
+    along the first-order hold by :data:`MASS_QUADRATURE`."""
+    points, weights = MASS_QUADRATURE
+    return sum(
+        w * np.linalg.norm((1.0 - s) * u[:-1] + s * u[1:], axis=1)
+        for s, w in zip(points, weights, strict=True)
+    )
+
+
 class PDGSubproblem:
     """Parametric convex subproblem for ``n_nodes`` nodes; see the module docstring."""
 
@@ -100,6 +135,8 @@ class PDGSubproblem:
         self.T_max = P(nonneg=True, name="T_max")
         self.cos_delta = P(nonneg=True, name="cos_delta_max")
         self.tf_bounds = P(2, name="tf_bounds")
+        self.mass_rate = P(nonneg=True, name="sigma_alpha_dtau")  # sigma_bar alpha / (N - 1)
+        self.mass_offset = P(k, name="c_mass")  # c_k of the mass row
 
         self.w_x = P(len(STATE_GROUPS), nonneg=True, name="w_x")  # soft weight per state group
         self.w_u = P(nonneg=True, name="w_u")
@@ -118,18 +155,21 @@ class PDGSubproblem:
         self.problem = self._build()
         self._instance: PDGInstance | None = None  # whose values the parameters hold
         self._z_linear: np.ndarray | None = None  # affine term of the current linearization
+        self._mass_offset_linear: np.ndarray | None = None  # c_k of the current linearization
+        self._alpha_mdot = 0.0  # alpha of Eq. 4a (set_instance)
 
     def _build(self) -> cp.Problem:
         X, U, sigma = self.X, self.U, self.sigma
-        dynamics = [  # Eq. 8, all intervals in one constraint
-            X[1:]
-            == batched_matvec(self.A, X[:-1], 14, 14)
+        linearized = (  # Eq. 10, all intervals at once
+            batched_matvec(self.A, X[:-1], 14, 14)
             + batched_matvec(self.Bm, U[:-1], 14, 3)
             + batched_matvec(self.Bp, U[1:], 14, 3)
             + self.S * sigma
             + self.z
             + self.nu
-        ]
+        )
+        self.mass_row = self._mass_row()
+        dynamics = [X[1:, :MASS] == linearized[:, :MASS], self.mass_row]
         thrust = cp.norm(U, 2, axis=1)
         ones = np.ones((self.n_nodes, 1))
         terminal_q = [6, 7, 8, 9] if self.fix_roll else [8, 9]
@@ -169,6 +209,30 @@ class PDGSubproblem:
         if self.soft:
             cost = cost + self._deviation_without_constant()
         return cp.Problem(cp.Minimize(cost), constraints)
+
+    def _mass_row(self) -> cp.Constraint:
+        """``m_{k+1} <= m_k - sigma_bar alpha dtau I_k(U) + S_k^m sigma + c_k + nu_k^m`` (Eq. 4a).
+
+        ``I_k(U) = sum_j w_j |(1 - s_j) U_k + s_j U_{k+1}|``, ``dtau = 1 / (N - 1)``: the
+        composite Simpson rule
+        of :data:`MASS_QUADRATURE`, which is what the two-step RK4 of the discretization
+        computes for a state-independent rate (module docstring). The norms are their own
+        expressions, not the thrust norm of Eq. 6a, so that the reduced subproblem of T-SCvx
+        (:mod:`~scpformer.problems.pdg6dof.reduced`) keeps their cones with every row.
+        """
+        X, U = self.X, self.U
+        points, weights = MASS_QUADRATURE
+        mean_thrust = sum(
+            w * cp.norm((1.0 - s) * U[:-1] + s * U[1:], 2, axis=1)
+            for s, w in zip(points, weights, strict=True)
+        )
+        return X[1:, MASS] <= (
+            X[:-1, MASS]
+            - self.mass_rate * mean_thrust
+            + cp.multiply(self.S[:, MASS], self.sigma)
+            + self.mass_offset
+            + self.nu[:, MASS]
+        )
 
     def _deviation_without_constant(self) -> cp.Expression:
         """``sum_g w_g |z_g - z_bar_g|^2`` over the variable groups, less its constant part.
@@ -211,6 +275,7 @@ class PDGSubproblem:
         self.T_max.value = c.T_max
         self.cos_delta.value = math.cos(math.radians(c.delta_max_deg))
         self.tf_bounds.value = np.array([c.tf_min, c.tf_max])
+        self._alpha_mdot = c.model().alpha_mdot
         self.scale_x, self.scale_u, self.scale_sigma = trust_region_scales(instance)
 
     def set_linearization(
@@ -230,12 +295,29 @@ class PDGSubproblem:
         norms = np.linalg.norm(u, axis=1, keepdims=True)
         safe = np.where(norms > 0.0, norms, 1.0)
         self.thrust_dir.value = np.where(norms > 0.0, u / safe, np.array([1.0, 0.0, 0.0]))
+        self._set_mass_row(disc, x, u, sigma)
+
+    def _set_mass_row(
+        self, disc: FOHDiscretization, x: np.ndarray, u: np.ndarray, sigma: float
+    ) -> None:
+        """``sigma_bar alpha dtau`` and the offsets ``c_k`` that make the mass row hold with
+        equality at the reference: ``c_k = F_k^m - m_k + sigma_bar alpha dtau I_k(u) -
+        S_k^m sigma_bar`` (any difference between the discretization's integral and
+        :data:`MASS_QUADRATURE`, e.g. for ``n_sub != 2``, goes into ``c_k``)."""
+        rate = sigma * self._alpha_mdot / (self.n_nodes - 1)
+        self.mass_rate.value = rate
+        offset = (
+            disc.x_next[:, MASS] - x[:-1, MASS] + rate * mean_thrust(u) - disc.S[:, MASS] * sigma
+        )
+        self.mass_offset.value = offset
+        self._mass_offset_linear = offset
 
     def shift_affine_term(self, defects: np.ndarray) -> None:
         """Second-order correction: ``z_k <- z_k - d_k`` with the defects ``d`` (K, 14) of a
         candidate, so that the linearized dynamics aim at the nonlinear flow there (the SOC
         step of SQP, Nocedal & Wright Sec. 15.5); ``set_linearization`` undoes it."""
         self.z.value = self._z_linear - defects
+        self.mass_offset.value = self._mass_offset_linear - defects[:, MASS]
 
     def _set_soft_weights(self, weight: float) -> None:
         """Weights ``weight / scale_g^2`` of the soft trust region and their products with
