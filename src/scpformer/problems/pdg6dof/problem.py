@@ -65,7 +65,7 @@ class PDGSolverConfig:
     nonlinear J with the linear L without the quadratic term. With the hard box every step of
     a linear cost lands on a corner of the box and moves every variable by ``eta``, whose
     nonlinear defects then hold the ratio below ``rho_1``; the soft region lets each variable
-    move as far as its own gradient asks (measurements in the README, "Convergence").
+    move as far as its own gradient asks (measurements in the README, "A soft trust region").
     ``prox_weight = 0`` is the hard box of Algorithm 1 exactly.
     """
 
