@@ -11,7 +11,7 @@
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
 # instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] epochs of the
 # rendezvous models, TPBVP_EPOCHS ["art:6 gru:4 lstm:4"] of the Table 2 models (Problem 1
-# twin), ROBUST_EPOCHS [8] of the robust ones, N_PDG [480] 6-DoF base instances
+# twin), ROBUST_EPOCHS [8] of the robust ones, N_PDG [1500] 6-DoF base instances
 # (seed PDG_SEED [2]; x8 rotations), RAY [unset] Ray address.
 set -euo pipefail
 
@@ -22,7 +22,7 @@ WORKERS=${WORKERS:-2}
 SEED=${SEED:-0}
 N_RDV=${N_RDV:-3000}
 N_ROB=${N_ROB:-1200}
-N_PDG=${N_PDG:-480}
+N_PDG=${N_PDG:-1500}
 PDG_SEED=${PDG_SEED:-2}
 PDG=$DATA/pdg
 PDG8=$DATA/pdg8
