@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -22,15 +20,8 @@ def _script_module():
     return module
 
 
-def test_a_folder_without_ocp_py_is_a_usage_error_naming_the_missing_file(tmp_path):
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
-    done = subprocess.run(
-        [sys.executable, str(SCRIPT), "--art-repo", str(tmp_path), "--n", "1"],
-        capture_output=True,
-        text=True,
-        env=env,
-        check=False,
-    )
+def test_a_folder_without_ocp_py_is_a_usage_error_naming_the_missing_file(tmp_path, run_benchmark):
+    done = run_benchmark("rendezvous_vs_public_art.py", "--art-repo", str(tmp_path), "--n", "1")
     assert done.returncode == 2
     assert "--art-repo" in done.stderr
     assert str(tmp_path / "optimization" / "ocp.py") in done.stderr
