@@ -20,6 +20,7 @@ import numpy as np
 from scpformer.dynamics import quaternion as quat
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.scp.solution import Trajectory
+from scpformer.validation import check_positive
 
 
 def upright_attitude(q0: np.ndarray) -> np.ndarray:
@@ -107,9 +108,10 @@ def cubic_profile_fuel(
 
 
 def cubic_profile_guess(
-    instance: PDGInstance, n_nodes: int
+    instance: PDGInstance, n_nodes: int, tf: float | None = None
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Initial guess ``(x (N, 14), u (N, 3), t_f)`` flying the cubic of :func:`cubic_final_time`.
+    """Initial guess ``(x (N, 14), u (N, 3), t_f)`` flying the cubic of final time ``tf``
+    (default :func:`cubic_final_time`).
 
     Position and velocity follow the cubic; the thrust is ``m (a - g)`` (clipped to
     ``[T_min, T_max]``) along the body x axis, with the body turned the shortest way from
@@ -120,7 +122,7 @@ def cubic_profile_guess(
     require; the final attitude is left to SCvx.
     """
     c = instance.constants
-    tf = cubic_final_time(instance)
+    tf = cubic_final_time(instance) if tf is None else check_positive("tf", tf)
     s = np.linspace(0.0, 1.0, n_nodes)
     t = tf * s[:, None]
     a2, a3 = (a[0] for a in cubic_coefficients(instance, np.array([tf])))
@@ -141,9 +143,11 @@ def cubic_profile_guess(
     return x, u, tf
 
 
-def cubic_profile_trajectory(instance: PDGInstance, n_nodes: int) -> Trajectory:
+def cubic_profile_trajectory(
+    instance: PDGInstance, n_nodes: int, tf: float | None = None
+) -> Trajectory:
     """:func:`cubic_profile_guess` as a trajectory ``z = (x, u, p = (t_f,))``."""
-    x, u, tf = cubic_profile_guess(instance, n_nodes)
+    x, u, tf = cubic_profile_guess(instance, n_nodes, tf)
     return Trajectory(x=x, u=u, p=np.array([tf]))
 
 

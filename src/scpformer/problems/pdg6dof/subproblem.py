@@ -15,7 +15,11 @@ Subproblem (Eq. 7 with Eqs. 10-11):
           m_{k+1} <= m_k - sigma_bar alpha dtau I_k(U) + S_k^m sigma + c_k + nu_k^m (4a)
           T_min - d_k . U_k <= s_k,  d_k = U_bar_k / |U_bar_k|                       (11, 6a)
           convex rows of 5a-5d, 6a (upper), 6b at every node
-          boundary conditions 3b-3i (terminal attitude: see TerminalAttitude note)
+          boundary conditions 3b-3i (terminal attitude: see TerminalAttitude note; with
+          fix_roll the final quaternion's vector part is zero and q0 = +-1 follows from the
+          unit norm: fixing q0 = 1 as well over-determines the linearized rows, whose q0
+          drifts from 1 at second order, and left a virtual control of ~3e-6 that never
+          vanished on EmbersArc's scenario)
           tf_min <= sigma <= tf_max                                                   (3a)
           |X - X_bar|_inf, |U - U_bar|_inf, |sigma - sigma_bar| <= eta   (q_tr = inf, Table 1)
 
@@ -174,7 +178,7 @@ class PDGSubproblem:
         dynamics = [X[1:, :MASS] == linearized[:, :MASS], self.mass_row]
         thrust = cp.norm(U, 2, axis=1)
         ones = np.ones((self.n_nodes, 1))
-        terminal_q = [6, 7, 8, 9] if self.fix_roll else [8, 9]
+        terminal_q = [7, 8, 9] if self.fix_roll else [8, 9]  # vector part only, see below
         terminal_w = [10, 11, 12] if self.fix_roll else [11, 12]
         self.inequalities = {  # one (N,) constraint per name of constraints.CONSTRAINT_NAMES
             "mass": X[:, 13] >= self.m_dry,  # 5a
