@@ -16,11 +16,11 @@ from scpformer.problems.robust_rendezvous import RobustInstance, solve_tpbvp
 from scpformer.problems.robust_rendezvous import solve as solve_robust
 from scpformer.scp.solution import Status
 from scpformer.warmstart import (
+    AnalyticWarmStart,
     ArtWarmStart,
     GivenWarmStart,
     RendezvousConvexWarmStart,
     RobustTpbvpWarmStart,
-    StraightLineWarmStart,
     WarmStartRecord,
     WarmStartResult,
     as_provider,
@@ -138,25 +138,23 @@ def test_robust_tpbvp_provider_records_the_eq7_budget_of_cvx():
 
 def test_cubic_profile_provider_is_the_6dof_default_guess():
     instance, config = PDGInstance(), PDGSolverConfig(n_nodes=10)
-    result = StraightLineWarmStart(n_nodes=10, profile="cubic_profile").guess(instance)
+    result = AnalyticWarmStart(n_nodes=10, profile="cubic_profile").guess(instance)
     default = PDGProblem(instance, config).initial_guess()
     for key in ("x", "u", "p"):
         assert np.array_equal(getattr(result.trajectory, key), getattr(default, key))
     assert result.record.source == "cubic_profile" and result.record.cost < 0  # -m_N
-    line = StraightLineWarmStart(n_nodes=10).guess(instance)
+    line = AnalyticWarmStart(n_nodes=10).guess(instance)
     assert line.record.source == "straight_line"
     assert not np.array_equal(line.trajectory.x, default.x)
     with pytest.raises(ValueError, match="profile must be one of cubic_profile, straight_line"):
-        StraightLineWarmStart(profile="spline")
+        AnalyticWarmStart(profile="spline")
 
 
 @pytest.mark.slow
 def test_6dof_solve_takes_a_provider_and_records_it():
     instance, config = PDGInstance(), PDGSolverConfig()
     by_default = solve_pdg(instance, config)
-    by_provider = solve_pdg(
-        instance, config, StraightLineWarmStart(config.n_nodes, "cubic_profile")
-    )
+    by_provider = solve_pdg(instance, config, AnalyticWarmStart(config.n_nodes, "cubic_profile"))
     assert by_provider.extras["warmstart"]["source"] == "cubic_profile"
     assert by_provider.status is by_default.status
     assert by_provider.cost == pytest.approx(by_default.cost, rel=1e-9)

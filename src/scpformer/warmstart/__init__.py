@@ -4,7 +4,7 @@
 :class:`WarmStartRecord`); every SCP entry point accepts a provider. Providers:
 
 * :class:`RendezvousConvexWarmStart` (ART paper Problems 1-2), :class:`RobustTpbvpWarmStart`
-  (robust paper CVX), :class:`StraightLineWarmStart` (6-DoF);
+  (robust paper CVX), :class:`AnalyticWarmStart` (6-DoF);
 * :class:`ArtWarmStart` (ART paper Algorithms 1-2, robust paper Eq. 8 post hoc check with
   fallback to the convex warm start);
 * :class:`GivenWarmStart` (a fixed Trajectory / Solution / states) and
@@ -28,9 +28,9 @@ from scpformer.warmstart.base import (
     as_provider,
 )
 from scpformer.warmstart.convex import (
+    AnalyticWarmStart,
     RendezvousConvexWarmStart,
     RobustTpbvpWarmStart,
-    StraightLineWarmStart,
 )
 from scpformer.warmstart.families import ART_FAMILIES, ART_FRAMES
 
@@ -40,13 +40,13 @@ __all__ = [
     "ART_MODES",
     "Acceptance",
     "AcceptanceCheck",
+    "AnalyticWarmStart",
     "ArtRollout",
     "ArtWarmStart",
     "GivenWarmStart",
     "PrecomputedWarmStart",
     "RendezvousConvexWarmStart",
     "RobustTpbvpWarmStart",
-    "StraightLineWarmStart",
     "WarmStart",
     "WarmStartRecord",
     "WarmStartResult",

@@ -4,8 +4,8 @@
   of the ART paper, the CVX warm starts of its Sec. 5;
 * :class:`RobustTpbvpWarmStart`: the convex TPBVP of the robust ART paper (its "CVX", the
   warm start of PS-CVX and the lower bound of the cost);
-* :class:`StraightLineWarmStart`: the straight-line guess of the 6-DoF problem (Szmuk &
-  Acikmese 2018, Sec. IV).
+* :class:`AnalyticWarmStart`: the analytic guesses of the 6-DoF problem, the cubic profile
+  (the solver's default) and the straight line (Szmuk & Acikmese 2018, Sec. IV).
 
 Each records the cost and the constraint-to-go ``C(t_1)`` of its guess (Eqs. 20-21 of the
 ART paper, Eq. 7 of the robust paper), the ``C_CVX(t_1)`` the papers bin their results by.
@@ -102,30 +102,30 @@ class RobustTpbvpWarmStart:
         return _result("tpbvp", solution, ctg, start)
 
 
-ANALYTIC_GUESSES = ("cubic_profile", "straight_line")  # the 6-DoF guesses of pdg6dof.guess
-
-
 @dataclass(frozen=True)
-class StraightLineWarmStart:
+class AnalyticWarmStart:
     """An analytic guess of the 6-DoF problem with ``n_nodes`` nodes: ``profile`` is
-    ``"straight_line"`` (Szmuk & Acikmese) or ``"cubic_profile"`` (the solver's default)."""
+    ``"straight_line"`` (Szmuk & Acikmese) or ``"cubic_profile"`` (the solver's default), the
+    names of :data:`scpformer.problems.pdg6dof.guess.ANALYTIC_GUESSES`."""
 
     n_nodes: int = 50
     profile: str = "straight_line"
 
     def __post_init__(self) -> None:
+        from scpformer.problems.pdg6dof.guess import ANALYTIC_GUESSES
+
         if self.profile not in ANALYTIC_GUESSES:
             raise ValueError(
                 f"profile must be one of {', '.join(ANALYTIC_GUESSES)}, got {self.profile!r}"
             )
 
     def guess(self, instance: Any) -> WarmStartResult:
-        from scpformer.problems.pdg6dof import guess as analytic
+        from scpformer.problems.pdg6dof.guess import ANALYTIC_GUESSES
         from scpformer.problems.pdg6dof.instance import PDGInstance
 
         check_instance(instance, PDGInstance, "pdg6dof")
         start = time.perf_counter()
-        z = getattr(analytic, f"{self.profile}_trajectory")(instance, self.n_nodes)
+        z = ANALYTIC_GUESSES[self.profile](instance, self.n_nodes)
         record = WarmStartRecord(
             source=self.profile,
             time_s=time.perf_counter() - start,

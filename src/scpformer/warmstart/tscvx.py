@@ -75,20 +75,22 @@ class TscvxWarmStart:
         start = time.perf_counter()
         from scpformer.data.pdg6dof_family import theta_vector
 
-        fallback = cubic_profile_trajectory(instance, config.n_nodes)  # the default cold start
-        yardstick = straight_line_trajectory(instance, config.n_nodes)
+        def fallback() -> Trajectory:  # the default cold start, built only when it is used
+            return cubic_profile_trajectory(instance, config.n_nodes)
+
         try:
             x, u, tf = self.predictor.predict_solution(theta_vector(instance))
             predicted = consistent_guess(instance, x, u, tf, config.n_nodes)
         except ValueError as err:
-            return self._result(fallback, False, f"prediction unusable: {err}", {}, start)
+            return self._result(fallback(), False, f"prediction unusable: {err}", {}, start)
+        yardstick = straight_line_trajectory(instance, config.n_nodes)
         scores = _penalized_costs(instance, config, {"prediction": predicted,
                                                      "straight_line": yardstick})  # fmt: skip
         details = {f"J_{name}": value for name, value in scores.items()}
         bound = self.params.guess_factor * max(abs(scores["straight_line"]), 1.0)
         if not scores["prediction"] <= bound:
             reason = f"J of the prediction above {self.params.guess_factor:g} straight lines'"
-            return self._result(fallback, False, reason, details, start)
+            return self._result(fallback(), False, reason, details, start)
         return self._result(predicted, True, "J within the bound", details, start)
 
     def tight(self, instance: PDGInstance) -> Any:

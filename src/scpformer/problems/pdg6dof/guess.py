@@ -128,7 +128,7 @@ def cubic_profile_guess(
     a2, a3 = (a[0] for a in cubic_coefficients(instance, np.array([tf])))
     r = instance.r0 + instance.v0 * t + a2 * t**2 + a3 * t**3
     v = instance.v0 + 2.0 * a2 * t + 3.0 * a3 * t**2
-    specific = cubic_acceleration(instance, np.array([tf]), s)[0] - c.g_I  # thrust / mass
+    specific = 2.0 * a2 + 6.0 * a3 * t - c.g_I  # thrust / mass
     magnitude = np.linalg.norm(specific, axis=1)
     m = profile_mass(instance, magnitude, tf / (n_nodes - 1))
     q = quat.multiply(shortest_arc_from_x(specific), upright_attitude(instance.x0[6:10]))
@@ -187,3 +187,9 @@ def slerp(q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray) -> np.ndarray:
     return (np.sin((1 - s) * angle)[:, None] * q_a + np.sin(s * angle)[:, None] * q_b) / np.sin(
         angle
     )
+
+
+ANALYTIC_GUESSES = {  # name -> trajectory builder; the first is the solver's default
+    "cubic_profile": cubic_profile_trajectory,
+    "straight_line": straight_line_trajectory,
+}

@@ -336,12 +336,13 @@ def solve(
     if guess is None or isinstance(guess, Trajectory | list | tuple | np.ndarray | dict):
         guess = default if guess is None else check_trajectory("guess", guess, default)
         return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
+    from scpformer.problems.pdg6dof.guess import ANALYTIC_GUESSES
     from scpformer.warmstart.base import as_provider
-    from scpformer.warmstart.convex import ANALYTIC_GUESSES, StraightLineWarmStart
+    from scpformer.warmstart.convex import AnalyticWarmStart
     from scpformer.warmstart.tscvx import TscvxWarmStart
 
     named = {
-        profile: lambda profile=profile: StraightLineWarmStart(config.n_nodes, profile)
+        profile: lambda profile=profile: AnalyticWarmStart(config.n_nodes, profile)
         for profile in ANALYTIC_GUESSES
     }
     provider = as_provider(guess, named)

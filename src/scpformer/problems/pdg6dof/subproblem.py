@@ -220,21 +220,21 @@ class PDGSubproblem:
         """``m_{k+1} <= m_k - sigma_bar alpha dtau I_k(U) + S_k^m sigma + c_k + nu_k^m`` (Eq. 4a).
 
         ``I_k(U) = sum_j w_j |(1 - s_j) U_k + s_j U_{k+1}|``, ``dtau = 1 / (N - 1)``: the
-        composite Simpson rule
-        of :data:`MASS_QUADRATURE`, which is what the two-step RK4 of the discretization
-        computes for a state-independent rate (module docstring). The norms are their own
+        composite Simpson rule of :data:`MASS_QUADRATURE`, which is what the two-step RK4 of the
+        discretization computes for a state-independent rate (module docstring; the numbers
+        at the reference come from :func:`mean_thrust`). The norms are their own
         expressions, not the thrust norm of Eq. 6a, so that the reduced subproblem of T-SCvx
         (:mod:`~scpformer.problems.pdg6dof.reduced`) keeps their cones with every row.
         """
         X, U = self.X, self.U
         points, weights = MASS_QUADRATURE
-        mean_thrust = sum(
+        mean_norm = sum(
             w * cp.norm((1.0 - s) * U[:-1] + s * U[1:], 2, axis=1)
             for s, w in zip(points, weights, strict=True)
         )
         return X[1:, MASS] <= (
             X[:-1, MASS]
-            - self.mass_rate * mean_thrust
+            - self.mass_rate * mean_norm
             + cp.multiply(self.S[:, MASS], self.sigma)
             + self.mass_offset
             + self.nu[:, MASS]
