@@ -131,6 +131,51 @@ def test_solution_standardization_round_trips():
         np.testing.assert_allclose(got, want)
 
 
+def _physical_theta(n, seed):
+    """theta rows with unit quaternions (the canonical frame needs real attitudes)."""
+    rng = np.random.default_rng(seed)
+    theta = rng.normal(size=(n, 16))
+    theta[:, 8:12] /= np.linalg.norm(theta[:, 8:12], axis=1, keepdims=True)
+    return theta
+
+
+def test_canonical_normalization_needs_theta_and_round_trips_with_it():
+    norm = TscvxNormalization(**(normalization().to_dict() | {"canonical": True}))
+    rng = np.random.default_rng(1)
+    theta = _physical_theta(2, 4)
+    x, u, tf = rng.normal(size=(2, N, 14)), rng.normal(size=(2, N, 3)), rng.normal(size=2)
+    with pytest.raises(ValueError, match="needs theta"):
+        norm.encode_solution(x, u, tf)
+    back = norm.decode_solution(norm.encode_solution(x, u, tf, theta), theta)
+    for got, want in zip(back, (x, u, tf), strict=True):
+        np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_normalization_dicts_without_the_canonical_key_load_as_raw_frame():
+    fields = normalization().to_dict()
+    fields.pop("canonical")
+    assert TscvxNormalization.from_dict(fields).canonical is False
+
+
+def test_a_canonical_predictor_is_exactly_equivariant_to_yaw_and_body_roll():
+    from scpformer.dynamics import quaternion as quat
+    from scpformer.problems.pdg6dof import symmetry as sym
+
+    norm = TscvxNormalization(**(normalization().to_dict() | {"canonical": True}))
+    pred = TscvxPredictor(tiny(TIGHT_KIND), tiny(SOLUTION_KIND), norm)
+    theta = _physical_theta(3, 5)
+    yaw = sym.yaw_quaternion(np.array([30.0, -100.0, 170.0]))
+    roll = quat.from_axis_angle([1.0, 0.0, 0.0], np.array([0.4, -2.0, 3.0]))
+    moved = sym.roll_theta(sym.yaw_theta(theta, yaw), roll)
+    x, u, tf = pred.predict_solution(theta)
+    x_m, u_m, tf_m = pred.predict_solution(moved)
+    np.testing.assert_allclose(x_m, sym.roll_states(sym.yaw_states(x, yaw[:, None]), roll[:, None]),
+                               atol=1e-5)  # fmt: skip
+    np.testing.assert_allclose(u_m, sym.roll_body_vectors(u, roll[:, None]), atol=1e-5)
+    np.testing.assert_allclose(tf_m, tf, atol=1e-6)
+    np.testing.assert_array_equal(pred.predict_tight(moved, 3), pred.predict_tight(theta, 3))
+
+
 def test_normalization_refuses_zero_std_and_wrong_shapes():
     fields = normalization().to_dict()
     with pytest.raises(ValueError, match="positive"):

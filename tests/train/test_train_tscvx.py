@@ -14,7 +14,11 @@ from scpformer.data.errors import DatasetError  # noqa: E402
 from scpformer.data.generate import GenerateConfig, generate  # noqa: E402
 from scpformer.data.splits import SplitConfig, make_splits  # noqa: E402
 from scpformer.data.torch_views import SolutionDataset, TightFlagsDataset  # noqa: E402
-from scpformer.models.tscvx import TSCVX_MODELS, load_tscvx_predictor  # noqa: E402
+from scpformer.models.tscvx import (  # noqa: E402
+    TSCVX_MODELS,
+    TscvxNormalization,
+    load_tscvx_predictor,
+)
 from scpformer.train.checkpoint import CheckpointError, load_checkpoint  # noqa: E402
 from scpformer.train.tscvx import (  # noqa: E402
     evaluate_tscvx,
@@ -95,7 +99,12 @@ def test_both_losses_decrease_and_the_run_loads_as_a_predictor(fake_pdg, tmp_pat
         assert history[-1].train_loss < 0.8 * history[0].train_loss, name
         assert (run / name / "checkpoint.pt").is_file() and (run / name / "metrics.csv").is_file()
     predictor = load_tscvx_predictor(run)
-    arrays, norm = read_tscvx(fake_pdg)
+    arrays, _ = read_tscvx(fake_pdg)
+    train_split = arrays.subset(arrays.split == "train")
+    norm = TscvxNormalization.canonical_from_arrays(
+        train_split.theta, train_split.x, train_split.u, train_split.tf
+    )
+    assert predictor.normalization.canonical
     theta = arrays.theta[:3]
     loaded = load_checkpoint(run / "tight" / "best.pt", models=TSCVX_MODELS)
     z = torch.tensor(norm.encode_theta(theta), dtype=torch.float32)
@@ -108,6 +117,19 @@ def test_both_losses_decrease_and_the_run_loads_as_a_predictor(fake_pdg, tmp_pat
     assert config["networks"]["tight"]["parameters"] > 0 and config["folds"] == 1
     assert result.metrics["split"] == "validation"
     assert (run / "metrics_validation.json").is_file() and (run / "tight_validation.csv").is_file()
+
+
+def test_raw_frame_training_uses_the_splits_statistics_and_resume_keeps_the_frame(
+    fake_pdg, tmp_path
+):
+    run = tmp_path / "raw"
+    train(fake_pdg, run, networks=("solution",), canonical=False)
+    _, norm = read_tscvx(fake_pdg)
+    stored = load_checkpoint(run / "solution", models=TSCVX_MODELS).normalization
+    assert stored.canonical is False
+    np.testing.assert_allclose(stored.x_mean, norm.x_mean)
+    with pytest.raises(ValueError, match="canonical = False"):
+        train(fake_pdg, run, networks=("solution",), resume=True, solution_epochs=3)
 
 
 def test_three_folds_deliver_the_last_folds_network(fake_pdg, tmp_path):

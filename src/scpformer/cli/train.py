@@ -160,6 +160,14 @@ def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--threads", type=int, default=None, help="torch threads (torch's default)")
     parser.add_argument(
+        "--canonical",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="networks see each instance in its canonical frame (yawed about Up, body rolled; "
+        "exact symmetries of the problem) and f1 predicts there (default); --no-canonical: "
+        "the raw frame, as the paper",
+    )
+    parser.add_argument(
         "--resume", action="store_true", help="continue the run in --out from its checkpoints"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -187,6 +195,7 @@ def run_train_tscvx(args: argparse.Namespace) -> int:
         report_split=args.report_split,
         threads=args.threads,
         progress=not args.no_progress,
+        canonical=args.canonical,
     )
     if not result.world.is_main:
         return 0

@@ -34,14 +34,13 @@ from scpformer.data.errors import DatasetError
 from scpformer.data.generate import repair
 from scpformer.data.pdg6dof_family import PDG6DoFFamily, build, instance_from_theta
 from scpformer.data.storage import Manifest
-from scpformer.dynamics import quaternion as quat
 from scpformer.problems.pdg6dof.constraints import constraint_values, tight_flags
 from scpformer.problems.pdg6dof.problem import verify_trajectory
+from scpformer.problems.pdg6dof.symmetry import yaw_quaternion, yaw_states, yaw_theta
 from scpformer.scp.solution import Trajectory
 
 ROTATION_ANGLES_DEG: tuple[float, ...] = tuple(45.0 * k for k in range(8))
 CHECK_FAILED = "augmentation_check_failed"
-UP_AXIS = (1.0, 0.0, 0.0)  # e1 = Up
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -67,22 +66,12 @@ class RotationAugmentation:
 
 def rotate_states(x: np.ndarray, angle_deg: float) -> np.ndarray:
     """States (..., 14) seen in the inertial frame rotated by ``angle_deg`` about Up."""
-    q_rot = quat.from_axis_angle(UP_AXIS, math.radians(angle_deg))
-    out = np.array(x, dtype=float, copy=True)
-    out[..., 0:3] = quat.rotate(q_rot, x[..., 0:3])
-    out[..., 3:6] = quat.rotate(q_rot, x[..., 3:6])
-    out[..., 6:10] = quat.multiply(q_rot, x[..., 6:10])
-    return out
+    return yaw_states(x, yaw_quaternion(angle_deg))
 
 
 def rotate_theta(theta: np.ndarray, angle_deg: float) -> np.ndarray:
     """theta (..., 16) of the rotated instance (as :meth:`PDGInstance.rotated_about_up`)."""
-    q_rot = quat.from_axis_angle(UP_AXIS, math.radians(angle_deg))
-    out = np.array(theta, dtype=float, copy=True)
-    out[..., 2:5] = quat.rotate(q_rot, theta[..., 2:5])
-    out[..., 5:8] = quat.rotate(q_rot, theta[..., 5:8])
-    out[..., 8:12] = quat.normalize(quat.multiply(q_rot, theta[..., 8:12]))
-    return out
+    return yaw_theta(theta, yaw_quaternion(angle_deg))
 
 
 def rotate_sample(sample: Mapping[str, Any], angle_deg: float, n_angles: int, k: int) -> dict:

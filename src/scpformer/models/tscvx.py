@@ -50,8 +50,9 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from scpformer.data.splits import Splits
+from scpformer.data.splits import STD_FLOOR, Splits
 from scpformer.models.normalization import _per_step_floor
+from scpformer.problems.pdg6dof import symmetry as sym
 
 N_THETA = 16  # parameters of theta (THETA_NAMES)
 N_CONSTRAINT_NAMES = 7  # rows per node (CONSTRAINT_NAMES)
@@ -250,7 +251,17 @@ def _check_theta(theta: Tensor) -> None:
 # ======================================================================================
 @dataclass(frozen=True, kw_only=True, eq=False)
 class TscvxNormalization:
-    """Per-element training-split mean and std of theta, x, u and t_f (Sec. III.E.3)."""
+    """Per-element training-split mean and std of theta, x, u and t_f (Sec. III.E.3).
+
+    With ``canonical`` (not in the paper), the networks see every instance in its canonical
+    frame (:mod:`scpformer.problems.pdg6dof.symmetry`: yawed about Up so that ``r0`` has no
+    North component, the body rolled so that ``q0`` has no twist about body x, ``q0_w >= 0``)
+    and the solution network predicts the solution in that frame; :meth:`decode_solution`
+    maps it back. Both symmetries are exact for the problem, so the networks learn a function
+    of two fewer inputs, without the sign ambiguity of ``q0``, and every rotated copy of the
+    augmentation is the same training point. The statistics are then those of the canonical
+    quantities. Checkpoints written before this option load with ``canonical = False``.
+    """
 
     theta_mean: np.ndarray  # (16,)
     theta_std: np.ndarray  # (16,)
@@ -260,9 +271,13 @@ class TscvxNormalization:
     u_std: np.ndarray  # (N, 3)
     tf_mean: float  # [U_T]
     tf_std: float  # [U_T]
+    canonical: bool = False  # instances and solutions seen in their canonical frame
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
+            if f.name == "canonical":
+                object.__setattr__(self, "canonical", bool(self.canonical))
+                continue
             value = np.asarray(getattr(self, f.name), dtype=np.float64)
             if f.name.startswith("tf"):
                 value = float(value)
@@ -302,12 +317,48 @@ class TscvxNormalization:
             tf_mean=s["tf"].mean, tf_std=s["tf"].std,
         )  # fmt: skip
 
+    @classmethod
+    def canonical_from_arrays(
+        cls, theta: np.ndarray, x: np.ndarray, u: np.ndarray, tf: np.ndarray
+    ) -> TscvxNormalization:
+        """Statistics of the canonical-frame training samples (theta (B, 16), x (B, N, 14),
+        u (B, N, 3), tf (B,), raw), floored as :meth:`from_splits`'s; the two components that
+        the canonical frame zeroes (``r0_N``, ``q0_x``) get std 1."""
+        frame = sym.canonical_frame(theta)
+        theta_c = sym.theta_to_canonical(theta, frame)
+        x_c, u_c = sym.solution_to_canonical(x, u, frame)
+        stats = {}
+        for name, value in (("theta", theta_c), ("x", x_c), ("u", u_c)):
+            std = value.std(axis=0)
+            stats[name] = (value.mean(axis=0), np.where(std < STD_FLOOR, 1.0, std))
+        return cls(
+            theta_mean=stats["theta"][0], theta_std=stats["theta"][1],
+            x_mean=stats["x"][0], x_std=_per_step_floor(*stats["x"]),
+            u_mean=stats["u"][0], u_std=_per_step_floor(*stats["u"]),
+            tf_mean=float(np.mean(tf)), tf_std=float(max(np.std(tf), STD_FLOOR)),
+            canonical=True,
+        )  # fmt: skip
+
+    def frame(self, theta: np.ndarray) -> sym.CanonicalFrame | None:
+        """The canonical frame of theta (B, 16), or None without ``canonical``."""
+        return sym.canonical_frame(theta) if self.canonical else None
+
     def encode_theta(self, theta: np.ndarray) -> np.ndarray:
-        """Raw theta (..., 16) -> standardized."""
+        """Raw theta (B, 16) -> standardized (in the canonical frame with ``canonical``)."""
+        frame = self.frame(theta)
+        if frame is not None:
+            theta = sym.theta_to_canonical(theta, frame)
         return (theta - self.theta_mean) / self.theta_std
 
-    def encode_solution(self, x: np.ndarray, u: np.ndarray, tf: np.ndarray) -> np.ndarray:
-        """(x (B, N, 14), u (B, N, 3), tf (B,)) -> standardized vector (B, 17 N + 1)."""
+    def encode_solution(
+        self, x: np.ndarray, u: np.ndarray, tf: np.ndarray, theta: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(x (B, N, 14), u (B, N, 3), tf (B,)) -> standardized vector (B, 17 N + 1).
+
+        ``theta`` (B, 16), the instances, is required with ``canonical``."""
+        frame = self._frame_of("encode_solution", theta)
+        if frame is not None:
+            x, u = sym.solution_to_canonical(x, u, frame)
         b = len(tf)
         parts = [
             ((x - self.x_mean) / self.x_std).reshape(b, -1),
@@ -316,20 +367,35 @@ class TscvxNormalization:
         ]
         return np.concatenate(parts, axis=1)
 
-    def decode_solution(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Inverse of :meth:`encode_solution`: (B, 17 N + 1) -> x, u, tf (physical)."""
+    def decode_solution(
+        self, z: np.ndarray, theta: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Inverse of :meth:`encode_solution`: (B, 17 N + 1) -> x, u, tf (physical, in the
+        instances' own frame; ``theta`` (B, 16) is required with ``canonical``)."""
+        frame = self._frame_of("decode_solution", theta)
         n, b = self.n_nodes, z.shape[0]
         x = z[:, : STATE_DIM * n].reshape(b, n, STATE_DIM) * self.x_std + self.x_mean
         u = z[:, STATE_DIM * n : -1].reshape(b, n, CONTROL_DIM) * self.u_std + self.u_mean
+        if frame is not None:
+            x, u = sym.solution_from_canonical(x, u, frame)
         return x, u, z[:, -1] * self.tf_std + self.tf_mean
+
+    def _frame_of(self, method: str, theta: np.ndarray | None) -> sym.CanonicalFrame | None:
+        if not self.canonical:
+            return None
+        if theta is None:
+            raise ValueError(f"{method} of a canonical normalization needs theta")
+        return sym.canonical_frame(theta)
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TscvxNormalization:
+        """Inverse of :meth:`to_dict`; a dict without ``canonical`` (written before that
+        option existed) loads with ``canonical = False``."""
         known = {f.name for f in dataclasses.fields(cls)}
-        if set(data) != known:
+        if not known - {"canonical"} <= set(data) <= known:
             raise ValueError(f"normalization dict must have keys {sorted(known)}")
         return cls(**data)
 
@@ -461,7 +527,7 @@ class TscvxPredictor:
         theta (B, 16). The quaternion is not normalized."""
         z, single = self._theta(theta)
         out = self.solution(z).cpu().numpy().astype(np.float64)
-        x, u, tf = self.normalization.decode_solution(out)
+        x, u, tf = self.normalization.decode_solution(out, np.atleast_2d(theta))
         return (x[0], u[0], float(tf[0])) if single else (x, u, tf)
 
 

@@ -190,7 +190,7 @@ def solution_tensors(arrays: TscvxArrays, norm: TscvxNormalization) -> TensorDat
     """f1's items: ``theta`` and ``target`` (standardized x, u, t_f), float32."""
     return TensorData({
         "theta": _float32(norm.encode_theta(arrays.theta)),
-        "target": _float32(norm.encode_solution(arrays.x, arrays.u, arrays.tf)),
+        "target": _float32(norm.encode_solution(arrays.x, arrays.u, arrays.tf, arrays.theta)),
     })  # fmt: skip
 
 
@@ -300,6 +300,7 @@ def train_tscvx(
     report_split: str = "validation",
     threads: int | None = None,
     progress: bool = True,
+    canonical: bool = True,
 ) -> TscvxRunResult:
     """Train (or resume) f2 and f1 on the ``pdg6dof`` dataset ``data`` into run folder ``out``.
 
@@ -326,6 +327,10 @@ def train_tscvx(
     threads
         torch threads (default: torch's). On a loaded shared machine one thread per process
         trains several times faster than two (threads wait for each other's cores).
+    canonical
+        Let both networks see every instance in its canonical frame and f1 predict the
+        solution there (:class:`TscvxNormalization`, :mod:`scpformer.problems.pdg6dof.symmetry`);
+        ``False``: the raw instance frame, as the paper. A resumed run keeps its own choice.
 
     Raises
     ------
@@ -361,6 +366,9 @@ def train_tscvx(
     world, device = distributed.start(configs["tight"].device)
     try:
         arrays, norm = read_tscvx(data)
+        if canonical:
+            train = arrays.subset(arrays.split == "train")
+            norm = TscvxNormalization.canonical_from_arrays(train.theta, train.x, train.u, train.tf)
         masks = fold_masks(arrays, folds, configs["tight"].validation_fraction,
                            configs["tight"].seed)  # fmt: skip
         context = _RunContext(data=data, arrays=arrays, norm=norm, masks=masks,
@@ -482,6 +490,11 @@ def _fit_fold(
     splits_digest = file_sha256(ctx.data / SPLITS_NAME)
     if previous is not None and previous["extra"].get("splits_digest") != splits_digest:
         raise ValueError(f"{folder} was trained on other data or splits than {ctx.data}")
+    if previous is not None and _stored_canonical(previous) != ctx.norm.canonical:
+        raise ValueError(
+            f"{folder} was trained with canonical = {_stored_canonical(previous)}: resume it "
+            f"with {'--canonical' if _stored_canonical(previous) else '--no-canonical'}"
+        )
     torch.manual_seed(config.seed + ctx.world.rank)
     if ctx.world.is_main:
         folder.mkdir(parents=True, exist_ok=True)
@@ -509,6 +522,11 @@ def _fit_fold(
     state = fit(objective, train, validation, config, device=ctx.device, world=ctx.world,
                 resume=resume_state, on_epoch=save, progress=ctx.progress)  # fmt: skip
     return state, model_config
+
+
+def _stored_canonical(previous: dict[str, Any]) -> bool:
+    """Whether a stored checkpoint's networks see canonical-frame instances."""
+    return bool(from_plain(previous.get("normalization") or {}).get("canonical", False))
 
 
 def _resumed_config(previous: dict[str, Any], preset_name: str, config: TrainConfig) -> TrainConfig:
@@ -554,6 +572,7 @@ def _write_run_config(
         "manifest_digest": manifest_digest(ctx.data),
         "splits_digest": file_sha256(ctx.data / SPLITS_NAME),
         "folds": len(ctx.masks),
+        "canonical": ctx.norm.canonical,
         "samples": {s: int(np.sum(ctx.arrays.split == s)) for s in SPLIT_NAMES},
         "networks": earlier | networks,
         "device": str(ctx.device),
@@ -606,8 +625,8 @@ def evaluate_tscvx(
         "checkpoint": checkpoint,
         "tight": tight_metrics(truth, predicted),
         "solution": solution_metrics(
-            norm.encode_solution(x, u, tf),
-            norm.encode_solution(chosen.x, chosen.u, chosen.tf),
+            norm.encode_solution(x, u, tf, chosen.theta),
+            norm.encode_solution(chosen.x, chosen.u, chosen.tf, chosen.theta),
             (x, u, tf),
             (chosen.x, chosen.u, chosen.tf),
         ),
