@@ -143,3 +143,14 @@ def test_prox_weight_zero_solves_the_hard_box_subproblem_of_algorithm_1():
 
     assert objective_parameters(hard) == {"lambda"}  # -m_N + lambda (|nu|_1 + sum s), Eq. 7
     assert {"w_x", "w_u", "w_sigma"} <= objective_parameters(soft)
+
+
+def test_an_instance_out_of_propellant_stalls_early_without_a_restart():
+    # m0 = 2.05 leaves 0.05 U_M of propellant: far too little to land from the nominal state
+    sol = solve(PDGInstance(m0=2.05))
+    assert sol.status is Status.STALLED
+    assert "stalled after" in sol.message and "infeasible" in sol.message
+    assert sol.iterations < 40  # not the 100 of the iteration cap
+    assert sol.trajectory is not None and not sol.verification.passed
+    assert sol.trajectory.x[-1, 13] == pytest.approx(2.0, abs=1e-6)  # burned to m_dry
+    assert "restart" not in sol.extras  # a longer flight would only burn more

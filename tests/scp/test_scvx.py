@@ -1,7 +1,12 @@
 import numpy as np
 import pytest
 
-from scpformer.scp.scvx import SCvxParameters, meets_stopping_test, update_trust_radius
+from scpformer.scp.scvx import (
+    SCvxParameters,
+    _stalled,
+    meets_stopping_test,
+    update_trust_radius,
+)
 from scpformer.scp.solution import IterationRecord
 
 P = SCvxParameters()
@@ -60,8 +65,25 @@ def test_a_small_step_under_a_throttled_trust_region_is_not_convergence():
         ({"iter_max": 0}, "iter_max"),
         ({"stopping": "step"}, "stopping"),
         ({"eps_opt": 0.0}, "eps_opt"),
+        ({"stall_window": -1}, "stall_window"),
+        ({"stall_window": 2.5}, "stall_window"),
+        ({"stall_decrease": 1.5}, "stall_decrease"),
+        ({"stall_penalty": 0.0}, "stall_penalty"),
     ],
 )
 def test_bad_parameters_name_the_field(kwargs, field):
     with pytest.raises(ValueError, match=field):
         SCvxParameters(**kwargs)
+
+
+def test_the_stall_test_fires_only_on_a_flat_penalty_above_its_floor_after_a_full_window():
+    w = P.stall_window
+    flat = [0.5] * 3 + [0.06] * w  # penalty flat over the last window
+    assert not _stalled(P, flat[:w])  # not a full window yet
+    assert _stalled(P, flat + [0.0599])
+    falling = [0.3 * 0.97**i for i in range(w + 5)]  # 3% per accepted iterate: slow progress
+    assert not _stalled(P, falling)
+    rising_then_flat = [0.05] + [0.2] * w  # a penalty above its value a window ago
+    assert _stalled(P, rising_then_flat)
+    assert not _stalled(P, [1e-4] * (w + 2))  # nearly feasible: creeping cost, not a stall
+    assert not _stalled(SCvxParameters(stall_window=0), flat)

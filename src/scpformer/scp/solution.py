@@ -18,6 +18,10 @@ class Status(str, Enum):
     MAX_ITERATIONS         the iteration limit was reached first (the paper counts it infeasible)
     INFEASIBLE_INSTANCE    the instance is infeasible before solving (reason in ``message``)
     SOLVER_FAILED          the conic solver failed on a subproblem (reason in ``message``)
+    STALLED                the penalty stopped decreasing at an infeasible iterate: a stationary
+                           point of the penalized cost (Eq. 16) that keeps virtual control, as
+                           SCvx reaches when the instance is infeasible near its start (Mao et
+                           al. 2016, Thm. 3); the best iterate is returned
     """
 
     CONVERGED = "converged"
@@ -25,6 +29,7 @@ class Status(str, Enum):
     MAX_ITERATIONS = "max_iterations"
     INFEASIBLE_INSTANCE = "infeasible_instance"
     SOLVER_FAILED = "solver_failed"
+    STALLED = "stalled"
 
 
 @dataclass(frozen=True)

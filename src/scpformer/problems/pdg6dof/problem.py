@@ -333,8 +333,10 @@ def solve(
         )
     problem = PDGProblem(instance, config)
     default = problem.initial_guess()
-    if guess is None or isinstance(guess, Trajectory | list | tuple | np.ndarray | dict):
-        guess = default if guess is None else check_trajectory("guess", guess, default)
+    if guess is None:
+        return solve_with_restart(problem, default, eta_init)
+    if isinstance(guess, Trajectory | list | tuple | np.ndarray | dict):
+        guess = check_trajectory("guess", guess, default)
         return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
     from scpformer.problems.pdg6dof.guess import ANALYTIC_GUESSES
     from scpformer.warmstart.base import as_provider
@@ -352,8 +354,75 @@ def solve(
     if result.trajectory is None:
         raise ValueError(f"guess: the warm start produced no trajectory ({result.record.reason})")
     checked = check_trajectory("guess", result.trajectory, default)
-    solution = solve_scvx(problem, checked, config.scvx, eta_init=eta_init)
+    default_start = isinstance(provider, AnalyticWarmStart) and provider.profile == "cubic_profile"
+    if default_start:  # the default cold start, named: the same solve as guess=None
+        solution = solve_with_restart(problem, checked, eta_init)
+    else:
+        solution = solve_scvx(problem, checked, config.scvx, eta_init=eta_init)
     return replace(solution, extras={**solution.extras, "warmstart": result.record.to_dict()})
+
+
+RESTART_TF_FACTOR = 1.5  # final time of the restart's guess, times the stalled run's
+RESTART_MIN_BUDGET = 10  # least solves left for a restart to be tried
+RESTART_DRY_MARGIN = 0.01  # stalled with m_f below m_dry + this (m0 - m_dry): out of propellant
+
+
+def solve_with_restart(
+    problem: PDGProblem, guess: Trajectory, eta_init: float | None = None
+) -> Solution:
+    """SCvx from the default guess, restarted once with a longer final time if it stalls.
+
+    The cubic profile's final time is that of the translational fuel optimum; an instance
+    whose attitude dynamics need much longer (e.g. EmbersArc's draw 0 of
+    ``benchmarks/pdg6dof_embersarc.py``: 2.36 U_T where the cubic says 1.04) stalls at an
+    infeasible stationary point, and SCvx lengthens ``t_f`` by ~0.5% per iteration (measured
+    on that draw: with ``t_f`` fixed at 1.1, 1.3, 1.5 and 1.8 U_T it stalls with penalties
+    0.26, 0.23, 0.16 and 0.10). A run that stops ``STALLED`` is therefore restarted from the
+    cubic profile flown in ``RESTART_TF_FACTOR`` times its final time, with the solves it has
+    left, unless it stalled out of propellant (final mass within ``RESTART_DRY_MARGIN`` of
+    the propellant above ``m_dry``: a longer flight burns more) or fewer than
+    ``RESTART_MIN_BUDGET`` solves remain. The result counts the solves and time of both runs,
+    keeps both histories and records the restart in ``extras["restart"]``.
+    """
+    config = problem.config
+    first = solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
+    budget = config.scvx.iter_max - first.iterations
+    if first.status is not Status.STALLED or budget < RESTART_MIN_BUDGET:
+        return first
+    instance, c = problem.instance, problem.instance.constants
+    if first.trajectory.x[-1, 13] <= c.m_dry + RESTART_DRY_MARGIN * (instance.m0 - c.m_dry):
+        return first
+    tf = min(RESTART_TF_FACTOR * float(first.trajectory.p[0]), c.tf_max)
+    restart_guess = cubic_profile_trajectory(instance, config.n_nodes, tf)
+    params = dataclasses.replace(config.scvx, iter_max=budget)
+    second = solve_scvx(problem, restart_guess, params, eta_init=eta_init)
+    return _joined(first, second, tf)
+
+
+def _joined(first: Solution, second: Solution, tf_guess: float) -> Solution:
+    """One solution of a stalled run and its restart (the restart's result, both histories)."""
+    offset = first.iterations
+    history = [*first.history, *(replace(r, iteration=r.iteration + offset) for r in second.history)]
+    timing = first.timing
+    if timing is not None and second.timing is not None:
+        timing = replace(
+            second.timing,
+            total=timing.total + second.timing.total,
+            discretization=timing.discretization + second.timing.discretization,
+            solver=timing.solver + second.timing.solver,
+        )
+    restart = {"after": offset, "tf_guess": tf_guess, "first_message": first.message}
+    message = second.message
+    if second.status is not Status.CONVERGED:
+        message = f"restarted with t_f = {tf_guess:.3g} after {offset} solves; then {message}"
+    return replace(
+        second,
+        message=message,
+        iterations=offset + second.iterations,
+        history=history,
+        timing=timing,
+        extras={**second.extras, "restart": restart},
+    )
 
 
 REFERENCE_ITER_MAX = 200  # subproblem solves of the reference run
