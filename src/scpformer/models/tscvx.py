@@ -482,6 +482,7 @@ class TscvxPredictor:
         self.threshold = float(threshold)
         self.n_nodes = normalization.n_nodes  # N
         self.n_rows = tight.config.n_rows  # R = 7 N
+        self._encoded: tuple[bytes, Tensor] | None = None  # the last theta's standardized input
 
     def _theta(self, theta: np.ndarray) -> tuple[Tensor, bool]:
         """Standardized (B, 16) float32 tensor, and whether ``theta`` was one vector."""
@@ -491,8 +492,11 @@ class TscvxPredictor:
             raise ValueError(f"theta must be ({N_THETA},) or (B, {N_THETA}), got {theta.shape}")
         if not np.all(np.isfinite(theta)):
             raise ValueError("theta must be finite (it holds NaN or inf)")
-        z = self.normalization.encode_theta(np.atleast_2d(theta))
-        return torch.as_tensor(z, dtype=torch.float32, device=self.device), single
+        key = theta.tobytes() + bytes(theta.shape)
+        if self._encoded is None or self._encoded[0] != key:  # T-SCvx asks once per iteration
+            z = self.normalization.encode_theta(np.atleast_2d(theta))
+            self._encoded = key, torch.as_tensor(z, dtype=torch.float32, device=self.device)
+        return self._encoded[1], single
 
     def _k(self, k: int | np.ndarray, batch: int, single: bool) -> Tensor:
         k_array = np.asarray(k)
