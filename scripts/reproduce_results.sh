@@ -11,8 +11,8 @@
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
 # instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] epochs of the
 # rendezvous models, TPBVP_EPOCHS ["art:6 gru:4 lstm:4"] of the Table 2 models (Problem 1
-# twin), ROBUST_EPOCHS [8] of the robust ones, N_PDG [1500] 6-DoF base instances
-# (seed PDG_SEED [2]; x8 rotations), RAY [unset] Ray address.
+# twin), ROBUST_EPOCHS [8] of the robust ones, N_PDG [3000] 6-DoF base instances
+# (seed PDG_SEED [3]; x8 rotations), RAY [unset] Ray address.
 set -euo pipefail
 
 DATA=${DATA:-/work/data}
@@ -22,8 +22,8 @@ WORKERS=${WORKERS:-2}
 SEED=${SEED:-0}
 N_RDV=${N_RDV:-3000}
 N_ROB=${N_ROB:-1200}
-N_PDG=${N_PDG:-1500}
-PDG_SEED=${PDG_SEED:-2}
+N_PDG=${N_PDG:-3000}
+PDG_SEED=${PDG_SEED:-3}
 PDG=$DATA/pdg
 PDG8=$DATA/pdg8
 RDV=$DATA/rdv$N_RDV
@@ -111,14 +111,14 @@ run scpformer experiment run robust-forecast --model "$RUNS/art-robust-small" --
 #    the lookup tables, and the four experiments (Table 3, Figs. 2-4, Tables 4-5)
 if [ ! -f "$PDG8/splits.h5" ]; then
   run scpformer generate pdg6dof --n "$N_PDG" --seed "$PDG_SEED" --out "$PDG" \
-    --workers "$WORKERS" --shard-size 16 --time-limit 40
+    --workers "$WORKERS"
   run scpformer dataset augment "$PDG" --out "$PDG8" --workers "$WORKERS"
   run scpformer dataset split "$PDG8" --fractions 0.8 0.1 0.1 --seed 0
 fi
 if [ -f "$RUNS/tscvx-small/tight/checkpoint.pt" ]; then resume=--resume; else resume=; fi
 # shellcheck disable=SC2086
 run scpformer train tscvx --data "$PDG8" --out "$RUNS/tscvx-small" --preset small \
-  --threads 1 --report-split test $resume
+  --threads 2 --report-split test $resume
 [ -f "$RUNS/kdtree/lookup.json" ] || run scpformer train kdtree --data "$PDG8" --out "$RUNS/kdtree"
 [ -f "$RUNS/interp/lookup.json" ] || run scpformer train interp --data "$PDG8" \
   --out "$RUNS/interp" --n-components 6
