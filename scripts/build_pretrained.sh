@@ -9,21 +9,22 @@
 #
 # Time on the 2-core development machine, from the logs of the shipped models (made while
 # other jobs kept the load at 5-10): rendezvous data 3 min + ART 18 min; robust data 21 min +
-# ART 19 min; 6-DoF data about 42 min (480 instances) + T-SCvx networks 5 min. About 1 h 50 min
+# ART 19 min; 6-DoF data 54 min (3000 instances, 49 min of generation beside other jobs, then
+# 5 min of augmentation and split) + T-SCvx networks T_TSCVX min (session 13). About 2 h 20 min
 # in all under that load (not measured on an idle machine, where it should be shorter). Each
 # model builds alone (`scripts/build_pretrained.sh tscvx`); a smaller N_PDG shortens the
 # longest stage but makes another T-SCvx model than the shipped one. A rerun resumes the
 # dataset generation (`generate` keeps finished shards).
 #
 # Environment (defaults in brackets): WORK [/tmp/scpformer-pretrained] datasets and runs,
-# OUT [src/scpformer/pretrained] where the packaged models go, WORKERS [2], N_PDG [480] 6-DoF
+# OUT [src/scpformer/pretrained] where the packaged models go, WORKERS [2], N_PDG [3000] 6-DoF
 # base instances (x8 by the rotation augmentation).
 set -euo pipefail
 
 WORK=${WORK:-/tmp/scpformer-pretrained}
 OUT=${OUT:-src/scpformer/pretrained}
 WORKERS=${WORKERS:-2}
-N_PDG=${N_PDG:-480}
+N_PDG=${N_PDG:-3000}
 MODELS=("$@")
 [ ${#MODELS[@]} -eq 0 ] && MODELS=(art-rendezvous art-robust tscvx)
 mkdir -p "$WORK"
@@ -57,10 +58,11 @@ art_robust() {
 
 tscvx() {
     : >tscvx.commands
-    run tscvx scpformer generate pdg6dof --n "$N_PDG" --seed 2 --out pdg --workers "$WORKERS" --time-limit 40
+    run tscvx scpformer generate pdg6dof --n "$N_PDG" --seed 3 --out pdg --workers "$WORKERS"
     run tscvx scpformer dataset augment pdg --out pdg8
     run tscvx scpformer dataset split pdg8 --fractions 0.8 0.1 0.1 --seed 0
-    run tscvx scpformer train tscvx --data pdg8 --out tscvx-small --preset small --seed 0
+    run tscvx scpformer train tscvx --data pdg8 --out tscvx-small --preset small --threads 2 \
+        --report-split test
     python -m scpformer.pretrained.package tscvx tscvx-small --commands tscvx.commands --out "$OUT"
 }
 

@@ -242,3 +242,11 @@ def test_predictor_refuses_networks_of_different_sizes():
     with pytest.raises(ValueError, match="disagree on N"):
         TscvxPredictor(tiny(TIGHT_KIND), build_model(SOLUTION_KIND, SolutionConfig(
             d_model=8, n_head=1, n_layer=1, d_ff=8, n_nodes=6)), normalization())  # fmt: skip
+
+
+def test_predictor_serves_large_batches_and_a_changed_theta_after_a_cached_one(predictor):
+    theta = np.random.default_rng(6).normal(size=(300, 16))  # batch size above 255
+    first = predictor.predict_tight_proba(theta, 2)
+    assert first.shape == (300, 7 * N)
+    np.testing.assert_allclose(predictor.predict_tight_proba(theta[:1], 2), first[:1], rtol=1e-5)
+    np.testing.assert_allclose(predictor.predict_tight_proba(theta, 2), first)

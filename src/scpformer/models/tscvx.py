@@ -482,7 +482,7 @@ class TscvxPredictor:
         self.threshold = float(threshold)
         self.n_nodes = normalization.n_nodes  # N
         self.n_rows = tight.config.n_rows  # R = 7 N
-        self._encoded: tuple[bytes, Tensor] | None = None  # the last theta's standardized input
+        self._encoded: tuple[tuple, Tensor] | None = None  # the last theta's standardized input
 
     def _theta(self, theta: np.ndarray) -> tuple[Tensor, bool]:
         """Standardized (B, 16) float32 tensor, and whether ``theta`` was one vector."""
@@ -492,7 +492,7 @@ class TscvxPredictor:
             raise ValueError(f"theta must be ({N_THETA},) or (B, {N_THETA}), got {theta.shape}")
         if not np.all(np.isfinite(theta)):
             raise ValueError("theta must be finite (it holds NaN or inf)")
-        key = theta.tobytes() + bytes(theta.shape)
+        key = (theta.shape, theta.tobytes())
         if self._encoded is None or self._encoded[0] != key:  # T-SCvx asks once per iteration
             z = self.normalization.encode_theta(np.atleast_2d(theta))
             self._encoded = key, torch.as_tensor(z, dtype=torch.float32, device=self.device)
