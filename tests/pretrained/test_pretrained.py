@@ -84,3 +84,12 @@ def test_a_missing_file_is_named(tampered):
 def test_an_unknown_family_has_no_default():
     with pytest.raises(PretrainedError, match="no pretrained model for family 'pdg3dof'"):
         default_model("pdg3dof")
+
+
+def test_bench_tscvx_times_the_shipped_networks_with_model_default(capsys):
+    from scpformer.cli.main import main
+
+    assert main(["bench", "tscvx", "--model", "default", "--repeats", "3", "--warmup", "1",
+                 "--batch", "2"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "T-SCvx inference (default;" in out and "predict_solution, batch 1" in out

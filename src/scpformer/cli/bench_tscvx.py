@@ -38,7 +38,11 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--tokens", choices=("single", "inputs"), default=None,
                         help="tokenization of random nets (preset's)")  # fmt: skip
-    parser.add_argument("--model", type=Path, help="trained run folder (RUN/tight, RUN/solution)")
+    parser.add_argument(
+        "--model",
+        type=Path,
+        help="trained run folder (RUN/tight, RUN/solution), or 'default': the shipped networks",
+    )
     parser.add_argument("--repeats", type=int, default=500, help="timed calls per case (500)")
     parser.add_argument("--warmup", type=int, default=20, help="untimed calls first (20)")
     parser.add_argument("--batch", type=int, default=64, help="batch of the throughput case (64)")
@@ -95,7 +99,10 @@ def run_bench(args: argparse.Namespace) -> int:
             raise ValueError(f"--{name} must be positive, got {getattr(args, name)}")
     torch.set_num_threads(args.threads)
     if args.model is not None:
-        predictor = load_tscvx_predictor(args.model)
+        from scpformer.pretrained import resolve_model
+
+        model = resolve_model(args.model, "pdg6dof")  # 'default': the shipped networks
+        predictor = load_tscvx_predictor(model)
         source = str(args.model)
     else:
         predictor = random_predictor(args.preset, args.tokens, args.seed)
