@@ -50,8 +50,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from scpformer.data.splits import STD_FLOOR, Splits
-from scpformer.models.normalization import _per_step_floor
+from scpformer.data.splits import Splits
+from scpformer.models.normalization import _floored, _per_step_floor
 from scpformer.problems.pdg6dof import symmetry as sym
 
 N_THETA = 16  # parameters of theta (THETA_NAMES)
@@ -327,25 +327,21 @@ class TscvxNormalization:
         frame = sym.canonical_frame(theta)
         theta_c = sym.theta_to_canonical(theta, frame)
         x_c, u_c = sym.solution_to_canonical(x, u, frame)
-        stats = {}
-        for name, value in (("theta", theta_c), ("x", x_c), ("u", u_c)):
-            std = value.std(axis=0)
-            stats[name] = (value.mean(axis=0), np.where(std < STD_FLOOR, 1.0, std))
+        stats = {
+            name: (value.mean(axis=0), _floored(value.std(axis=0)))
+            for name, value in (("theta", theta_c), ("x", x_c), ("u", u_c))
+        }
         return cls(
             theta_mean=stats["theta"][0], theta_std=stats["theta"][1],
             x_mean=stats["x"][0], x_std=_per_step_floor(*stats["x"]),
             u_mean=stats["u"][0], u_std=_per_step_floor(*stats["u"]),
-            tf_mean=float(np.mean(tf)), tf_std=float(max(np.std(tf), STD_FLOOR)),
+            tf_mean=float(np.mean(tf)), tf_std=float(_floored(np.std(tf))),
             canonical=True,
         )  # fmt: skip
 
-    def frame(self, theta: np.ndarray) -> sym.CanonicalFrame | None:
-        """The canonical frame of theta (B, 16), or None without ``canonical``."""
-        return sym.canonical_frame(theta) if self.canonical else None
-
     def encode_theta(self, theta: np.ndarray) -> np.ndarray:
         """Raw theta (B, 16) -> standardized (in the canonical frame with ``canonical``)."""
-        frame = self.frame(theta)
+        frame = self._frame_of("encode_theta", theta)
         if frame is not None:
             theta = sym.theta_to_canonical(theta, frame)
         return (theta - self.theta_mean) / self.theta_std
@@ -381,6 +377,7 @@ class TscvxNormalization:
         return x, u, z[:, -1] * self.tf_std + self.tf_mean
 
     def _frame_of(self, method: str, theta: np.ndarray | None) -> sym.CanonicalFrame | None:
+        """The canonical frame of theta (B, 16), or None without ``canonical``."""
         if not self.canonical:
             return None
         if theta is None:
