@@ -2,12 +2,15 @@ import numpy as np
 import pytest
 
 from scpformer.scp.scvx import (
+    Candidate,
+    Evaluation,
     SCvxParameters,
     _stalled,
     meets_stopping_test,
+    solve_scvx,
     update_trust_radius,
 )
-from scpformer.scp.solution import IterationRecord
+from scpformer.scp.solution import IterationRecord, Status, Trajectory, Verification
 
 P = SCvxParameters()
 
@@ -87,3 +90,67 @@ def test_the_stall_test_fires_only_on_a_flat_penalty_above_its_floor_after_a_ful
     assert _stalled(P, rising_then_flat)
     assert not _stalled(P, [1e-4] * (w + 2))  # nearly feasible: creeping cost, not a stall
     assert not _stalled(SCvxParameters(stall_window=0), flat)
+
+
+class ScriptedProblem:
+    """A ConvexifiedProblem whose subproblem answers are scripted: candidate i has the cost
+    ``costs[i]``, the penalty ``penalties[i]`` and the linear prediction ``predictions[i]``."""
+
+    def __init__(self, costs, penalties, predictions):
+        self.costs, self.penalties, self.predictions = costs, penalties, predictions
+        self.solves = 0
+
+    @staticmethod
+    def _z(i: int) -> Trajectory:
+        return Trajectory(x=np.full((3, 1), float(i)), u=np.zeros((3, 1)), p=np.zeros(1))
+
+    def evaluate(self, z):
+        i = int(z.x[0, 0])
+        return Evaluation(
+            cost=self.costs[i], penalty=self.penalties[i], max_defect=self.penalties[i],
+            tight_flags=np.zeros(0, dtype=bool), linearization=None, time=0.0,
+        )  # fmt: skip
+
+    def solve_subproblem(self, z, evaluation, eta, lambda_, solver):
+        self.solves += 1
+        i = self.solves
+        return Candidate(self._z(i), self.predictions[i], 0.0, 0.0, "optimal", 0.0, True)
+
+    def solve_correction(self, z, evaluation, candidate, cand_ev, eta, lambda_, solver):
+        raise AssertionError("no correction is needed once z_bar is certified stationary")
+
+    def verify(self, z):
+        return Verification(True, {}, 0.0, {}, {})
+
+    def node_times(self, z):
+        return np.arange(3.0)
+
+    def step_norm(self, z_new, z_old):
+        return 1.0
+
+
+def test_a_stationary_iterate_is_returned_when_its_subproblem_finds_no_descent():
+    # guess 0 (infeasible), candidate 1 accepted and feasible; the subproblem about 1 predicts
+    # a decrease below eps_opt |J|, but its candidate 2 is worse on the nonlinear problem
+    # (defects): 1 is a stationary point and is returned, without a correction solve
+    tiny = 0.1 * P.eps_opt
+    problem = ScriptedProblem(
+        costs=[0.0, -2.0, -2.0 - tiny], penalties=[1.0, 0.0, 1e-3],
+        predictions=[None, -2.0, -2.0 - tiny],
+    )  # fmt: skip
+    solution = solve_scvx(problem, ScriptedProblem._z(0), P)
+    assert solution.status is Status.CONVERGED
+    assert solution.iterations == 2 and problem.solves == 2
+    assert solution.cost == -2.0  # the certified iterate, not the rejected candidate
+    assert [r.accepted for r in solution.history] == [True, False]
+
+
+def test_a_predicted_decrease_is_no_certificate_under_a_small_radius():
+    tiny = 0.1 * P.eps_opt
+    problem = ScriptedProblem(
+        costs=[0.0, -2.0, -2.0 - tiny, -2.0 - tiny], penalties=[1.0, 0.0, 0.0, 0.0],
+        predictions=[None, -2.0, -2.0 - tiny, -2.0 - tiny],
+    )  # fmt: skip
+    small = SCvxParameters(eta_init=0.5, eta_ub=0.5, iter_max=3)
+    solution = solve_scvx(problem, ScriptedProblem._z(0), small)
+    assert solution.status is Status.MAX_ITERATIONS

@@ -607,7 +607,9 @@ def run_trajectory(options: RunOptions, *, command: str = "", name: str) -> Path
     cold = solve(instance, config.solver)
     solution = solve(instance, config.solver, guess=TscvxWarmStart(predictor))
     report = new_report(name, f"{PAPER} Fig. 3", command, settings, study)
-    report.figures += trajectory_figures(instance, solution, cold, predictor, options.out)
+    report.figures += trajectory_figures(
+        instance, solution, cold, predictor, options.out, config.solver.tight_tol
+    )
     report.sections.append(("Instance", trajectory_summary(int(position), solution, cold)))
     report.comparisons = trajectory_comparisons(instance, solution, cold)
     return report.write(options.out)
@@ -632,11 +634,17 @@ def trajectory_comparisons(instance: Any, solution: Any, cold: Any) -> list[rep.
     ]
 
 
-def trajectory_figures(instance, solution, cold, predictor, out: Path) -> list[tuple[str, str]]:
+def trajectory_figures(
+    instance, solution, cold, predictor, out: Path, tight_tol: float
+) -> list[tuple[str, str]]:
     """The trajectory figure and the predicted-vs-true tight rows figure."""
     from scpformer.data.pdg6dof_family import theta_vector
     from scpformer.plotting.pdg6dof import plot_trajectory
-    from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
+    from scpformer.problems.pdg6dof.constraints import (
+        CONSTRAINT_NAMES,
+        constraint_values,
+        tight_flags,
+    )
 
     z = solution.trajectory
     t = np.linspace(0.0, float(z.p[0]), z.x.shape[0])
@@ -651,7 +659,10 @@ def trajectory_figures(instance, solution, cold, predictor, out: Path) -> list[t
         "predicted tight, k = 1": predictor.predict_tight(theta, 1),
         "tight at cold SCvx's first solve": cold.history[0].tight_flags,
         f"predicted tight, k = {cold.iterations}": predictor.predict_tight(theta, cold.iterations),
-        "tight at cold SCvx's optimum": cold.history[-1].tight_flags,
+        "tight at cold SCvx's optimum": tight_flags(  # the returned iterate's, not the last
+            # solve's: a run certified stationary ends on a solve whose candidate it rejects
+            constraint_values(instance, cold.trajectory.x, cold.trajectory.u), tight_tol
+        ).ravel(),
     }
     figure, axes = rep.new_figure(ncols=len(panels), width=16.0, height=3.2)
     n = len(CONSTRAINT_NAMES)

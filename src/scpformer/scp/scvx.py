@@ -15,7 +15,12 @@ decrease ``Delta L`` is below ``eps_opt max(1, |J|)`` while the trust radius is 
 iterate is a first-order stationary point of Eq. 16 up to that tolerance. A step made short by
 a small radius (or by a proximal weight) proves nothing and does not stop the loop; a run that
 never meets the test ends at ``iter_max`` as ``MAX_ITERATIONS`` and returns its last accepted
-(lowest ``J``) iterate. ``stopping = "table1"`` is Table 1's test read as in SCPToolbox.jl:
+(lowest ``J``) iterate. The test certifies the iterate the subproblem is built about, so it is
+read off the first solve of every iteration: when it holds about a feasible ``z_bar`` the loop
+ends there, returning the candidate if the ratio test accepts it and ``z_bar`` otherwise,
+without the second-order correction the candidate's defects would call for (measured on 12
+nominal instances, numpy seed 0, and 12 of ``generate pdg6dof``'s, seed 99: one solve fewer
+in most runs, cold and T-SCvx alike). ``stopping = "table1"`` is Table 1's test read as in SCPToolbox.jl:
 ``|z* - z_bar|_inf <= eps_abs`` or ``|Delta J| <= eps_rel |J(z_bar)|``. Either way the nonlinear
 penalty must be below ``feas_tol``, and, because a loop can meet the test with virtual control
 stuck on an unreachable state, the virtual control and buffers of the subproblem
@@ -236,6 +241,7 @@ def solve_scvx(
     history: list[IterationRecord] = []
     status, message = Status.MAX_ITERATIONS, ""
     penalties: list[float] = []  # of the accepted iterates, for the stall test
+    bar_negligible = False  # z_bar feasible enough to be returned as converged
     while len(history) < params.iter_max:
         t_iter = time.perf_counter()
         cand = problem.solve_subproblem(z_bar, ev_bar, eta, params.lambda_, params.solver)
@@ -244,6 +250,16 @@ def solve_scvx(
             status, message = Status.SOLVER_FAILED, f"iteration {len(history) + 1}: {cand.status}"
             break
         ev, J = step
+        if bar_negligible and _certifies_stationary(params, J_bar, cand.linear_cost, eta):
+            accepted = J_bar - J >= params.rho_0 * (J_bar - cand.linear_cost)
+            final = accepted and _negligible(params, cand, ev) and ev.penalty <= params.feas_tol
+            history.append(
+                _record(len(history) + 1, final, cand, ev, J, J_bar, z_bar, eta, problem, t_iter)
+            )
+            if final:
+                z_bar, ev_bar = cand.trajectory, ev
+            status = Status.CONVERGED
+            break
         if _wants_correction(params, ev, J_bar, J, cand, len(history)):
             history.append(
                 _record(len(history) + 1, False, cand, ev, J, J_bar, z_bar, eta, problem, t_iter)
@@ -274,8 +290,8 @@ def solve_scvx(
             continue
         stop = meets_stopping_test(params, history[-1], delta_J, delta_L, J_bar, eta_used)
         z_bar, ev_bar, J_bar = cand.trajectory, ev, J
-        negligible = cand.virtual_max <= params.virtual_tol and ev.max_defect <= params.defect_tol
-        if stop and ev.penalty <= params.feas_tol and negligible:
+        bar_negligible = _negligible(params, cand, ev) and ev.penalty <= params.feas_tol
+        if stop and bar_negligible:
             status = Status.CONVERGED
             break
         penalties.append(ev.penalty)
@@ -283,6 +299,26 @@ def solve_scvx(
             status, message = Status.STALLED, _stall_message(params, penalties, len(history))
             break
     return _finish(problem, z_bar, ev_bar, status, message, history, start, clock)
+
+
+def _negligible(params: SCvxParameters, cand: Candidate, ev: Evaluation) -> bool:
+    """Virtual control, buffers and nonlinear defects of an iterate are negligible."""
+    return cand.virtual_max <= params.virtual_tol and ev.max_defect <= params.defect_tol
+
+
+def _certifies_stationary(
+    params: SCvxParameters, J_bar: float, linear_cost: float, eta: float
+) -> bool:
+    """The first solve about ``z_bar`` finds no descent: ``z_bar`` is stationary.
+
+    The ``"stationary"`` test of :func:`meets_stopping_test` is a property of the subproblem
+    about ``z_bar``, not of its candidate: when the subproblem, with a radius of at least
+    ``eta_stationary``, predicts a decrease ``Delta L`` below ``eps_opt max(1, |J|)``, ``z_bar``
+    is a stationary point whether or not the candidate's nonlinear defects pass the ratio test.
+    """
+    if params.stopping != "stationary" or eta < params.eta_stationary:
+        return False
+    return J_bar - linear_cost <= params.eps_opt * max(1.0, abs(J_bar))
 
 
 def _stalled(params: SCvxParameters, penalties: list[float]) -> bool:
@@ -363,8 +399,7 @@ def meets_stopping_test(
     """
     if params.stopping == "table1":
         return record.step_norm <= params.eps_abs or abs(delta_J) <= params.eps_rel * abs(J_bar)
-    scale = max(1.0, abs(J_bar))
-    return delta_L <= params.eps_opt * scale and eta_used >= params.eta_stationary
+    return _certifies_stationary(params, J_bar, J_bar - delta_L, eta_used)
 
 
 def _record(
