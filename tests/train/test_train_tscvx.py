@@ -21,6 +21,7 @@ from scpformer.models.tscvx import (  # noqa: E402
 )
 from scpformer.train.checkpoint import CheckpointError, load_checkpoint  # noqa: E402
 from scpformer.train.tscvx import (  # noqa: E402
+    SolutionObjective,
     evaluate_tscvx,
     fold_masks,
     positive_weight,
@@ -130,6 +131,30 @@ def test_raw_frame_training_uses_the_splits_statistics_and_resume_keeps_the_fram
     np.testing.assert_allclose(stored.x_mean, norm.x_mean)
     with pytest.raises(ValueError, match="canonical = False"):
         train(fake_pdg, run, networks=("solution",), resume=True, solution_epochs=3)
+
+
+def test_the_thrust_weight_scales_the_thrust_errors_of_the_solution_loss():
+    n = 4  # nodes: 14 n state outputs, 3 n thrust outputs, t_f
+    net = torch.nn.Identity()
+    target = torch.zeros(2, 17 * n + 1)
+    pred = torch.zeros(2, 17 * n + 1)
+    pred[:, 14 * n] = 1.0  # one thrust error
+    pred[:, 0] = 1.0  # one state error of the same size
+    plain = SolutionObjective(net, n)({"theta": pred, "target": target})[1]
+    assert float(plain) == pytest.approx(float(torch.nn.functional.mse_loss(pred, target)))
+    weighted = SolutionObjective(net, n, thrust_weight=4.0)({"theta": pred, "target": target})[1]
+    mean_weight = (14 * n + 4.0 * 3 * n + 1) / (17 * n + 1)
+    assert float(weighted) == pytest.approx((1.0 + 4.0) / mean_weight / (17 * n + 1))
+
+
+def test_resume_keeps_the_thrust_weight(fake_pdg, tmp_path):
+    run = tmp_path / "weighted"
+    train(fake_pdg, run, networks=("solution",), thrust_weight=3.0)
+    assert json.loads((run / "config.json").read_text())["thrust_weight"] == 3.0
+    with pytest.raises(ValueError, match="thrust-weight 3"):
+        train(fake_pdg, run, networks=("solution",), resume=True, solution_epochs=3)
+    with pytest.raises(ValueError, match="thrust_weight"):
+        train(fake_pdg, tmp_path / "bad", thrust_weight=0.0)
 
 
 def test_three_folds_deliver_the_last_folds_network(fake_pdg, tmp_path):

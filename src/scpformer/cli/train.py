@@ -168,6 +168,12 @@ def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
         "the raw frame, as the paper",
     )
     parser.add_argument(
+        "--thrust-weight",
+        type=float,
+        default=1.0,
+        help="weight of f1's thrust outputs in its MSE (1: the paper's plain MSE)",
+    )
+    parser.add_argument(
         "--resume", action="store_true", help="continue the run in --out from its checkpoints"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -196,6 +202,7 @@ def run_train_tscvx(args: argparse.Namespace) -> int:
         threads=args.threads,
         progress=not args.no_progress,
         canonical=args.canonical,
+        thrust_weight=args.thrust_weight,
     )
     if not result.world.is_main:
         return 0
