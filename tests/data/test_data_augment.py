@@ -1,6 +1,8 @@
 """The T-SCvx rotation augmentation: a rotated solution solves the rotated instance."""
 
+import dataclasses
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -106,3 +108,29 @@ def test_only_complete_pdg6dof_datasets_are_augmented(tmp_path):
         augment_dataset(tmp_path / "toy", tmp_path / "out")
     with pytest.raises(ValueError, match=r"angles_deg must be distinct"):
         RotationAugmentation(angles_deg=(0.0, 0.0))
+
+
+def test_the_first_instances_of_an_unfinished_dataset_are_augmented(pdg_dataset, tmp_path):
+    manifest = storage.read_manifest(pdg_dataset.folder)
+    boundary = manifest.shards[0].stop - manifest.shards[0].start  # one shard
+    unfinished = dataclasses.replace(
+        manifest, shards=tuple(s for s in manifest.shards if s.start == 0)
+    )  # the generation of the other shards still running
+    source = tmp_path / "src"
+    shutil.copytree(pdg_dataset.folder, source)
+    storage.write_manifest(source, unfinished)
+    with pytest.raises(DatasetError, match=r"incomplete.*--first"):
+        augment_dataset(source, tmp_path / "all")
+    with pytest.raises(DatasetError, match="not all stored"):
+        augment_dataset(source, tmp_path / "more", first=boundary + 1)
+    with pytest.raises(ValueError, match="first must be"):
+        augment_dataset(source, tmp_path / "zero", first=0)
+    out = augment_dataset(source, tmp_path / "part", first=boundary)
+    assert out.complete and out.source["n"] == boundary
+    rotated = all_columns(tmp_path / "part")
+    assert set(rotated["base_index"]) == set(range(boundary))
+    # the same rotated samples as those of the whole dataset's first shard
+    whole = augment_dataset(pdg_dataset.folder, tmp_path / "whole")
+    (shard,) = [s for s in whole.shards if s.start == 0]
+    first_shard = storage.read_columns(tmp_path / "whole" / shard.file, whole.schema)
+    np.testing.assert_array_equal(rotated["theta"], first_shard["theta"])

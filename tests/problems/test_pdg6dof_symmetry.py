@@ -97,9 +97,7 @@ def test_solving_the_body_rolled_instance_gives_the_rolled_solution(tilted):
     # Independent of the mapping above: SCvx solves the rolled instance from its own guess.
     instance, solution = tilted
     q_roll = quat.from_axis_angle([1.0, 0.0, 0.0], 2.0)
-    rolled = instance_from_theta(
-        sym.roll_theta(theta_vector(instance), q_roll), instance.constants
-    )
+    rolled = instance_from_theta(sym.roll_theta(theta_vector(instance), q_roll), instance.constants)
     other = solve(rolled)
     assert other.status is Status.CONVERGED, other.message
     propellant = instance.m0 + solution.cost

@@ -83,7 +83,7 @@ def test_the_stall_test_fires_only_on_a_flat_penalty_above_its_floor_after_a_ful
     w = P.stall_window
     flat = [0.5] * 3 + [0.06] * w  # penalty flat over the last window
     assert not _stalled(P, flat[:w])  # not a full window yet
-    assert _stalled(P, flat + [0.0599])
+    assert _stalled(P, [*flat, 0.0599])
     falling = [0.3 * 0.97**i for i in range(w + 5)]  # 3% per accepted iterate: slow progress
     assert not _stalled(P, falling)
     rising_then_flat = [0.05] + [0.2] * w  # a penalty above its value a window ago

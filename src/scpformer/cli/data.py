@@ -369,6 +369,14 @@ def _add_augment_parser(commands: argparse._SubParsersAction) -> None:
         "--all-statuses", action="store_true", help="rotate failed samples too (default: drop)"
     )
     parser.add_argument("--workers", type=positive, default=1, help="processes (1)")
+    parser.add_argument(
+        "--first",
+        type=positive,
+        default=None,
+        metavar="N",
+        help="rotate only the first N base instances (a shard boundary; SRC may still be "
+        "generating): the same draws as generate --n N with SRC's seed",
+    )
     parser.set_defaults(handler=run_augment)
 
 
@@ -495,6 +503,7 @@ def run_augment(args: argparse.Namespace) -> int:
             args.out,
             transform,
             workers=args.workers,
+            first=args.first,
             on_shard=on_shard,
             on_notice=lambda text: tqdm.write(f"scpformer: {text}", file=sys.stderr),
         )

@@ -170,8 +170,8 @@ def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--thrust-weight",
         type=float,
-        default=1.0,
-        help="weight of f1's thrust outputs in its MSE (1: the paper's plain MSE)",
+        default=None,
+        help="weight of f1's thrust outputs in its MSE (preset's: paper 1, the plain MSE; small 4)",
     )
     parser.add_argument(
         "--resume", action="store_true", help="continue the run in --out from its checkpoints"

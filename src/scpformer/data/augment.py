@@ -137,6 +137,7 @@ def augment_dataset(
     transform: RotationAugmentation | None = None,
     *,
     workers: int = 1,
+    first: int | None = None,
     on_shard: Callable[[int, int], None] | None = None,
     on_notice: Callable[[str], None] | None = None,
 ) -> Manifest:
@@ -145,13 +146,19 @@ def augment_dataset(
     Parameters
     ----------
     source
-        A complete ``pdg6dof`` dataset made by ``generate``.
+        A complete ``pdg6dof`` dataset made by ``generate`` (or, with ``first``, one whose
+        first ``first`` instances are stored).
     out
         Folder of the augmented dataset (created; resumed when it holds this same transform).
     transform
         The augmentation (default: the paper's 8 rotations, checked).
     workers
         Processes that augment shards in parallel (the nonlinear check costs ~0.06 s a copy).
+    first
+        Rotate only base instances ``0 .. first - 1`` (a shard boundary): a smaller dataset
+        of the same draws, or the finished part of a generation still running. ``generate
+        --n first`` with the same seed draws the same instances (instance i uses child i of
+        the seed).
     on_shard
         Called with (shards done, shards planned) after each shard.
     on_notice
@@ -164,7 +171,7 @@ def augment_dataset(
     """
     transform = transform or RotationAugmentation()
     source, out = Path(source), Path(out)
-    src = _source_manifest(source)
+    src = _source_manifest(source, first)
     if workers < 1:
         raise ValueError(f"workers must be a positive integer, got {workers}")
     if out.exists() and not out.is_dir():
@@ -201,15 +208,38 @@ def _files(manifest: Manifest) -> set[str]:
     return {s.file for s in manifest.shards}
 
 
-def _source_manifest(source: Path) -> Manifest:
+def _source_manifest(source: Path, first: int | None = None) -> Manifest:
+    """The source's manifest (with ``first``: restricted to its first ``first`` instances)."""
     src = storage.read_manifest(source)
     if src.family != PDG6DoFFamily.name:
         raise DatasetError(f"the rotation augmentation is for pdg6dof datasets, not {src.family}")
     if src.kind != "generated":
         raise DatasetError(f"{source} is already a transformed dataset ({src.transform['name']})")
+    if first is not None:
+        return _first_instances(source, src, first)
     if not src.complete:
-        raise DatasetError(f"{source} is incomplete: finish it with its generate command first")
+        raise DatasetError(
+            f"{source} is incomplete: finish it with its generate command first, or rotate "
+            "its finished part with --first N"
+        )
     return src
+
+
+def _first_instances(source: Path, src: Manifest, first: int) -> Manifest:
+    """``src`` restricted to base instances ``0 .. first - 1``, which must all be stored."""
+    if isinstance(first, bool) or not isinstance(first, int) or not 0 < first <= src.n:
+        raise ValueError(f"first must be an integer in [1, {src.n}], got {first!r}")
+    shards = tuple(sorted((s for s in src.shards if s.stop <= first), key=lambda s: s.start))
+    stops = [0, *(s.stop for s in shards)]
+    contiguous = all(s.start == stop for s, stop in zip(shards, stops, strict=False))
+    if not (shards and contiguous and shards[-1].stop == first):
+        done = stops[-1] if contiguous else min(s.start for s in src.shards if s.start > 0)
+        raise DatasetError(
+            f"{source}: its first {first} instances are not all stored (shards of "
+            f"{src.shard_size}; the stored ones run without gap up to {done}): choose a "
+            "shard boundary that far, or finish the generation"
+        )
+    return dataclasses.replace(src, n=first, shards=shards, plan=None)
 
 
 def _prepare(
@@ -228,7 +258,7 @@ def _prepare(
             "content_id": storage.content_id(src),
             "family": src.family,
             "seed": src.seed,
-            "n": src.n,
+            "n": src.n,  # with --first: the first n instances of the source
         },
         plan=tuple((s.start, s.stop) for s in src.shards),
         shards=(),

@@ -661,7 +661,8 @@ def trajectory_figures(
         f"predicted tight, k = {cold.iterations}": predictor.predict_tight(theta, cold.iterations),
         "tight at cold SCvx's optimum": tight_flags(  # the returned iterate's, not the last
             # solve's: a run certified stationary ends on a solve whose candidate it rejects
-            constraint_values(instance, cold.trajectory.x, cold.trajectory.u), tight_tol
+            constraint_values(instance, cold.trajectory.x, cold.trajectory.u),
+            tight_tol,
         ).ravel(),
     }
     figure, axes = rep.new_figure(ncols=len(panels), width=16.0, height=3.2)

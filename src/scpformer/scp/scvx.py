@@ -20,7 +20,8 @@ read off the first solve of every iteration: when it holds about a feasible ``z_
 ends there, returning the candidate if the ratio test accepts it and ``z_bar`` otherwise,
 without the second-order correction the candidate's defects would call for (measured on 12
 nominal instances, numpy seed 0, and 12 of ``generate pdg6dof``'s, seed 99: one solve fewer
-in most runs, cold and T-SCvx alike). ``stopping = "table1"`` is Table 1's test read as in SCPToolbox.jl:
+in most runs, cold and T-SCvx alike). ``stopping = "table1"`` is Table 1's test read as in
+SCPToolbox.jl:
 ``|z* - z_bar|_inf <= eps_abs`` or ``|Delta J| <= eps_rel |J(z_bar)|``. Either way the nonlinear
 penalty must be below ``feas_tol``, and, because a loop can meet the test with virtual control
 stuck on an unreachable state, the virtual control and buffers of the subproblem

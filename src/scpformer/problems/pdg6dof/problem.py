@@ -402,7 +402,8 @@ def solve_with_restart(
 def _joined(first: Solution, second: Solution, tf_guess: float) -> Solution:
     """One solution of a stalled run and its restart (the restart's result, both histories)."""
     offset = first.iterations
-    history = [*first.history, *(replace(r, iteration=r.iteration + offset) for r in second.history)]
+    shifted = (replace(r, iteration=r.iteration + offset) for r in second.history)
+    history = [*first.history, *shifted]
     timing = first.timing
     if timing is not None and second.timing is not None:
         timing = replace(
