@@ -17,14 +17,14 @@
 # dataset generation (`generate` keeps finished shards).
 #
 # Environment (defaults in brackets): WORK [/tmp/scpformer-pretrained] datasets and runs,
-# OUT [src/scpformer/pretrained] where the packaged models go, WORKERS [2], N_PDG [3000] 6-DoF
+# OUT [src/scpformer/pretrained] where the packaged models go, WORKERS [2], N_PDG [4736] 6-DoF
 # base instances (x8 by the rotation augmentation).
 set -euo pipefail
 
 WORK=${WORK:-/tmp/scpformer-pretrained}
 OUT=${OUT:-src/scpformer/pretrained}
 WORKERS=${WORKERS:-2}
-N_PDG=${N_PDG:-3000}
+N_PDG=${N_PDG:-4736}
 MODELS=("$@")
 [ ${#MODELS[@]} -eq 0 ] && MODELS=(art-rendezvous art-robust tscvx)
 mkdir -p "$WORK"
@@ -58,11 +58,15 @@ art_robust() {
 
 tscvx() {
     : >tscvx.commands
-    run tscvx scpformer generate pdg6dof --n "$N_PDG" --seed 3 --out pdg --workers "$WORKERS"
-    run tscvx scpformer dataset augment pdg --out pdg8
+    run tscvx scpformer generate pdg6dof --n "$N_PDG" --seed 4 --out pdg --workers "$WORKERS"
+    run tscvx scpformer dataset augment pdg --out pdg8 --workers "$WORKERS"
     run tscvx scpformer dataset split pdg8 --fractions 0.8 0.1 0.1 --seed 0
-    run tscvx scpformer train tscvx --data pdg8 --out tscvx-small --preset small --threads 2 \
-        --report-split test
+    run tscvx scpformer train tscvx --data pdg8 --out tscvx-small --preset small \
+        --networks tight --threads 1 --report-split test &
+    local tight=$!  # the two networks train side by side, one thread each
+    run tscvx scpformer train tscvx --data pdg8 --out tscvx-small --preset small \
+        --networks solution --threads 1 --report-split test
+    wait "$tight"
     python -m scpformer.pretrained.package tscvx tscvx-small --commands tscvx.commands --out "$OUT"
 }
 

@@ -11,8 +11,8 @@
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
 # instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] epochs of the
 # rendezvous models, TPBVP_EPOCHS ["art:6 gru:4 lstm:4"] of the Table 2 models (Problem 1
-# twin), ROBUST_EPOCHS [8] of the robust ones, N_PDG [3000] 6-DoF base instances
-# (seed PDG_SEED [3]; x8 rotations), RAY [unset] Ray address.
+# twin), ROBUST_EPOCHS [8] of the robust ones, N_PDG [4736] 6-DoF base instances
+# (seed PDG_SEED [4]; x8 rotations), RAY [unset] Ray address.
 set -euo pipefail
 
 DATA=${DATA:-/work/data}
@@ -22,8 +22,8 @@ WORKERS=${WORKERS:-2}
 SEED=${SEED:-0}
 N_RDV=${N_RDV:-3000}
 N_ROB=${N_ROB:-1200}
-N_PDG=${N_PDG:-3000}
-PDG_SEED=${PDG_SEED:-3}
+N_PDG=${N_PDG:-4736}
+PDG_SEED=${PDG_SEED:-4}
 PDG=$DATA/pdg
 PDG8=$DATA/pdg8
 RDV=$DATA/rdv$N_RDV
@@ -118,7 +118,12 @@ fi
 if [ -f "$RUNS/tscvx-small/tight/checkpoint.pt" ]; then resume=--resume; else resume=; fi
 # shellcheck disable=SC2086
 run scpformer train tscvx --data "$PDG8" --out "$RUNS/tscvx-small" --preset small \
-  --threads 2 --report-split test $resume
+  --networks tight --threads 1 --report-split test $resume &
+tight=$!  # the two networks train side by side, one thread each
+# shellcheck disable=SC2086
+run scpformer train tscvx --data "$PDG8" --out "$RUNS/tscvx-small" --preset small \
+  --networks solution --threads 1 --report-split test $resume
+wait "$tight"
 [ -f "$RUNS/kdtree/lookup.json" ] || run scpformer train kdtree --data "$PDG8" --out "$RUNS/kdtree"
 [ -f "$RUNS/interp/lookup.json" ] || run scpformer train interp --data "$PDG8" \
   --out "$RUNS/interp" --n-components 6
