@@ -9,9 +9,10 @@
 #
 # Time on the 2-core development machine, from the logs of the shipped models (made while
 # other jobs kept the load at 5-10): rendezvous data 3 min + ART 18 min; robust data 21 min +
-# ART 19 min; 6-DoF data 54 min (3000 instances, 49 min of generation beside other jobs, then
-# 5 min of augmentation and split) + T-SCvx networks 13 min (session 13). About 2 h 20 min
-# in all under that load (not measured on an idle machine, where it should be shorter). Each
+# ART 19 min; 6-DoF data: the first 4736 instances of a --n 6000 run stored after 1 h 32 min
+# of generation with other jobs beside it, then 7 min of augmentation with two workers (session
+# 15) + T-SCvx networks 20.6 min (the two side by side, one thread each). The whole script has
+# not been timed end to end, nor on an idle machine, where it should be shorter. Each
 # model builds alone (`scripts/build_pretrained.sh tscvx`); a smaller N_PDG shortens the
 # longest stage but makes another T-SCvx model than the shipped one. A rerun resumes the
 # dataset generation (`generate` keeps finished shards).
