@@ -339,9 +339,12 @@ class TscvxNormalization:
             canonical=True,
         )  # fmt: skip
 
-    def encode_theta(self, theta: np.ndarray) -> np.ndarray:
-        """Raw theta (B, 16) -> standardized (in the canonical frame with ``canonical``)."""
-        frame = self._frame_of("encode_theta", theta)
+    def encode_theta(
+        self, theta: np.ndarray, frame: sym.CanonicalFrame | None = None
+    ) -> np.ndarray:
+        """Raw theta (B, 16) -> standardized (in the canonical frame with ``canonical``;
+        ``frame``: theta's :meth:`frame`, when the caller has it already)."""
+        frame = self._frame_of("encode_theta", theta) if frame is None else frame
         if frame is not None:
             theta = sym.theta_to_canonical(theta, frame)
         return (theta - self.theta_mean) / self.theta_std
@@ -364,17 +367,25 @@ class TscvxNormalization:
         return np.concatenate(parts, axis=1)
 
     def decode_solution(
-        self, z: np.ndarray, theta: np.ndarray | None = None
+        self,
+        z: np.ndarray,
+        theta: np.ndarray | None = None,
+        frame: sym.CanonicalFrame | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inverse of :meth:`encode_solution`: (B, 17 N + 1) -> x, u, tf (physical, in the
-        instances' own frame; ``theta`` (B, 16) is required with ``canonical``)."""
-        frame = self._frame_of("decode_solution", theta)
+        instances' own frame; ``theta`` (B, 16), or its :meth:`frame`, is required with
+        ``canonical``)."""
+        frame = self._frame_of("decode_solution", theta) if frame is None else frame
         n, b = self.n_nodes, z.shape[0]
         x = z[:, : STATE_DIM * n].reshape(b, n, STATE_DIM) * self.x_std + self.x_mean
         u = z[:, STATE_DIM * n : -1].reshape(b, n, CONTROL_DIM) * self.u_std + self.u_mean
         if frame is not None:
             x, u = sym.solution_from_canonical(x, u, frame)
         return x, u, z[:, -1] * self.tf_std + self.tf_mean
+
+    def frame(self, theta: np.ndarray) -> sym.CanonicalFrame | None:
+        """The canonical frame of theta (B, 16), or None without ``canonical``."""
+        return self._frame_of("frame", theta)
 
     def _frame_of(self, method: str, theta: np.ndarray | None) -> sym.CanonicalFrame | None:
         """The canonical frame of theta (B, 16), or None without ``canonical``."""
@@ -479,7 +490,8 @@ class TscvxPredictor:
         self.threshold = float(threshold)
         self.n_nodes = normalization.n_nodes  # N
         self.n_rows = tight.config.n_rows  # R = 7 N
-        self._encoded: tuple[tuple, Tensor] | None = None  # the last theta's standardized input
+        # the last theta's key, standardized input and canonical frame
+        self._encoded: tuple[tuple, Tensor, sym.CanonicalFrame | None] | None = None
 
     def _theta(self, theta: np.ndarray) -> tuple[Tensor, bool]:
         """Standardized (B, 16) float32 tensor, and whether ``theta`` was one vector."""
@@ -491,8 +503,10 @@ class TscvxPredictor:
             raise ValueError("theta must be finite (it holds NaN or inf)")
         key = (theta.shape, theta.tobytes())
         if self._encoded is None or self._encoded[0] != key:  # T-SCvx asks once per iteration
-            z = self.normalization.encode_theta(np.atleast_2d(theta))
-            self._encoded = key, torch.as_tensor(z, dtype=torch.float32, device=self.device)
+            frame = self.normalization.frame(np.atleast_2d(theta))
+            z = self.normalization.encode_theta(np.atleast_2d(theta), frame)
+            tensor = torch.as_tensor(z, dtype=torch.float32, device=self.device)
+            self._encoded = key, tensor, frame
         return self._encoded[1], single
 
     def _k(self, k: int | np.ndarray, batch: int, single: bool) -> Tensor:
@@ -528,7 +542,8 @@ class TscvxPredictor:
         theta (B, 16). The quaternion is not normalized."""
         z, single = self._theta(theta)
         out = self.solution(z).cpu().numpy().astype(np.float64)
-        x, u, tf = self.normalization.decode_solution(out, np.atleast_2d(theta))
+        frame = self._encoded[2] if self._encoded is not None else None
+        x, u, tf = self.normalization.decode_solution(out, np.atleast_2d(theta), frame)
         return (x[0], u[0], float(tf[0])) if single else (x, u, tf)
 
 
