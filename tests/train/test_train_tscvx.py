@@ -19,7 +19,11 @@ from scpformer.models.tscvx import (  # noqa: E402
     TscvxNormalization,
     load_tscvx_predictor,
 )
-from scpformer.train.checkpoint import CheckpointError, load_checkpoint  # noqa: E402
+from scpformer.train.checkpoint import (  # noqa: E402
+    CheckpointError,
+    load_checkpoint,
+    slim_checkpoint,
+)
 from scpformer.train.tscvx import (  # noqa: E402
     SolutionObjective,
     evaluate_tscvx,
@@ -155,6 +159,14 @@ def test_resume_keeps_the_thrust_weight(fake_pdg, tmp_path):
         train(fake_pdg, run, networks=("solution",), resume=True, solution_epochs=3)
     with pytest.raises(ValueError, match="thrust_weight"):
         train(fake_pdg, tmp_path / "bad", thrust_weight=0.0)
+
+
+def test_a_packaged_network_beside_a_new_one_counts_as_trained(fake_pdg, tmp_path):
+    trained, run = tmp_path / "trained", tmp_path / "run"
+    train(fake_pdg, trained, networks=("tight",))
+    slim_checkpoint(trained / "tight" / "checkpoint.pt", run / "tight" / "checkpoint.pt")
+    result = train(fake_pdg, run, networks=("solution",))  # was: KeyError 'train_config'
+    assert "tight" in result.metrics and "solution" in result.metrics
 
 
 def test_three_folds_deliver_the_last_folds_network(fake_pdg, tmp_path):

@@ -579,8 +579,9 @@ def load_tscvx_predictor(
     run, file = Path(run_dir), CHECKPOINT_CHOICES[checkpoint]
     folders = {TIGHT_KIND: "tight", SOLUTION_KIND: "solution"}
     paths = {kind: run / folder / file for kind, folder in folders.items()}
-    if checkpoint == "best" and not any(p.is_file() for p in paths.values()):
-        paths = {kind: p.with_name(CHECKPOINT_CHOICES["last"]) for kind, p in paths.items()}
+    if checkpoint == "best":  # a packaged network keeps only checkpoint.pt (made from best.pt)
+        last = CHECKPOINT_CHOICES["last"]
+        paths = {kind: p if p.is_file() else p.with_name(last) for kind, p in paths.items()}
     loaded = {
         kind: load_checkpoint(path, kind=kind, family=FAMILY, models=TSCVX_MODELS)
         for kind, path in paths.items()

@@ -441,12 +441,15 @@ def _check_new_or_resume(folder: Path, resume: bool) -> None:
 
 def _finished(folder: Path) -> bool:
     """Whether the network in ``folder`` has run all its epochs (another launch may still be
-    training it: ``--networks tight`` and ``--networks solution`` side by side)."""
+    training it: ``--networks tight`` and ``--networks solution`` side by side). A packaged
+    (weights-only) network, e.g. a shipped pretrained one copied in, is a trained one."""
     if not (folder / CHECKPOINT_NAME).is_file():
         return False
     payload = read_checkpoint(folder)
-    epochs = from_plain(payload["extra"])["train_config"]["epochs"]
-    return int(payload["metrics"]["epoch"]) >= int(epochs)
+    train_config = from_plain(payload.get("extra") or {}).get("train_config")
+    if train_config is None:
+        return True
+    return int(payload["metrics"]["epoch"]) >= int(train_config["epochs"])
 
 
 def _fold_folder(folder: Path, fold: int, folds: int) -> Path:
