@@ -229,17 +229,19 @@ def _first_instances(source: Path, src: Manifest, first: int) -> Manifest:
     """``src`` restricted to base instances ``0 .. first - 1``, which must all be stored."""
     if isinstance(first, bool) or not isinstance(first, int) or not 0 < first <= src.n:
         raise ValueError(f"first must be an integer in [1, {src.n}], got {first!r}")
-    shards = tuple(sorted((s for s in src.shards if s.stop <= first), key=lambda s: s.start))
-    stops = [0, *(s.stop for s in shards)]
-    contiguous = all(s.start == stop for s, stop in zip(shards, stops, strict=False))
-    if not (shards and contiguous and shards[-1].stop == first):
-        done = stops[-1] if contiguous else min(s.start for s in src.shards if s.start > 0)
+    prefix: list[storage.ShardInfo] = []  # the stored shards that run without gap from 0
+    for shard in sorted(src.shards, key=lambda s: s.start):
+        if shard.start != (prefix[-1].stop if prefix else 0) or shard.start >= first:
+            break
+        prefix.append(shard)
+    if not (prefix and prefix[-1].stop == first):
+        done = prefix[-1].stop if prefix else 0
         raise DatasetError(
             f"{source}: its first {first} instances are not all stored (shards of "
             f"{src.shard_size}; the stored ones run without gap up to {done}): choose a "
             "shard boundary that far, or finish the generation"
         )
-    return dataclasses.replace(src, n=first, shards=shards, plan=None)
+    return dataclasses.replace(src, n=first, shards=tuple(prefix), plan=None)
 
 
 def _prepare(

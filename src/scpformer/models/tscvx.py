@@ -493,8 +493,9 @@ class TscvxPredictor:
         # the last theta's key, standardized input and canonical frame
         self._encoded: tuple[tuple, Tensor, sym.CanonicalFrame | None] | None = None
 
-    def _theta(self, theta: np.ndarray) -> tuple[Tensor, bool]:
-        """Standardized (B, 16) float32 tensor, and whether ``theta`` was one vector."""
+    def _theta(self, theta: np.ndarray) -> tuple[Tensor, sym.CanonicalFrame | None, bool]:
+        """Standardized (B, 16) float32 tensor, theta's canonical frame (None without
+        ``canonical``), and whether ``theta`` was one vector."""
         theta = np.asarray(theta, dtype=np.float64)
         single = theta.ndim == 1
         if theta.ndim not in (1, 2) or theta.shape[-1] != N_THETA:
@@ -507,7 +508,7 @@ class TscvxPredictor:
             z = self.normalization.encode_theta(np.atleast_2d(theta), frame)
             tensor = torch.as_tensor(z, dtype=torch.float32, device=self.device)
             self._encoded = key, tensor, frame
-        return self._encoded[1], single
+        return self._encoded[1], self._encoded[2], single
 
     def _k(self, k: int | np.ndarray, batch: int, single: bool) -> Tensor:
         k_array = np.asarray(k)
@@ -524,7 +525,7 @@ class TscvxPredictor:
     @torch.inference_mode()
     def predict_tight_proba(self, theta: np.ndarray, k: int | np.ndarray) -> np.ndarray:
         """P(row tight at iteration k): (R,) for theta (16,), (B, R) for theta (B, 16)."""
-        z, single = self._theta(theta)
+        z, _, single = self._theta(theta)
         logits = self.tight(z, self._k(k, len(z), single))  # (B, R)
         proba = torch.sigmoid(logits).cpu().numpy().astype(np.float64)
         return proba[0] if single else proba
@@ -540,9 +541,8 @@ class TscvxPredictor:
     def predict_solution(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, Any]:
         """(x (N, 14), u (N, 3), tf float) for theta (16,); (B, N, 14), (B, N, 3), (B,) for
         theta (B, 16). The quaternion is not normalized."""
-        z, single = self._theta(theta)
+        z, frame, single = self._theta(theta)
         out = self.solution(z).cpu().numpy().astype(np.float64)
-        frame = self._encoded[2] if self._encoded is not None else None
         x, u, tf = self.normalization.decode_solution(out, np.atleast_2d(theta), frame)
         return (x[0], u[0], float(tf[0])) if single else (x, u, tf)
 
