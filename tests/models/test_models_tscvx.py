@@ -216,6 +216,22 @@ def test_predictor_single_theta_matches_its_batched_row(predictor):
     assert predictor.n_nodes == N
 
 
+@pytest.mark.parametrize("tokens", TOKENIZATIONS)
+def test_traced_batch_one_calls_equal_the_eager_networks_for_every_theta_and_k(tokens):
+    traced = TscvxPredictor(tiny(TIGHT_KIND, tokens), tiny(SOLUTION_KIND, tokens), normalization())
+    eager = TscvxPredictor(tiny(TIGHT_KIND, tokens), tiny(SOLUTION_KIND, tokens), normalization(),
+                           trace=False)  # fmt: skip
+    for i, theta in enumerate(np.random.default_rng(4).normal(size=(3, 16))):
+        for k in (1, 2 + i, 9):  # k is an input of the trace, not a constant
+            np.testing.assert_allclose(traced.predict_tight_proba(theta, k),
+                                       eager.predict_tight_proba(theta, k), rtol=1e-6)  # fmt: skip
+        pairs = zip(traced.predict_solution(theta), eager.predict_solution(theta), strict=True)
+        for a, b in pairs:
+            np.testing.assert_allclose(a, b, rtol=1e-6)
+    assert all(isinstance(m, torch.jit.ScriptModule) for m in traced._traced.values())
+    assert set(traced._traced) == {"tight", "solution"} and not eager._traced
+
+
 def test_threshold_moves_the_predicted_set(predictor):
     theta = np.zeros(16)
     assert predictor.predict_tight(theta, 1, threshold=0.01).all()

@@ -40,6 +40,7 @@ Usage::
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -467,6 +468,15 @@ class TscvxPredictor:
         Probability above which :meth:`predict_tight` calls a row tight.
     device
         Where the networks run.
+    trace
+        Run batch-1 calls (one theta, as the solver asks) through a ``torch.jit`` trace of
+        each network, frozen and made on first use: the same operations without the
+        per-module Python dispatch. Measured with ``torch.set_num_threads(1)`` on the small
+        preset (median of 5 x 300 calls): f1 0.49 -> 0.26 ms, f2 0.39 -> 0.16 ms, outputs
+        identical. Batches run eagerly; a network that fails to trace runs eagerly too.
+        ``torch.jit`` is deprecated in favour of ``torch.compile``/``torch.export``, but
+        neither serves this case: ``export`` ran 0.71 ms against eager's 0.50 ms, and
+        ``compile`` needs a C++ toolchain and seconds of compilation per process.
     """
 
     def __init__(
@@ -477,6 +487,7 @@ class TscvxPredictor:
         *,
         threshold: float = 0.5,
         device: str | torch.device = "cpu",
+        trace: bool = True,
     ) -> None:
         if not 0.0 < threshold < 1.0:
             raise ValueError(f"threshold must be in (0, 1), got {threshold!r}")
@@ -492,6 +503,25 @@ class TscvxPredictor:
         self.n_rows = tight.config.n_rows  # R = 7 N
         # the last theta's key, standardized input and canonical frame
         self._encoded: tuple[tuple, Tensor, sym.CanonicalFrame | None] | None = None
+        self._trace = bool(trace)
+        self._traced: dict[str, nn.Module] = {}  # network name -> its batch-1 trace
+
+    def _network(self, name: str, inputs: tuple[Tensor, ...]) -> nn.Module:
+        """``self.tight`` or ``self.solution`` (``name``), or its batch-1 trace for these
+        ``inputs`` (see ``trace`` in the class docstring)."""
+        network = getattr(self, name)
+        if not self._trace or len(inputs[0]) != 1:
+            return network
+        if name not in self._traced:
+            try:
+                with warnings.catch_warnings():  # the shape checks become constants: fine at B=1
+                    warnings.simplefilter("ignore", torch.jit.TracerWarning)
+                    warnings.simplefilter("ignore", DeprecationWarning)
+                    traced = torch.jit.freeze(torch.jit.trace(network, inputs))
+            except Exception:  # an operation the tracer cannot record: stay eager
+                traced = network
+            self._traced[name] = traced
+        return self._traced[name]
 
     def _theta(self, theta: np.ndarray) -> tuple[Tensor, sym.CanonicalFrame | None, bool]:
         """Standardized (B, 16) float32 tensor, theta's canonical frame (None without
@@ -526,7 +556,8 @@ class TscvxPredictor:
     def predict_tight_proba(self, theta: np.ndarray, k: int | np.ndarray) -> np.ndarray:
         """P(row tight at iteration k): (R,) for theta (16,), (B, R) for theta (B, 16)."""
         z, _, single = self._theta(theta)
-        logits = self.tight(z, self._k(k, len(z), single))  # (B, R)
+        inputs = (z, self._k(k, len(z), single))
+        logits = self._network("tight", inputs)(*inputs)  # (B, R)
         proba = torch.sigmoid(logits).cpu().numpy().astype(np.float64)
         return proba[0] if single else proba
 
@@ -542,7 +573,7 @@ class TscvxPredictor:
         """(x (N, 14), u (N, 3), tf float) for theta (16,); (B, N, 14), (B, N, 3), (B,) for
         theta (B, 16). The quaternion is not normalized."""
         z, frame, single = self._theta(theta)
-        out = self.solution(z).cpu().numpy().astype(np.float64)
+        out = self._network("solution", (z,))(z).cpu().numpy().astype(np.float64)
         x, u, tf = self.normalization.decode_solution(out, np.atleast_2d(theta), frame)
         return (x[0], u[0], float(tf[0])) if single else (x, u, tf)
 

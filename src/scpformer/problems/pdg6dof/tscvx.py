@@ -83,8 +83,11 @@ class TscvxParameters:
     same radius, the same subproblem and the same outcome. The exponent is therefore
     ``max(tau_r, shrink_floor)`` (1: contractions as Eq. 15; 0: Eq. 22 literally).
     ``drop_box``: under the soft trust region the hard box (radius ``SOFT_BOX_FACTOR eta``)
-    is a safeguard that never binds in practice; it is left out and the step re-solved with
-    it when it leaves the box.
+    is a safeguard that never binds in practice; with ``drop_box`` it is left out (and the
+    step re-solved with it when it leaves the box). Off by default: the box's rows are few,
+    but it bounds every variable, and without it Clarabel needed 28 interior-point
+    iterations per reduced subproblem instead of 20 (10 feasible-range instances, seed 5, 83
+    solves either way, final masses equal to 6 digits): 65 against 50 ms per solve.
     ``guess_factor``: J (Eq. 16) is a poor measure of a guess's distance to the optimum, as
     its L1 defects grow with any noise on the states: measured on nominal instances, the
     cold optimum with Gaussian noise of 2% of the trust-region scales has about 1.1 times
@@ -100,7 +103,7 @@ class TscvxParameters:
     max_repairs: int = 2  # re-solves per iteration with violated rows added, then full
     stall_rejections: int = 3  # rejected steps in a row before the full subproblem
     shrink_floor: float = 1.0  # least exponent of alpha in Eq. 22's contractions
-    drop_box: bool = True  # leave out the safeguard box of the soft trust region
+    drop_box: bool = False  # leave out the safeguard box of the soft trust region
     cold_fallback: bool = True  # an unconverged run is replaced by cold SCvx
     guess_factor: float = 20.0  # a predicted guess with J above this many straight lines' J
     # is replaced by the straight line (TscvxWarmStart)
