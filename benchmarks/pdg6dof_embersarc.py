@@ -20,7 +20,8 @@ prints one line per draw and exits 1 unless every draw converged.
 Measured (docs/embersarc-scenario.md; seed 0, 3 draws, single deterministic runs): with the
 stall test and restart (session 13) ours converges on draw 0 (68 solves, verified) and stalls
 at infeasible stationary points on draws 1 and 2 at velocity scale 1.0; before them it ended in
-max_iterations on all three. At velocity scale 0.8 it converges (verified) on draws 0 and 1. EmbersArc's own solver (its commit c2dbab6, K = 40, fixed t_f = 15 s, run verbatim outside
+max_iterations on all three. At velocity scale 0.8 it converges (verified) on draws 0 and 1.
+EmbersArc's own solver (its commit c2dbab6, K = 40, fixed t_f = 15 s, run verbatim outside
 the repository) reports "converged" on all three draws at 1.0, but its convergence test is a
 ratio test: its trajectories keep virtual control and, propagated through the nonlinear
 dynamics, miss the pad by 19, 147 and 284 m. Started from its draw-0 trajectory, ours converges

@@ -2,11 +2,12 @@
 
 On ``--n`` nominal instances (``SampleRanges.nominal()``, ``--seed``) solved cold, the
 subproblem is linearized about the converged trajectory (trust radius 1, the soft region)
-and solved with several row sets: every row (with and without the safeguard box), the rows
-tight at the optimum plus those within the default margin (what T-SCvx keeps near the end),
-the tight rows alone, and none. Each set is solved ``--repeats`` times per instance; the
-table gives the conic problem's size and the median Clarabel time (setup + solve) over all
-instances and repeats, beside cvxpy's own full solve (in-place updated solver object).
+and solved with several row sets, each with and without the safeguard box of the soft trust
+region: every row, the rows tight at the optimum plus those within the default margin (what
+T-SCvx keeps near the end), the tight rows alone, and none. Each set is solved ``--repeats``
+times per instance; the table gives the conic problem's size, Clarabel's interior-point
+iterations and its median time (setup + solve) over all instances and repeats, beside
+cvxpy's own full solve (in-place updated solver object).
 
 Usage: PYTHONPATH=src python benchmarks/tscvx_reduced.py --n 5 --repeats 5
 """
@@ -32,12 +33,12 @@ def row_sets(problem: PDGProblem, z, n_nodes: int) -> dict[str, tuple[np.ndarray
     margin = TscvxParameters().margin
     near = near_active_rows(problem.instance, z, margin, row_scales(problem.instance, n_nodes))
     every = np.ones(7 * n_nodes, dtype=bool)
+    masks = {"all rows": every, "tight + margin": tight | near, "tight": tight,
+             "none": np.zeros_like(every)}  # fmt: skip
     return {
-        "all rows + box": (every, True),
-        "all rows": (every, False),
-        "tight + margin": (tight | near, False),
-        "tight": (tight, False),
-        "none": (np.zeros_like(every), False),
+        f"{name}{suffix}": (mask, box)
+        for name, mask in masks.items()
+        for suffix, box in ((" + box", True), ("", False))
     }
 
 
@@ -50,7 +51,7 @@ def main() -> int:
     config = PDGSolverConfig()
     instances = sample_instances(np.random.default_rng(args.seed), args.n, SampleRanges.nominal())
     times: dict[str, list[float]] = {}
-    sizes: dict[str, list[tuple[int, int, int, int]]] = {}
+    sizes: dict[str, list[tuple[int, int, int, int, int]]] = {}
     for instance in instances:
         cold = solve(instance, config)
         problem = PDGProblem(instance, config)
@@ -70,14 +71,22 @@ def main() -> int:
                 assert sol.status == "optimal", (name, sol.status)
                 times.setdefault(name, []).append(sol.solve_time)
                 s = reduced.last_size
-                sizes.setdefault(name, []).append((s.flags_kept, s.rows, s.cones, s.columns))
+                sizes.setdefault(name, []).append(
+                    (s.flags_kept, s.rows, s.cones, s.columns, s.iterations)
+                )
     print(f"{args.n} nominal instances (seed {args.seed}), {args.repeats} repeats each")
-    print(f"{'row set':<20} {'flags':>6} {'rows':>6} {'cones':>6} {'cols':>6} {'median ms':>10}")
+    print(
+        f"{'row set':<22} {'flags':>6} {'rows':>6} {'cones':>6} {'cols':>6} {'IPM its':>8} "
+        f"{'median ms':>10}"
+    )
     for name, values in times.items():
-        med = np.median(sizes[name], axis=0) if name in sizes else [350, 4886, 200, 2473]
-        flags, rows, cones, cols = (f"{v:.0f}" for v in med)
+        if name in sizes:
+            flags, rows, cones, cols, its = (f"{v:.0f}" for v in np.median(sizes[name], axis=0))
+        else:  # cvxpy's own solve: every row and the box
+            flags, rows, cones, cols, its = "350", "", "", "", ""
         print(
-            f"{name:<20} {flags:>6} {rows:>6} {cones:>6} {cols:>6} {1e3 * np.median(values):>10.1f}"
+            f"{name:<22} {flags:>6} {rows:>6} {cones:>6} {cols:>6} {its:>8} "
+            f"{1e3 * np.median(values):>10.1f}"
         )
     return 0
 

@@ -157,12 +157,13 @@ def _named_variables(sub: PDGSubproblem) -> list[tuple[str, cp.Variable]]:
 
 @dataclass(frozen=True)
 class ReducedSize:
-    """Size of the conic problem handed to Clarabel."""
+    """Size of the conic problem handed to Clarabel, and its interior-point iterations."""
 
     rows: int
     columns: int
     cones: int  # second-order cones
     flags_kept: int  # (name, node) rows kept
+    iterations: int  # Clarabel's interior-point iterations on it
 
 
 class ReducedSubproblem:
@@ -216,6 +217,7 @@ class ReducedSubproblem:
             columns=int(cols.sum()),
             cones=int(self._cone_count),
             flags_kept=int(np.count_nonzero(keep)),
+            iterations=int(result.iterations),
         )
         status = CLARABEL_STATUS.get(str(result.status), str(result.status))
         if status not in CLARABEL_STATUS.values():
