@@ -232,6 +232,11 @@ def test_traced_batch_one_calls_equal_the_eager_networks_for_every_theta_and_k(t
     assert set(traced._traced) == {"tight", "solution"} and not eager._traced
 
 
+def test_warm_up_traces_both_networks_and_leaves_no_cached_theta(predictor):
+    predictor.warm_up()
+    assert set(predictor._traced) == {"tight", "solution"} and predictor._encoded is None
+
+
 def test_threshold_moves_the_predicted_set(predictor):
     theta = np.zeros(16)
     assert predictor.predict_tight(theta, 1, threshold=0.01).all()

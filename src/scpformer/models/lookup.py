@@ -237,6 +237,9 @@ class LookupPredictor:
         proba = np.clip(self.tight(np.column_stack([thetas, ks])), 0.0, 1.0)
         return proba[0] if single else proba
 
+    def warm_up(self) -> None:
+        """Nothing to prepare: the tables are built when the run is read."""
+
     def predict_tight(self, theta: np.ndarray, k: int | np.ndarray) -> np.ndarray:
         """Predicted tight flags (probability >= ``threshold``): bool (R,) or (B, R)."""
         return self.predict_tight_proba(theta, k) >= self.threshold

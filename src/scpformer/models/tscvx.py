@@ -506,6 +506,15 @@ class TscvxPredictor:
         self._trace = bool(trace)
         self._traced: dict[str, nn.Module] = {}  # network name -> its batch-1 trace
 
+    def warm_up(self) -> None:
+        """Run both networks once at batch 1 (tracing them, see ``trace``), so that the
+        first timed call does not pay for it: about 1 s in a fresh process."""
+        theta = self.normalization.theta_mean.copy()
+        theta[sym.THETA_Q] = (1.0, 0.0, 0.0, 0.0)  # a valid attitude for the canonical frame
+        self.predict_solution(theta)
+        self.predict_tight(theta, 1)
+        self._encoded = None
+
     def _network(self, name: str, inputs: tuple[Tensor, ...]) -> nn.Module:
         """``self.tight`` or ``self.solution`` (``name``), or its batch-1 trace for these
         ``inputs`` (see ``trace`` in the class docstring)."""
