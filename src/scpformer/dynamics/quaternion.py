@@ -55,6 +55,18 @@ def multiply(p: ArrayLike, q: ArrayLike) -> Array:
     return np.concatenate([scalar, vector], axis=-1)
 
 
+def product_matrices(p: ArrayLike) -> tuple[Array, Array]:
+    """``(L(p), R(p))`` (..., 4, 4) with ``p (x) q = L(p) q`` and ``q (x) p = R(p) q``."""
+    p = np.asarray(p, dtype=float)
+    scalar = p[..., 0, None, None] * np.eye(3)
+    left = np.empty((*p.shape[:-1], 4, 4))
+    left[..., 0, 0], left[..., 0, 1:], left[..., 1:, 0] = p[..., 0], -p[..., 1:], p[..., 1:]
+    right = left.copy()
+    left[..., 1:, 1:] = scalar + skew(p[..., 1:])
+    right[..., 1:, 1:] = scalar - skew(p[..., 1:])
+    return left, right
+
+
 def conjugate(q: ArrayLike) -> Array:
     """Quaternion conjugate ``q*`` (..., 4)."""
     q = np.asarray(q, dtype=float)

@@ -36,6 +36,7 @@ from scpformer.dynamics import quaternion as quat
 UP_AXIS = (1.0, 0.0, 0.0)  # e1 = Up (inertial) and the body's thrust axis
 # slices of theta = (gamma_gs, theta_max, r0, v0, q0, omega0_deg, m0), as PDGInstance.theta
 THETA_R, THETA_V, THETA_Q, THETA_W = slice(2, 5), slice(5, 8), slice(8, 12), slice(12, 15)
+THETA_STATE = slice(2, 16)  # (r0, v0, q0, omega0, m0): the layout of a state
 # slices of the state x (Eq. 24): r, v, q, omega, m
 STATE_R, STATE_V, STATE_Q, STATE_W = slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13)
 
@@ -87,10 +88,42 @@ def roll_theta(theta: np.ndarray, q_roll: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CanonicalFrame:
-    """Per instance, the yaw and body roll that make theta canonical (module docstring)."""
+    """Per instance, the yaw and body roll that make theta canonical (module docstring).
+
+    ``state_map`` and ``body_map`` are the two transforms as matrices (:func:`frame_maps`):
+    a state ``x`` (14,) becomes ``state_map @ x`` in the canonical frame, a body vector ``u``
+    becomes ``body_map @ u``. Both are orthogonal, so their transposes map back.
+    """
 
     q_yaw: np.ndarray  # (B, 4) inertial yaw about Up applied first
     q_roll: np.ndarray  # (B, 4) body roll about body x applied second (sign-fixed q0)
+    state_map: np.ndarray  # (B, 14, 14)
+    body_map: np.ndarray  # (B, 3, 3)
+
+
+def frame_maps(q_yaw: np.ndarray, q_roll: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The yaw ``q_yaw`` then the body roll ``q_roll`` (B, 4) as linear maps of a state and
+    of a body vector: (B, 14, 14) and (B, 3, 3).
+
+    ``r -> C(q_yaw) r``, ``v -> C(q_yaw) v``, ``q -> q_yaw (x) q (x) q_roll = L(q_yaw)
+    R(q_roll) q``, ``omega -> C(q_roll)^T omega``, ``m -> m``, and a body vector
+    ``-> C(q_roll)^T``: the composition of :func:`yaw_states` and :func:`roll_states` (and
+    :func:`roll_body_vectors`), one matrix product per node instead of a dozen array
+    operations. Measured at batch 1 (N = 50): mapping a predicted solution back 0.20 ->
+    0.003 ms, theta to the canonical frame 0.095 -> 0.010 ms, for a frame that now takes
+    0.11 instead of 0.07 ms to make.
+    """
+    yaw = quat.dcm(q_yaw)
+    body = np.swapaxes(quat.dcm(q_roll), -1, -2)
+    left, _ = quat.product_matrices(q_yaw)
+    _, right = quat.product_matrices(q_roll)
+    state = np.zeros((len(q_yaw), 14, 14))
+    state[:, STATE_R, STATE_R] = yaw
+    state[:, STATE_V, STATE_V] = yaw
+    state[:, STATE_Q, STATE_Q] = left @ right
+    state[:, STATE_W, STATE_W] = body
+    state[:, 13, 13] = 1.0
+    return state, body
 
 
 def canonical_frame(theta: np.ndarray) -> CanonicalFrame:
@@ -111,25 +144,36 @@ def canonical_frame(theta: np.ndarray) -> CanonicalFrame:
     twist = np.where(norm > 1e-12, twist / np.maximum(norm, 1e-12), [1.0, 0.0, 0.0, 0.0])
     q_roll = quat.conjugate(twist)
     sign = np.where(quat.multiply(q0, q_roll)[:, :1] < 0.0, -1.0, 1.0)
-    return CanonicalFrame(q_yaw=q_yaw, q_roll=sign * q_roll)
+    q_roll = sign * q_roll
+    return CanonicalFrame(q_yaw, q_roll, *frame_maps(q_yaw, q_roll))
 
 
 def theta_to_canonical(theta: np.ndarray, frame: CanonicalFrame) -> np.ndarray:
-    """theta (B, 16) in its canonical frame (``r0_N = 0``, ``q0_x = 0``, ``q0_w >= 0``)."""
-    return roll_theta(yaw_theta(theta, frame.q_yaw), frame.q_roll)
+    """theta (B, 16) in its canonical frame (``r0_N = 0``, ``q0_x = 0``, ``q0_w >= 0``).
+
+    ``theta[2:16]`` is ``(r0, v0, q0, omega0, m0)``, laid out as a state, so it moves with
+    the state map (the rates in deg/s are as linear as in rad/s); ``q0`` is renormalized.
+    """
+    out = np.array(theta, dtype=float, copy=True)
+    out[:, THETA_STATE] = _apply(frame.state_map, theta[:, None, THETA_STATE])[:, 0]
+    out[:, THETA_Q] = quat.normalize(out[:, THETA_Q])
+    return out
 
 
 def solution_to_canonical(
     x: np.ndarray, u: np.ndarray, frame: CanonicalFrame
 ) -> tuple[np.ndarray, np.ndarray]:
     """States (B, N, 14) and body thrust (B, N, 3) in the canonical frame of their instance."""
-    q_yaw, q_roll = frame.q_yaw[:, None], frame.q_roll[:, None]
-    return roll_states(yaw_states(x, q_yaw), q_roll), roll_body_vectors(u, q_roll)
+    return _apply(frame.state_map, x), _apply(frame.body_map, u)
 
 
 def solution_from_canonical(
     x: np.ndarray, u: np.ndarray, frame: CanonicalFrame
 ) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of :func:`solution_to_canonical`: canonical-frame (x, u) back to the instance's."""
-    q_yaw, q_roll = quat.conjugate(frame.q_yaw)[:, None], quat.conjugate(frame.q_roll)[:, None]
-    return yaw_states(roll_states(x, q_roll), q_yaw), roll_body_vectors(u, q_roll)
+    return _apply(frame.state_map, x, inverse=True), _apply(frame.body_map, u, inverse=True)
+
+
+def _apply(maps: np.ndarray, vectors: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """``maps[b] @ vectors[b, n]`` (or the transpose's) for every instance b and node n."""
+    return vectors @ (maps if inverse else np.swapaxes(maps, -1, -2))
