@@ -474,6 +474,8 @@ class TscvxPredictor:
         per-module Python dispatch. Measured with ``torch.set_num_threads(1)`` on the small
         preset (median of 5 x 300 calls): f1 0.49 -> 0.26 ms, f2 0.39 -> 0.16 ms, outputs
         identical. Batches run eagerly; a network that fails to trace runs eagerly too.
+        The trace freezes the weights it was made with: after changing a network's weights,
+        build a new predictor (or pass ``trace=False``).
         ``torch.jit`` is deprecated in favour of ``torch.compile``/``torch.export``, but
         neither serves this case: ``export`` ran 0.71 ms against eager's 0.50 ms, and
         ``compile`` needs a C++ toolchain and seconds of compilation per process.
@@ -596,13 +598,15 @@ def load_tscvx_predictor(
     *,
     threshold: float = 0.5,
     checkpoint: str = "best",
+    trace: bool = True,
 ) -> TscvxPredictor:
     """The predictor of run folder ``run_dir`` (``RUN/tight`` and ``RUN/solution``).
 
     ``checkpoint``: ``best`` (each network's epoch of least validation loss, ``best.pt``) or
     ``last`` (its last epoch, ``checkpoint.pt``). A packaged run
     (:mod:`scpformer.pretrained`) keeps one weights-only ``checkpoint.pt`` per network, made
-    from ``best.pt``; ``best`` loads it when there is no ``best.pt``.
+    from ``best.pt``; ``best`` loads it when there is no ``best.pt``. ``trace``: see
+    :class:`TscvxPredictor`.
 
     Raises
     ------
@@ -632,4 +636,5 @@ def load_tscvx_predictor(
         loaded[SOLUTION_KIND].normalization,
         threshold=threshold,
         device=device,
+        trace=trace,
     )
