@@ -221,6 +221,8 @@ def test_traced_batch_one_calls_equal_the_eager_networks_for_every_theta_and_k(t
     traced = TscvxPredictor(tiny(TIGHT_KIND, tokens), tiny(SOLUTION_KIND, tokens), normalization())
     eager = TscvxPredictor(tiny(TIGHT_KIND, tokens), tiny(SOLUTION_KIND, tokens), normalization(),
                            trace=False)  # fmt: skip
+    traced.warm_up()
+    eager.warm_up()
     for i, theta in enumerate(np.random.default_rng(4).normal(size=(3, 16))):
         for k in (1, 2 + i, 9):  # k is an input of the trace, not a constant
             np.testing.assert_allclose(traced.predict_tight_proba(theta, k),
@@ -232,7 +234,10 @@ def test_traced_batch_one_calls_equal_the_eager_networks_for_every_theta_and_k(t
     assert set(traced._traced) == {"tight", "solution"} and not eager._traced
 
 
-def test_warm_up_traces_both_networks_and_leaves_no_cached_theta(predictor):
+def test_only_warm_up_traces_and_it_leaves_no_cached_theta(predictor):
+    predictor.predict_solution(np.zeros(16))
+    predictor.predict_tight(np.zeros(16), 2)
+    assert not predictor._traced  # a one-shot solve does not pay for tracing
     predictor.warm_up()
     assert set(predictor._traced) == {"tight", "solution"} and predictor._encoded is None
 

@@ -469,9 +469,9 @@ class TscvxPredictor:
     device
         Where the networks run.
     trace
-        Run batch-1 calls (one theta, as the solver asks) through a ``torch.jit`` trace of
-        each network, frozen and made on first use: the same operations without the
-        per-module Python dispatch. Measured with ``torch.set_num_threads(1)`` on the small
+        Let :meth:`warm_up` trace each network for batch-1 calls (one theta, as the solver
+        asks) with ``torch.jit``, frozen: the same operations without the per-module Python
+        dispatch. Measured with ``torch.set_num_threads(1)`` on the small
         preset (median of 5 x 300 calls): f1 0.49 -> 0.26 ms, f2 0.39 -> 0.16 ms, outputs
         identical. Batches run eagerly; a network that fails to trace runs eagerly too.
         The trace freezes the weights it was made with: after changing a network's weights,
@@ -509,30 +509,31 @@ class TscvxPredictor:
         self._traced: dict[str, nn.Module] = {}  # network name -> its batch-1 trace
 
     def warm_up(self) -> None:
-        """Run both networks once at batch 1 (tracing them, see ``trace``), so that the
-        first timed call does not pay for it: about 1 s in a fresh process."""
+        """Trace both networks for batch-1 calls (with ``trace``) and run each once, so that
+        the calls that follow, and their timings, do not pay for it.
+
+        Until then every call runs eagerly: the first trace in a process costs about 0.7 s
+        (torch.jit's own start-up), which a one-shot solve (0.5-1 s) should not pay. Long
+        runs (the T-SCvx studies, ``scpformer bench tscvx``) warm up first.
+        """
         theta = self.normalization.theta_mean.copy()
         theta[sym.THETA_Q] = (1.0, 0.0, 0.0, 0.0)  # a valid attitude for the canonical frame
+        if self._trace:
+            z, _, single = self._theta(theta)
+            k = self._k(1, len(z), single)
+            self._traced = {
+                "tight": _batch_one_trace(self.tight, (z, k)),
+                "solution": _batch_one_trace(self.solution, (z,)),
+            }
         self.predict_solution(theta)
         self.predict_tight(theta, 1)
         self._encoded = None
 
     def _network(self, name: str, inputs: tuple[Tensor, ...]) -> nn.Module:
-        """``self.tight`` or ``self.solution`` (``name``), or its batch-1 trace for these
-        ``inputs`` (see ``trace`` in the class docstring)."""
-        network = getattr(self, name)
-        if not self._trace or len(inputs[0]) != 1:
-            return network
-        if name not in self._traced:
-            try:
-                with warnings.catch_warnings():  # the shape checks become constants: fine at B=1
-                    warnings.simplefilter("ignore", torch.jit.TracerWarning)
-                    warnings.simplefilter("ignore", DeprecationWarning)
-                    traced = torch.jit.freeze(torch.jit.trace(network, inputs))
-            except Exception:  # an operation the tracer cannot record: stay eager
-                traced = network
-            self._traced[name] = traced
-        return self._traced[name]
+        """``self.tight`` or ``self.solution`` (``name``), or its batch-1 trace when
+        :meth:`warm_up` made one and ``inputs`` are one theta."""
+        traced = self._traced.get(name) if len(inputs[0]) == 1 else None
+        return getattr(self, name) if traced is None else traced
 
     def _theta(self, theta: np.ndarray) -> tuple[Tensor, sym.CanonicalFrame | None, bool]:
         """Standardized (B, 16) float32 tensor, theta's canonical frame (None without
@@ -587,6 +588,18 @@ class TscvxPredictor:
         out = self._network("solution", (z,))(z).cpu().numpy().astype(np.float64)
         x, u, tf = self.normalization.decode_solution(out, np.atleast_2d(theta), frame)
         return (x[0], u[0], float(tf[0])) if single else (x, u, tf)
+
+
+def _batch_one_trace(network: nn.Module, inputs: tuple[Tensor, ...]) -> nn.Module:
+    """``network`` traced and frozen for ``inputs`` of batch 1, or ``network`` itself when
+    the tracer cannot record it (see ``trace`` in :class:`TscvxPredictor`)."""
+    try:
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore", torch.jit.TracerWarning)  # shape checks: constants
+            warnings.simplefilter("ignore", DeprecationWarning)
+            return torch.jit.freeze(torch.jit.trace(network, inputs))
+    except Exception:  # an operation the tracer cannot record: stay eager
+        return network
 
 
 CHECKPOINT_CHOICES = {"best": "best.pt", "last": "checkpoint.pt"}
