@@ -36,6 +36,17 @@ def test_omega_and_xi_matrices_give_the_kinematics_product():
     np.testing.assert_allclose(np.einsum("kij,kj->ki", quat.xi_matrix(Q), W), expected, atol=1e-12)
 
 
+def test_product_matrices_give_left_and_right_products_and_are_rotations_for_unit_q():
+    P = rng.normal(size=(20, 4))  # any quaternion, not only unit ones
+    left, right = quat.product_matrices(P)
+    np.testing.assert_allclose(np.einsum("kij,kj->ki", left, Q), quat.multiply(P, Q), atol=1e-12)
+    np.testing.assert_allclose(np.einsum("kij,kj->ki", right, Q), quat.multiply(Q, P), atol=1e-12)
+    unit_left, unit_right = quat.product_matrices(Q)
+    for m in (unit_left, unit_right):
+        np.testing.assert_allclose(m @ np.swapaxes(m, -1, -2), np.broadcast_to(np.eye(4), m.shape),
+                                   atol=1e-12)  # fmt: skip
+
+
 @pytest.mark.parametrize(
     "fn, jac",
     [(quat.rotate, quat.rotate_jacobian), (quat.rotate_inverse, quat.rotate_inverse_jacobian)],

@@ -62,6 +62,20 @@ def test_solution_to_and_from_the_canonical_frame_round_trips():
     np.testing.assert_allclose(back[1], u, atol=1e-12)
 
 
+def test_the_frame_maps_are_the_yaw_then_the_roll_and_orthogonal():
+    theta = _sampled_thetas(8)
+    rng = np.random.default_rng(2)
+    x, u = rng.normal(size=(8, 5, 14)), rng.normal(size=(8, 5, 3))
+    frame = sym.canonical_frame(theta)
+    x_c, u_c = sym.solution_to_canonical(x, u, frame)
+    expected = sym.roll_states(sym.yaw_states(x, frame.q_yaw[:, None]), frame.q_roll[:, None])
+    np.testing.assert_allclose(x_c, expected, atol=1e-12)
+    np.testing.assert_allclose(u_c, sym.roll_body_vectors(u, frame.q_roll[:, None]), atol=1e-12)
+    for m in (frame.state_map, frame.body_map):
+        np.testing.assert_allclose(m @ np.swapaxes(m, -1, -2), np.broadcast_to(np.eye(len(m[0])),
+                                   m.shape), atol=1e-12)  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def tilted():
     """A nominal instance tilted 20 deg with a roll and rates (neither symmetric nor upright)."""
