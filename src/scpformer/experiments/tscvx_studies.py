@@ -199,7 +199,7 @@ class SolveTimeSolver:
 
         torch.set_num_threads(1)
         self.predictors = {kind: load_predictor(run, kind) for kind, run in self.runs.items()}
-        for predictor in self.predictors.values():  # the first calls trace the T-SCvx networks
+        for predictor in self.predictors.values():  # traces the T-SCvx networks
             predictor.warm_up()
         PDG6DoFFamily(solver_config(self.data_config)).warm_up()
 

@@ -471,9 +471,9 @@ class TscvxPredictor:
     trace
         Let :meth:`warm_up` trace each network for batch-1 calls (one theta, as the solver
         asks) with ``torch.jit``, frozen: the same operations without the per-module Python
-        dispatch. Measured with ``torch.set_num_threads(1)`` on the small
-        preset (median of 5 x 300 calls): f1 0.49 -> 0.26 ms, f2 0.39 -> 0.16 ms, outputs
-        identical. Batches run eagerly; a network that fails to trace runs eagerly too.
+        dispatch. Measured with ``torch.set_num_threads(1)`` on the small preset (median of
+        5 x 300 calls): f1 0.49 -> 0.26 ms, f2 0.39 -> 0.16 ms, outputs identical.
+        Batches run eagerly; a network that fails to trace runs eagerly too.
         The trace freezes the weights it was made with: after changing a network's weights,
         build a new predictor (or pass ``trace=False``).
         ``torch.jit`` is deprecated in favour of ``torch.compile``/``torch.export``, but

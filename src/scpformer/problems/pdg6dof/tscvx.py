@@ -106,7 +106,7 @@ class TscvxParameters:
     drop_box: bool = False  # leave out the safeguard box of the soft trust region
     cold_fallback: bool = True  # an unconverged run is replaced by cold SCvx
     guess_factor: float = 20.0  # a predicted guess with J above this many straight lines' J
-    # is replaced by the straight line (TscvxWarmStart)
+    # is replaced by the cubic-profile cold start (TscvxWarmStart)
 
     def __post_init__(self) -> None:
         for name in ("eta_init", "violation_tol", "guess_factor"):
