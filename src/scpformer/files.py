@@ -9,7 +9,9 @@ any earlier file at the path untouched.
 from __future__ import annotations
 
 import os
+import signal
 import tempfile
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -114,6 +116,32 @@ def _naming(path: Path, tmp: Path) -> Iterator[None]:
         raise type(err)(err.errno, err.strerror or str(err), str(path)) from None
     finally:
         tmp.unlink(missing_ok=True)
+
+
+@contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Within the block, SIGINT and SIGTERM wait: they take effect when the block ends.
+
+    For steps that must not be cut in two, like a shard written but not yet listed in the
+    manifest. A signal that arrives inside is recorded and raised again once the previous
+    handlers are back, so Ctrl-C and ``kill`` still stop the run, only a moment later. Python
+    runs signal handlers in the main thread only; elsewhere the block defers nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    kinds = (signal.SIGINT, signal.SIGTERM)
+    previous = {
+        kind: signal.signal(kind, lambda signum, frame: pending.append(signum)) for kind in kinds
+    }
+    try:
+        yield
+    finally:
+        for kind, handler in previous.items():
+            signal.signal(kind, handler)
+        for signum in dict.fromkeys(pending):
+            signal.raise_signal(signum)
 
 
 def save_npz_atomic(path: str | Path, arrays: dict[str, Any]) -> Path:

@@ -1,9 +1,11 @@
 import errno
 import os
+import signal
 
 import numpy as np
 import pytest
 
+from scpformer.cli.errors import Terminated, sigterm_raises
 from scpformer.data import storage
 from scpformer.data.errors import DatasetError, DiskFullError
 from scpformer.data.family import Field
@@ -99,6 +101,28 @@ def test_verify_reports_leftover_and_unlisted_files(tmp_path):
     problems = storage.verify_dataset(tmp_path)
     assert any("leftover temporary file" in p for p in problems)
     assert any("shard-00002.h5: shard file not listed" in p for p in problems)
+
+
+@pytest.mark.parametrize("kind", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_a_signal_between_shard_and_manifest_waits_until_the_manifest_lists_the_shard(
+    tmp_path, monkeypatch, kind
+):
+    empty = manifest_with(write(tmp_path)).without_shard("shard-00000.h5")
+    real_write_shard = storage.write_shard
+
+    def signalled_after_writing(*args, **kwargs):
+        info = real_write_shard(*args, **kwargs)
+        signal.raise_signal(kind)  # the shard is on disk, the manifest not yet rewritten
+        return info
+
+    monkeypatch.setattr(storage, "write_shard", signalled_after_writing)
+    with pytest.raises((Terminated, KeyboardInterrupt)), sigterm_raises():
+        storage.append_shard(
+            tmp_path, empty, "shard-00001.h5", columns(), start=0, stop=4, attrs={}
+        )
+    listed = [s.file for s in storage.read_manifest(tmp_path).shards]
+    assert listed == ["shard-00001.h5"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_reading_a_truncated_shard_lazily_is_a_clear_error(tmp_path):

@@ -312,14 +312,12 @@ def _write(
 ) -> Manifest:
     columns = storage.stack_records(records, manifest.schema)
     attrs = {**storage.shard_header(manifest), "transform": RotationAugmentation.name}
-    info = storage.write_shard(
-        out / storage.shard_name(number),
+    return storage.append_shard(
+        out,
+        manifest,
+        storage.shard_name(number),
         columns,
-        manifest.schema,
         start=src_shard.start,
         stop=src_shard.stop,
         attrs=attrs,
     )
-    manifest = manifest.with_shard(info)
-    storage.write_manifest(out, manifest)
-    return manifest

@@ -461,11 +461,9 @@ class _Run:
         records = [self._record(results[i]) for i in range(start, stop)]
         columns = storage.stack_records(records, self.schema)
         attrs = storage.shard_header(self.manifest)
-        info = storage.write_shard(
-            self.config.out / name, columns, self.schema, start=start, stop=stop, attrs=attrs
+        self.manifest = storage.append_shard(
+            self.config.out, self.manifest, name, columns, start=start, stop=stop, attrs=attrs
         )
-        self.manifest = self.manifest.with_shard(info)
-        storage.write_manifest(self.config.out, self.manifest)
 
     def _record(self, result: TaskResult) -> dict[str, Any]:
         record = {f.name: f.empty(1)[0] for f in self.schema}

@@ -40,7 +40,7 @@ import numpy as np
 
 from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full
 from scpformer.data.family import Field
-from scpformer.files import write_bytes_atomic
+from scpformer.files import interrupts_deferred, write_bytes_atomic
 
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
@@ -503,6 +503,32 @@ def write_shard(
         bytes=len(data),
         status_counts=dict(sorted(statuses.items())),
     )
+
+
+def append_shard(
+    folder: Path,
+    manifest: Manifest,
+    name: str,
+    columns: Mapping[str, np.ndarray],
+    *,
+    start: int,
+    stop: int,
+    attrs: Mapping[str, Any],
+) -> Manifest:
+    """Write shard ``name`` of samples [start, stop) and the manifest that lists it.
+
+    Ctrl-C and SIGTERM wait until both files are on disk (:func:`interrupts_deferred`), so an
+    interrupted run never leaves a finished shard that its manifest does not list. Returns the
+    new manifest.
+    """
+    folder = Path(folder)
+    with interrupts_deferred():
+        info = write_shard(
+            folder / name, columns, manifest.schema, start=start, stop=stop, attrs=attrs
+        )
+        manifest = manifest.with_shard(info)
+        write_manifest(folder, manifest)
+    return manifest
 
 
 def read_columns(path: Path, schema: Sequence[Field], names: Iterable[str] | None = None) -> dict:
