@@ -35,8 +35,13 @@ def test_a_folder_holding_another_seeds_dataset_is_refused(toy_folder):
 def test_a_folder_holding_another_configuration_names_the_difference(toy_folder):
     with pytest.raises(DatasetError, match=r"config\.sleep: 0\.0 there, 0\.5 here"):
         generate(ToyFamily(sleep=0.5), config(toy_folder))
-    with pytest.raises(DatasetError, match=r"differs in n 5"):
-        generate(ToyFamily(), config(toy_folder, n=6))
+
+
+def test_a_smaller_n_is_refused_because_a_dataset_only_grows(toy_folder):
+    before = {p.name: p.read_bytes() for p in toy_folder.iterdir()}
+    with pytest.raises(DatasetError, match=r"holds 5 instances and a dataset only grows.*--n 5"):
+        generate(ToyFamily(), config(toy_folder, n=4))
+    assert {p.name: p.read_bytes() for p in toy_folder.iterdir()} == before
 
 
 def test_a_refused_folder_is_left_untouched(toy_folder):

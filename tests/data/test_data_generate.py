@@ -19,9 +19,9 @@ from scpformer.data.generate import GenerateConfig, generate
 HERE = Path(__file__).parent
 
 
-def run(out, family=None, **kwargs):
+def run(out, family=None, on_notice=None, **kwargs):
     config = dict(n=7, out=out, shard_size=3, workers=1) | kwargs
-    return generate(family or ToyFamily(), GenerateConfig(**config))
+    return generate(family or ToyFamily(), GenerateConfig(**config), on_notice=on_notice)
 
 
 def all_columns(folder):
@@ -55,6 +55,51 @@ def test_a_larger_dataset_extends_a_smaller_one_with_the_same_seed(tmp_path):
     assert not np.array_equal(
         instance_rng(0, 0).uniform(size=3), instance_rng(1, 0).uniform(size=3)
     )
+
+
+def test_a_larger_n_grows_a_dataset_to_the_data_of_a_fresh_run(tmp_path):
+    run(tmp_path / "ds", n=4)
+    notices = []
+    grown = run(tmp_path / "ds", n=11, on_notice=notices.append)
+    fresh = run(tmp_path / "fresh", n=11)
+    assert grown.generated == 7  # instances 4..10 only
+    assert any("growing the dataset from 4 to 11" in n for n in notices)
+    for name in ("index", "theta", "status"):
+        np.testing.assert_array_equal(
+            all_columns(tmp_path / "ds")[name], all_columns(tmp_path / "fresh")[name]
+        )
+    ranges = [(s.start, s.stop) for s in grown.manifest.shards]
+    assert ranges == [(0, 3), (3, 4), (4, 7), (7, 10), (10, 11)]  # the partial shard is kept
+    assert grown.manifest.grown_from == (4,) and grown.manifest.complete
+    assert storage.verify_dataset(tmp_path / "ds") == []
+    assert fresh.manifest.plan is None
+
+
+def test_a_dataset_grown_twice_survives_the_loss_of_its_manifest(tmp_path, capsys):
+    from scpformer.cli.main import main
+
+    for n in (3, 5, 8):
+        run(tmp_path / "ds", n=n)
+    before = storage.read_manifest(tmp_path / "ds")
+    assert before.grown_from == (3, 5)
+    (tmp_path / "ds" / storage.MANIFEST_NAME).unlink()
+    assert main(["dataset", "repair", str(tmp_path / "ds")]) == 0
+    rebuilt = storage.read_manifest(tmp_path / "ds")
+    assert rebuilt.shards == before.shards and rebuilt.n == 8
+    assert storage.verify_dataset(tmp_path / "ds") == []
+
+
+def test_growing_a_split_dataset_says_to_split_it_again(tmp_path):
+    from scpformer.data.errors import DatasetError
+    from scpformer.data.splits import load_splits, make_splits
+
+    folder = run(tmp_path / "ds", n=4).folder
+    make_splits(folder)
+    notices = []
+    run(folder, n=6, on_notice=notices.append)
+    assert any("splits.h5 splits the first 4 instances only" in n for n in notices)
+    with pytest.raises(DatasetError, match="different data"):
+        load_splits(folder)
 
 
 def test_failed_instances_are_stored_with_their_status(tmp_path):

@@ -206,7 +206,12 @@ def add_generate_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def _add_common_generate_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("generation")
-    group.add_argument("--n", type=positive, required=True, help="number of instances to solve")
+    group.add_argument(
+        "--n",
+        type=positive,
+        required=True,
+        help="number of instances; a larger --n on an existing dataset grows it",
+    )
     group.add_argument("--out", type=Path, required=True, help="dataset folder")
     group.add_argument("--seed", type=count, default=0, help="root seed of the dataset (0)")
     group.add_argument(

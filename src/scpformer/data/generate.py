@@ -7,6 +7,10 @@ actors (:mod:`scpformer.data.executors`). A shard is written as soon as its last
 back, then the manifest is updated; killing the process at any moment loses at most the
 unfinished shards' solves.
 
+Instance ``i`` draws from its own seed stream, whatever ``n`` is, so running again with a larger
+``n`` grows a dataset: its shards are kept and new ones planned after them
+(:meth:`~scpformer.data.storage.Manifest.grown_to`). A smaller ``n`` is refused.
+
 Failed, infeasible, timed-out and crashed instances are stored like solved ones, with their
 status: failure rates are results.
 """
@@ -29,6 +33,7 @@ from scpformer.data import storage
 from scpformer.data.errors import DatasetError
 from scpformer.data.executors import Executor, LocalPool, RayPool, TaskResult
 from scpformer.data.family import DatasetFamily, Field, full_schema
+from scpformer.data.splits import SPLITS_NAME
 from scpformer.data.storage import Manifest, ShardInfo
 
 START_METHODS = ("forkserver", "spawn", "fork")
@@ -240,18 +245,34 @@ def _check_contents(folder: Path, wanted: Manifest, notice: NoticeCallback) -> M
 
 
 def _resumable(old: Manifest, wanted: Manifest, folder: Path, notice: NoticeCallback) -> Manifest:
-    why = storage.describe_mismatch(old, wanted)
+    """``old`` to resume, or grown to ``wanted.n`` (see :meth:`Manifest.grown_to`)."""
+    why = storage.describe_mismatch(dataclasses.replace(old, n=wanted.n), wanted)
     if why is not None:
         raise DatasetError(
             f"{folder} holds another dataset ({old.family}, seed {old.seed}, n {old.n}): it "
             f"differs in {why}; choose another --out folder or repeat its original command"
+        )
+    if wanted.n < old.n:
+        raise DatasetError(
+            f"{folder} holds {old.n} instances and a dataset only grows: --n {wanted.n} would "
+            f"drop some; use --n {old.n} to resume it, more to grow it, or another --out folder"
         )
     if (old.package_version, old.versions) != (wanted.package_version, wanted.versions):
         notice(
             f"resuming data written with scpformer {old.package_version} {old.versions} "
             f"using {wanted.package_version} {wanted.versions}"
         )
-    return old
+    return _grown(old, wanted.n, folder, notice) if wanted.n > old.n else old
+
+
+def _grown(old: Manifest, n: int, folder: Path, notice: NoticeCallback) -> Manifest:
+    notice(f"growing the dataset from {old.n} to {n} instances; the {old.n} stored are kept")
+    if (folder / SPLITS_NAME).exists():
+        notice(
+            f"{SPLITS_NAME} splits the first {old.n} instances only: run `scpformer dataset "
+            f"split {folder}` again once this run is complete"
+        )
+    return old.grown_to(n)
 
 
 def _require_empty(folder: Path, wanted: Manifest) -> None:
@@ -294,9 +315,9 @@ def repair(folder: Path, manifest: Manifest, notice: NoticeCallback) -> Manifest
     for path in temps:
         path.unlink(missing_ok=True)
         notice(f"removed {path.name}, left half-written by an interrupted run")
-    identity = storage.identity_digest(manifest)
+    identities = storage.identity_digests(manifest)
     for info in manifest.shards:
-        problems = storage.check_shard(folder, info, manifest.schema, identity)
+        problems = storage.check_shard(folder, info, manifest.schema, identities)
         if problems:
             (folder / info.file).unlink(missing_ok=True)
             manifest = manifest.without_shard(info.file)
@@ -332,7 +353,7 @@ def rebuild_manifest(folder: Path, notice: NoticeCallback) -> Manifest:
     paths = sorted(folder.glob(storage.SHARD_GLOB)) if folder.is_dir() else []
     if not paths:
         raise DatasetError(f"no shard files in {folder}: nothing to rebuild a manifest from")
-    manifest = _first_header(paths)
+    manifest = _latest_header(paths)
     with storage.locked_folder(folder):
         planned = {storage.shard_name(i): r for i, r in enumerate(manifest.planned_ranges())}
         for path in paths:
@@ -345,14 +366,21 @@ def rebuild_manifest(folder: Path, notice: NoticeCallback) -> Manifest:
     return manifest
 
 
-def _first_header(paths: list[Path]) -> Manifest:
-    reasons = []
+def _latest_header(paths: list[Path]) -> Manifest:
+    """The shard-less manifest in the shards' headers with the largest ``n``.
+
+    Shards of a grown dataset carry the manifest of the run that wrote them; the latest one
+    plans every shard and remembers the earlier sizes.
+    """
+    headers, reasons = [], []
     for path in paths:
         try:
-            return storage.manifest_from_header(storage.shard_attrs(path))
+            headers.append(storage.manifest_from_header(storage.shard_attrs(path)))
         except DatasetError as err:
             reasons.append(f"{path.name}: {err}")
-    raise DatasetError(f"no shard carries a readable dataset header ({reasons[0]})")
+    if not headers:
+        raise DatasetError(f"no shard carries a readable dataset header ({reasons[0]})")
+    return max(headers, key=lambda manifest: manifest.n)
 
 
 def _adoptable(path: Path, manifest: Manifest, planned: tuple[int, int] | None) -> ShardInfo | None:
@@ -361,7 +389,7 @@ def _adoptable(path: Path, manifest: Manifest, planned: tuple[int, int] | None) 
         return None
     try:
         attrs = storage.shard_attrs(path)
-        if attrs.get("config_sha256") != storage.identity_digest(manifest):
+        if attrs.get("config_sha256") not in storage.identity_digests(manifest):
             return None  # made with other settings, or by a version without the digest
         if (attrs.get("start"), attrs.get("stop")) != tuple(planned):
             return None

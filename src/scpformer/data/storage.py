@@ -29,7 +29,7 @@ import json
 import math
 import os
 from collections import Counter
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Collection, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -90,6 +90,7 @@ class Manifest:
     transform: dict[str, Any] | None = None  # name and config of the transform (if transformed)
     source: dict[str, Any] | None = None  # the dataset a transform read (path, checksum)
     plan: tuple[tuple[int, int], ...] | None = None  # shard ranges when not from n, shard_size
+    grown_from: tuple[int, ...] = ()  # earlier n of a grown dataset, oldest first
     shards: tuple[ShardInfo, ...] = ()
     runs: tuple[dict[str, Any], ...] = ()  # one record per (re)start: backend, workers, limits
     format_version: int = FORMAT_VERSION
@@ -103,6 +104,26 @@ class Manifest:
         return [
             (s * self.shard_size, min((s + 1) * self.shard_size, self.n)) for s in range(n_shards)
         ]
+
+    def grown_to(self, n: int) -> Manifest:
+        """This dataset planned to ``n > self.n`` instances: its shards kept, new ones after.
+
+        Instance ``i`` is drawn from its own seed stream whatever ``n`` is, so the first
+        ``self.n`` instances stay valid. New shards of ``shard_size`` start at ``self.n`` (a
+        last partial shard is kept as it is), and ``self.n`` joins :attr:`grown_from`, so the
+        identity digest the kept shards carry still checks out (:func:`identity_digests`).
+        """
+        if n <= self.n:
+            raise ValueError(f"a dataset grows to more than its {self.n} instances, not to {n}")
+        added = [(a, min(a + self.shard_size, n)) for a in range(self.n, n, self.shard_size)]
+        ranges = tuple(self.planned_ranges()) + tuple(added)
+        uniform = dataclasses.replace(self, n=n, plan=None).planned_ranges()
+        return dataclasses.replace(
+            self,
+            n=n,
+            plan=None if list(ranges) == uniform else ranges,
+            grown_from=(*self.grown_from, self.n),
+        )
 
     @property
     def complete(self) -> bool:
@@ -165,6 +186,7 @@ class Manifest:
             "transform": self.transform,
             "source": self.source,
             "plan": [list(r) for r in self.plan] if self.plan is not None else None,
+            "grown_from": list(self.grown_from),
             "counts": self.counts(),
             "complete": self.complete,
             "schema": [f.to_dict() for f in self.schema],
@@ -181,6 +203,7 @@ class Manifest:
         data["schema"] = tuple(Field.from_dict(f) for f in data["schema"])
         data["shards"] = tuple(ShardInfo(**s) for s in data.get("shards", ()))
         data["runs"] = tuple(data.get("runs", ()))
+        data["grown_from"] = tuple(data.get("grown_from", ()))
         data["success_statuses"] = tuple(data["success_statuses"])
         if data.get("plan") is not None:
             data["plan"] = tuple(tuple(r) for r in data["plan"])
@@ -222,6 +245,16 @@ def identity_digest(manifest: Manifest) -> str:
     """
     text = json.dumps(manifest.identity(), sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def identity_digests(manifest: Manifest) -> frozenset[str]:
+    """Every ``config_sha256`` a shard of ``manifest`` may carry: one per size it has had.
+
+    A grown dataset's earlier shards were written when ``n`` was smaller
+    (:meth:`Manifest.grown_to`); they hold the same instances.
+    """
+    sizes = (manifest.n, *manifest.grown_from)
+    return frozenset(identity_digest(dataclasses.replace(manifest, n=n)) for n in sizes)
 
 
 _HEADER_DROPPED = ("shards", "runs", "counts", "complete")
@@ -568,12 +601,15 @@ def shard_attrs(path: Path) -> dict[str, Any]:
 
 
 def check_shard(
-    folder: Path, info: ShardInfo, schema: Sequence[Field], identity: str | None = None
+    folder: Path,
+    info: ShardInfo,
+    schema: Sequence[Field],
+    identities: Collection[str] | None = None,
 ) -> list[str]:
     """Problems of one listed shard: missing, size, checksum, fields, shapes, content digest.
 
-    With ``identity`` (:func:`identity_digest` of the manifest), a shard whose own
-    ``config_sha256`` differs (made with other settings) is a problem too.
+    With ``identities`` (:func:`identity_digests` of the manifest), a shard whose own
+    ``config_sha256`` is none of them (made with other settings) is a problem too.
     """
     path = Path(folder) / info.file
     damage = shard_damage(folder, info)
@@ -587,7 +623,7 @@ def check_shard(
         return [f"{info.file}: unreadable ({_short(err)})"]
     if problems:
         return problems
-    if identity is not None and made_with is not None and str(made_with) != identity:
+    if identities is not None and made_with is not None and str(made_with) not in identities:
         return [f"{info.file}: made with another configuration than the manifest's"]
     columns = read_columns(path, schema)
     if content_digest(columns, schema) != info.content_sha256:
@@ -626,9 +662,11 @@ def verify_dataset(folder: Path) -> list[str]:
     """
     folder = Path(folder)
     manifest = read_manifest(folder)
-    identity = identity_digest(manifest)
+    identities = identity_digests(manifest)
     problems = [
-        p for info in manifest.shards for p in check_shard(folder, info, manifest.schema, identity)
+        p
+        for info in manifest.shards
+        for p in check_shard(folder, info, manifest.schema, identities)
     ]
     temps, unlisted = stray_files(folder, manifest)
     problems += [f"{p.name}: leftover temporary file of an interrupted run" for p in temps]
