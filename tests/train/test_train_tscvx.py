@@ -76,6 +76,20 @@ def test_items_read_once_equal_those_of_the_views(fake_pdg):
     np.testing.assert_allclose(targets[0].numpy(), want[0], rtol=1e-4, atol=1e-5)
 
 
+def test_the_solution_network_alone_reads_no_tight_flags_and_the_same_samples(fake_pdg):
+    full, norm = read_tscvx(fake_pdg)
+    lean, lean_norm = read_tscvx(fake_pdg, flags=False)
+    assert full.has_flags and not lean.has_flags and lean.flags.nbytes == 0
+    for name in ("theta", "x", "u", "tf", "iterations", "base_index", "split"):
+        np.testing.assert_array_equal(getattr(lean, name), getattr(full, name))
+    torch.testing.assert_close(
+        solution_tensors(lean, lean_norm).tensors["target"],
+        solution_tensors(full, norm).tensors["target"],
+    )
+    with pytest.raises(ValueError, match="tight flags"):
+        evaluate_tscvx(fake_pdg, fake_pdg, arrays=(lean, lean_norm))
+
+
 def test_folds_partition_train_and_validation_by_base_instance(fake_pdg):
     arrays, _ = read_tscvx(fake_pdg)
     masks = fold_masks(arrays, 3, 0.1, seed=0)

@@ -128,7 +128,7 @@ class TscvxArrays:
     u: np.ndarray  # (n, N, 3)
     tf: np.ndarray  # (n,)
     iterations: np.ndarray  # (n,) SCvx iterations with flags
-    flags: np.ndarray  # (n, iter_max, R) bool
+    flags: np.ndarray  # (n, iter_max, R) bool; (n, 0, 0) when read without flags
     base_index: np.ndarray  # (n,) split group
     split: np.ndarray  # (n,) "train", "validation" or "test"
 
@@ -142,6 +142,11 @@ class TscvxArrays:
     def iter_max(self) -> int:
         return self.flags.shape[1]
 
+    @property
+    def has_flags(self) -> bool:
+        """Whether the tight flags were read (``read_tscvx(..., flags=True)``)."""
+        return self.flags.shape[1] > 0
+
     def tight_items(self) -> tuple[np.ndarray, np.ndarray]:
         """(rows, k): one item per (sample, iteration k = 1..iterations), sample-major."""
         rows = np.repeat(np.arange(len(self)), self.iterations)
@@ -150,8 +155,11 @@ class TscvxArrays:
         return rows, k.astype(np.int64)
 
 
-def read_tscvx(folder: Path | str) -> tuple[TscvxArrays, TscvxNormalization]:
+def read_tscvx(folder: Path | str, *, flags: bool = True) -> tuple[TscvxArrays, TscvxNormalization]:
     """Every solved sample of a split ``pdg6dof`` dataset, and its training statistics.
+
+    ``flags=False`` skips the ``(iter_max, 7 N)`` tight flags of every sample, most of the
+    dataset's bytes, for training the solution network alone.
 
     Raises
     ------
@@ -167,15 +175,16 @@ def read_tscvx(folder: Path | str) -> tuple[TscvxArrays, TscvxNormalization]:
     for name, indices in splits.indices.items():
         split[indices] = name
     column = view.samples.column
-    flags = column("tight_flags")[positions]
-    iterations = np.minimum(column("iterations")[positions], flags.shape[1])  # rows stored
+    iter_max = view.samples.manifest.field("tight_flags").shape[0]
+    iterations = np.minimum(column("iterations")[positions], iter_max)  # rows stored
+    tight = column("tight_flags")[positions] if flags else np.zeros((len(positions), 0, 0), bool)
     arrays = TscvxArrays(
         theta=column("theta")[positions],
         x=column("x")[positions],
         u=column("u")[positions],
         tf=column("tf")[positions],
         iterations=iterations.astype(np.int64),
-        flags=flags,
+        flags=tight,
         base_index=column("base_index")[positions],
         split=split[positions].astype(str),
     )
@@ -393,7 +402,7 @@ def train_tscvx(
         _check_new_or_resume(out / name, resume)
     world, device = distributed.start(configs["tight"].device)
     try:
-        arrays, norm = read_tscvx(data)
+        arrays, norm = read_tscvx(data, flags="tight" in networks)
         if canonical:
             train = arrays.subset(arrays.split == "train")
             norm = TscvxNormalization.canonical_from_arrays(train.theta, train.x, train.u, train.tf)
@@ -410,7 +419,8 @@ def train_tscvx(
         distributed.barrier(world)
         metrics = {}
         if world.is_main and all(_finished(out / name) for name in NETWORKS):
-            metrics = evaluate_tscvx(out, data, split=report_split, arrays=(arrays, norm))
+            read = (arrays, norm) if arrays.has_flags else None
+            metrics = evaluate_tscvx(out, data, split=report_split, arrays=read)
         return TscvxRunResult(run=out, networks=results, metrics=metrics,
                               report_split=report_split, world=world)  # fmt: skip
     finally:
@@ -649,8 +659,10 @@ def evaluate_tscvx(
     if split not in SPLIT_NAMES:
         raise ValueError(f"split must be one of {SPLIT_NAMES}, got {split!r}")
     run = Path(run)
-    predictor = load_tscvx_predictor(run, threshold=threshold, checkpoint=checkpoint)
     arrays, _ = read_tscvx(data) if arrays is None else arrays
+    if not arrays.has_flags:
+        raise ValueError("evaluate_tscvx needs arrays read with their tight flags")
+    predictor = load_tscvx_predictor(run, threshold=threshold, checkpoint=checkpoint)
     chosen = arrays.subset(arrays.split == split)
     if len(chosen) == 0:
         raise DatasetError(f"the {split} split of {data} holds no solved sample")
