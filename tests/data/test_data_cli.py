@@ -28,6 +28,18 @@ def test_generate_shows_progress_and_a_summary(tmp_path, capsys):
     assert "solved=" in err and "failed=" in err and "inst/s" in err  # the tqdm bar
 
 
+def test_a_larger_n_on_the_command_line_grows_the_dataset_and_info_says_so(tmp_path, capsys):
+    generate_toy(tmp_path / "ds", "--shard-size", "2")
+    capsys.readouterr()
+    argv = ["generate", "toy", "--n", "8", "--out", str(tmp_path / "ds"), "--workers", "1"]
+    assert main([*argv, "--shard-size", "2"]) == 0
+    out, err = capsys.readouterr()
+    assert "growing the dataset from 5 to 8 instances" in err
+    assert "8 of 8 instances in 5 shard(s)" in out and "this run: 3 instances" in out
+    assert main(["dataset", "info", str(tmp_path / "ds")]) == 0
+    assert "5 -> 8 instances" in capsys.readouterr().out
+
+
 def test_info_and_verify_describe_a_dataset(tmp_path, capsys):
     generate_toy(tmp_path / "ds")
     capsys.readouterr()

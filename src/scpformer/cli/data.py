@@ -441,6 +441,9 @@ def info_lines(folder: Path, manifest: Manifest) -> list[str]:
         ("outcome", _solved_line(manifest)),
         ("written by", f"scpformer {manifest.package_version}, {manifest.versions}"),
     ]
+    if manifest.grown_from:
+        sizes = " -> ".join(str(n) for n in (*manifest.grown_from, manifest.n))
+        rows.insert(4, ("grown", f"{sizes} instances"))
     if (folder / SPLITS_NAME).is_file():
         try:
             splits = load_splits(folder)
