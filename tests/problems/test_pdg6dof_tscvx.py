@@ -62,6 +62,20 @@ def test_oracle_rows_reach_the_cold_optimum_with_reduced_subproblems(cold):
 
 
 @pytest.mark.slow
+def test_tscvx_runs_algorithm_1_exactly_with_the_hard_box_and_no_quadratic_term(cold):
+    # prox_weight 0: the conic data has no P matrix; the reduced subproblem must not need one
+    scvx = SCvxParameters(
+        lambda_=500.0, iter_max=20, second_order_correction=False, stopping="table1"
+    )
+    config = PDGSolverConfig(prox_weight=0.0, scvx=scvx)
+    solution = solve(PDGInstance(), config, guess=TscvxWarmStart(OraclePredictor(cold)))
+    assert solution.status is Status.CONVERGED, solution.message
+    assert solution.verification.passed
+    assert _gap(solution, cold) <= 5e-3
+    assert "reduced" in solution.extras["tscvx"]["modes"]
+
+
+@pytest.mark.slow
 def test_all_rows_dropped_still_converge_to_the_optimum_through_repairs(cold):
     # From a guess away from the optimum the steps cross rows that were neither predicted
     # nor near-active: they are added back (repairs) or the run goes on with the full rows.

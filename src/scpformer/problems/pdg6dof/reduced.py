@@ -198,8 +198,8 @@ class ReducedSubproblem:
         data = self.conic_data()
         rows = self.layout.kept_rows(keep, keep_box)
         A = sp.csr_array(data["A"])[rows]
-        P = sp.csc_array(data["P"])
         c = np.asarray(data["c"], dtype=float)
+        P = sp.csc_array(data["P"]) if "P" in data else sp.csc_array((c.size, c.size))  # LP/SOCP
         cols = _used_columns(A, P, c)
         A = sp.csc_array(A[:, cols])
         P = sp.triu(P[cols][:, cols]).tocsc()
