@@ -134,3 +134,20 @@ def test_the_first_instances_of_an_unfinished_dataset_are_augmented(pdg_dataset,
     (shard,) = [s for s in whole.shards if s.start == 0]
     first_shard = storage.read_columns(tmp_path / "whole" / shard.file, whole.schema)
     np.testing.assert_array_equal(rotated["theta"], first_shard["theta"])
+
+
+def test_the_first_instances_of_a_grown_dataset_keep_its_uneven_shards(pdg_dataset):
+    from scpformer.data.augment import _first_instances
+
+    manifest = storage.read_manifest(pdg_dataset.folder)
+    shard = manifest.shards[0]
+    uneven = [(0, 2), (2, 3), (3, 5), (5, 7)]  # grown from 3 to 7 instances, shards of 2
+    grown = dataclasses.replace(
+        manifest,
+        n=7,
+        plan=tuple(uneven),
+        grown_from=(3,),
+        shards=tuple(dataclasses.replace(shard, start=a, stop=b) for a, b in uneven),
+    )
+    prefix = _first_instances(pdg_dataset.folder, grown, 5)
+    assert prefix.complete and prefix.planned_ranges() == uneven[:3]

@@ -241,7 +241,8 @@ def _first_instances(source: Path, src: Manifest, first: int) -> Manifest:
             f"{src.shard_size}; the stored ones run without gap up to {done}): choose a "
             "shard boundary that far, or finish the generation"
         )
-    return dataclasses.replace(src, n=first, shards=tuple(prefix), plan=None)
+    plan = tuple((s.start, s.stop) for s in prefix)  # a grown source's shards may be uneven
+    return dataclasses.replace(src, n=first, shards=tuple(prefix), plan=plan)
 
 
 def _prepare(
@@ -263,6 +264,7 @@ def _prepare(
             "n": src.n,  # with --first: the first n instances of the source
         },
         plan=tuple((s.start, s.stop) for s in src.shards),
+        grown_from=(),  # the source's history, not this dataset's
         shards=(),
         runs=(),
         package_version=__version__,
