@@ -310,7 +310,7 @@ def analyse(rows: list[dict[str, str]], out: Path, zeta_1: float = math.inf) -> 
     report.figures += _figures(cols, cum, out)
     report.sections.append(("Results by C_CVX(t_1) > x (the paper's curves)", _table(cum, "x")))
     report.sections.append(("Results in disjoint C_CVX(t_1) ranges", _table(bins, "range")))
-    report.comparisons += _comparisons(cols, cum, bins)
+    report.comparisons += _comparisons(cols, cum)
     report.sections.insert(0, ("Reading these numbers", _caveats(cols, zeta_1)))
     return report
 
@@ -381,12 +381,43 @@ def _table(stats: list[dict[str, Any]], key: str) -> str:
     return rep.markdown_table(header, rows)
 
 
-def _comparisons(cols: Columns, cum: list[dict], bins: list[dict]) -> list[rep.Comparison]:
-    gt0 = next(s for s in cum if s["x"] == 0)
+def _curve_extreme(
+    cum: list[dict], value: Any, lo: int, hi: int, pick: Any = max
+) -> tuple[float, int, int]:
+    """``pick`` of ``value(point)`` over the paper's curve points ``C_CVX(t_1) > x``, ``x`` in
+    ``[lo, hi]``: (value, its x, its instance count). NaN points are skipped."""
+    points = [(float(value(s)), s["x"], s["count_feasible"]) for s in cum if lo <= s["x"] <= hi]
+    points = [p for p in points if np.isfinite(p[0])]
+    if not points:
+        return math.nan, lo, 0
+    return pick(points, key=lambda p: p[0])
+
+
+def _comparisons(cols: Columns, cum: list[dict]) -> list[rep.Comparison]:
+    """The paper's claims beside ours, read as the paper reads its Figs. 4-6.
+
+    Each point of those figures averages the instances with ``C_CVX(t_1) > x`` (the grey
+    dashed count), so "more than 20% for all C_CVX(t_1) > 0" is the least improvement over
+    the points ``x >= 0`` and "up to 80% in the range [30, 40]" the largest over the points
+    ``x`` in [30, 40]. The disjoint bins of the second table are a stricter view.
+    """
     every = next(s for s in cum if s["x"] < 0)
-    b3040 = next(s for s in bins if s["range"] == (30, 40))
     C = rep.Comparison
     share = 100.0 * float(np.mean(cols.c > 0))
+
+    def least(key: str) -> tuple[str, str]:
+        value, x, n = _curve_extreme(cum, lambda s: s[key], 0, 10**6, min)
+        return rep.fmt(value), f"least over the points x >= 0 (at x = {x}, n = {n})"
+
+    def most(value: Any) -> tuple[str, str]:
+        best, x, n = _curve_extreme(cum, value, 30, 40)
+        return rep.fmt(best), f"largest over the points x = 30..40 (at x = {x}, n = {n})"
+
+    vs_cvx, vs_tpbvp = least("improvement_vs_convex"), least("improvement_vs_tpbvp")
+    up_cvx = most(lambda s: s["improvement_vs_convex"])
+    up_tpbvp = most(lambda s: s["improvement_vs_tpbvp"])
+    saved_iterations = most(lambda s: s["convex_iterations"] - s["art_iterations"])
+    saved_time = most(lambda s: s["convex_scp_time"] - s["art_scp_time"])
     return [
         C(
             quantity="share of test instances with C_CVX(t_1) > 0 [%]",
@@ -401,34 +432,34 @@ def _comparisons(cols: Columns, cum: list[dict], bins: list[dict]) -> list[rep.C
             note="the room ART can improve on",
         ),
         C(
-            quantity="ART improvement of the gap vs CVX, C_CVX > 0 [%]",
+            quantity="ART improvement of the gap vs CVX, every C_CVX(t_1) > x, x >= 0 [%]",
             paper="> 20",
-            ours=rep.fmt(gt0["improvement_vs_convex"]),
-            note=f"n = {gt0['count_feasible']}",
+            ours=vs_cvx[0],
+            note=vs_cvx[1],
         ),
         C(
-            quantity="ART improvement of the gap vs CVX-TPBVP, C_CVX > 0 [%]",
+            quantity="ART improvement of the gap vs CVX-TPBVP, every C_CVX(t_1) > x, x >= 0 [%]",
             paper="> 20",
-            ours=rep.fmt(gt0["improvement_vs_tpbvp"]),
-            note=f"n = {gt0['count_feasible']}",
+            ours=vs_tpbvp[0],
+            note=vs_tpbvp[1],
         ),
         C(
-            quantity="ART improvement vs CVX, C_CVX in [30, 40] [%]",
+            quantity="ART improvement vs CVX, C_CVX(t_1) > x, x in [30, 40] [%]",
             paper="up to 80",
-            ours=rep.fmt(b3040["improvement_vs_convex"]),
-            note=f"n = {b3040['count_feasible']}",
+            ours=up_cvx[0],
+            note=up_cvx[1],
         ),
         C(
-            quantity="ART improvement vs CVX-TPBVP, C_CVX in [30, 40] [%]",
+            quantity="ART improvement vs CVX-TPBVP, C_CVX(t_1) > x, x in [30, 40] [%]",
             paper="up to ~90",
-            ours=rep.fmt(b3040["improvement_vs_tpbvp"]),
-            note=f"n = {b3040['count_feasible']}",
+            ours=up_tpbvp[0],
+            note=up_tpbvp[1],
         ),
         C(
-            quantity="SCP iterations saved by ART vs CVX, C_CVX in [30, 40]",
+            quantity="SCP iterations saved by ART vs CVX, C_CVX(t_1) > x, x in [30, 40]",
             paper="up to ~1.5",
-            ours=rep.fmt(b3040["convex_iterations"] - b3040["art_iterations"]),
-            note=f"n = {b3040['count_feasible']}",
+            ours=saved_iterations[0],
+            note=saved_iterations[1],
         ),
         C(
             quantity="ART generation time (Algorithm 2) [s]",
@@ -443,9 +474,10 @@ def _comparisons(cols: Columns, cum: list[dict], bins: list[dict]) -> list[rep.C
             note="mean",
         ),
         C(
-            quantity="SCP time saved by ART vs CVX, C_CVX in [30, 40] [s]",
+            quantity="SCP time saved by ART vs CVX, C_CVX(t_1) > x, x in [30, 40] [s]",
             paper="up to 1",
-            ours=rep.fmt(b3040["convex_scp_time"] - b3040["art_scp_time"]),
+            ours=saved_time[0],
+            note=saved_time[1],
         ),
         C(
             quantity="total time WS + SCP, CVX / CVX-TPBVP / ART [s]",
