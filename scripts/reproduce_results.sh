@@ -4,15 +4,17 @@
 # the script after an interruption and finished work is kept (generate, train --resume and
 # experiment run all skip what is done).
 #
-#   scripts/reproduce_results.sh            # everything, default sizes (~4.5 h on 2 CPU cores)
+#   scripts/reproduce_results.sh            # everything, default sizes (~5.5 h on 2 CPU cores)
 #   DATA=/tmp/d RUNS=/tmp/r scripts/reproduce_results.sh
 #
 # Environment (defaults in brackets): DATA [/work/data] dataset root, RUNS [$DATA/runs] model
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
 # instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] epochs of the
 # rendezvous models, TPBVP_EPOCHS ["art:6 gru:4 lstm:4"] of the Table 2 models (Problem 1
-# twin), ROBUST_EPOCHS [8] of the robust ones, N_PDG [4736] 6-DoF base instances
-# (seed PDG_SEED [4]; x8 rotations), RAY [unset] Ray address.
+# twin), ROBUST_EPOCHS [8] of the robust ones, N_WS [9000] rendezvous instances and WS_EPOCHS
+# [8] of the ART model of the art-warmstart study (Figs. 4-6: trained on 3000 instances, ART
+# trailed CVX there; on 9000 it leads), N_PDG [4736] 6-DoF base instances (seed PDG_SEED [4];
+# x8 rotations), RAY [unset] Ray address.
 set -euo pipefail
 
 DATA=${DATA:-/work/data}
@@ -22,12 +24,15 @@ WORKERS=${WORKERS:-2}
 SEED=${SEED:-0}
 N_RDV=${N_RDV:-3000}
 N_ROB=${N_ROB:-1200}
+N_WS=${N_WS:-9000}
+WS_EPOCHS=${WS_EPOCHS:-8}
 N_PDG=${N_PDG:-4736}
 PDG_SEED=${PDG_SEED:-4}
 PDG=$DATA/pdg
 PDG8=$DATA/pdg8
 RDV=$DATA/rdv$N_RDV
 TPB=$DATA/rdv-tpbvp
+RDV_WS=$DATA/rdv-ws$N_WS
 TPBVP_EPOCHS=${TPBVP_EPOCHS:-art:6 gru:4 lstm:4}
 ROB=$DATA/rob$N_ROB
 EPOCHS_FLAG=${EPOCHS:+--epochs $EPOCHS}
@@ -47,6 +52,13 @@ if [ ! -f "$TPB/splits.h5" ]; then
   run scpformer dataset split "$TPB" --fractions 0.8 0.1 0.1 --seed "$SEED"
 fi
 
+#    the art-warmstart study's data: the same seed, N_WS instances (a larger --n grows a
+#    dataset, so an interrupted or smaller run is kept and extended)
+if [ ! -f "$RDV_WS/splits.h5" ]; then
+  run scpformer generate rendezvous --n "$N_WS" --seed "$SEED" --out "$RDV_WS" --workers "$WORKERS"
+  run scpformer dataset split "$RDV_WS" --fractions 0.8 0.1 0.1 --seed "$SEED"
+fi
+
 # 2. models: ART, GRU and LSTM on the same sequences (small presets: two CPU cores)
 for kind in art gru lstm; do
   if [ -f "$RUNS/$kind-small/checkpoint.pt" ]; then resume=--resume; else resume=; fi
@@ -62,12 +74,18 @@ for spec in $TPBVP_EPOCHS; do
   run scpformer train "$kind" --data "$TPB" --out "$RUNS/$kind-tpbvp-small" --preset small \
     --frame rtn --twin tpbvp --seed "$SEED" --epochs "${spec##*:}" $resume
 done
+#    and ART on the larger set of the art-warmstart study
+if [ -f "$RUNS/art-ws-small/checkpoint.pt" ]; then resume=--resume; else resume=; fi
+# shellcheck disable=SC2086
+run scpformer train art --data "$RDV_WS" --out "$RUNS/art-ws-small" --preset small --frame rtn \
+  --seed "$SEED" --epochs "$WS_EPOCHS" --batch-size 32 --lr 0.001 $resume
 
 # 3. experiments (ART paper): each writes results.csv, PNG figures and report.md
 # shellcheck disable=SC2086
 common=(--data "$RDV" --workers "$WORKERS" --seed "$SEED" $RAY_FLAG)
-run scpformer experiment run art-warmstart --model "$RUNS/art-small" "${common[@]}" \
-  --out "$OUT/art-warmstart"
+# shellcheck disable=SC2086
+run scpformer experiment run art-warmstart --model "$RUNS/art-ws-small" --data "$RDV_WS" \
+  --workers "$WORKERS" --seed "$SEED" $RAY_FLAG --out "$OUT/art-warmstart"
 run scpformer experiment run art-forecast-scp --model "$RUNS/art-small" \
   --model "$RUNS/gru-small" --model "$RUNS/lstm-small" "${common[@]}" \
   --out "$OUT/art-forecast-scp"
