@@ -153,6 +153,11 @@ def test_a_missing_or_corrupt_manifest_is_a_clear_error(tmp_path):
         storage.read_manifest(tmp_path)
 
 
+def test_the_manifest_is_written_to_a_folder_given_as_a_string(tmp_path):
+    storage.write_manifest(str(tmp_path), manifest_with(write(tmp_path)))
+    assert storage.read_manifest(str(tmp_path)).shards[0].file == "shard-00000.h5"
+
+
 def test_manifest_round_trips_through_json(tmp_path):
     manifest = manifest_with(write(tmp_path))
     storage.write_manifest(tmp_path, manifest)

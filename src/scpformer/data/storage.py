@@ -337,8 +337,9 @@ def _fsync_file(path: Path) -> None:
         os.fsync(fh.fileno())
 
 
-def atomic_write_text(path: Path, text: str) -> None:
+def atomic_write_text(path: Path | str, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file, fsync and rename."""
+    path = Path(path)
     try:
         write_bytes_atomic(path, text.encode())
         _fsync_dir(path.parent)
@@ -351,9 +352,10 @@ def atomic_write_text(path: Path, text: str) -> None:
         raise
 
 
-def write_manifest(folder: Path, manifest: Manifest) -> None:
+def write_manifest(folder: Path | str, manifest: Manifest) -> None:
     """Write ``folder/manifest.json`` atomically."""
-    atomic_write_text(folder / MANIFEST_NAME, json.dumps(manifest.to_dict(), indent=1) + "\n")
+    text = json.dumps(manifest.to_dict(), indent=1) + "\n"
+    atomic_write_text(Path(folder) / MANIFEST_NAME, text)
 
 
 def read_manifest(folder: Path) -> Manifest:
