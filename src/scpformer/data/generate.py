@@ -324,7 +324,7 @@ def repair(folder: Path, manifest: Manifest, notice: NoticeCallback) -> Manifest
             notice(f"{problems[0]}: regenerating it")
     planned = {storage.shard_name(i): r for i, r in enumerate(manifest.planned_ranges())}
     for path in unlisted:
-        info = _adoptable(path, manifest, planned.get(path.name))
+        info = _adoptable(path, manifest, planned.get(path.name), identities)
         if info is None:
             path.unlink(missing_ok=True)
             notice(f"removed {path.name}: not a shard of this dataset")
@@ -356,8 +356,9 @@ def rebuild_manifest(folder: Path, notice: NoticeCallback) -> Manifest:
     manifest = _latest_header(paths)
     with storage.locked_folder(folder):
         planned = {storage.shard_name(i): r for i, r in enumerate(manifest.planned_ranges())}
+        identities = storage.identity_digests(manifest)
         for path in paths:
-            info = _adoptable(path, manifest, planned.get(path.name))
+            info = _adoptable(path, manifest, planned.get(path.name), identities)
             if info is None:
                 notice(f"{path.name}: damaged or of another dataset; left out and in place")
             else:
@@ -383,13 +384,21 @@ def _latest_header(paths: list[Path]) -> Manifest:
     return max(headers, key=lambda manifest: manifest.n)
 
 
-def _adoptable(path: Path, manifest: Manifest, planned: tuple[int, int] | None) -> ShardInfo | None:
-    """The manifest entry of an intact finished shard that the manifest missed, else None."""
+def _adoptable(
+    path: Path,
+    manifest: Manifest,
+    planned: tuple[int, int] | None,
+    identities: frozenset[str],
+) -> ShardInfo | None:
+    """The manifest entry of an intact finished shard that the manifest missed, else None.
+
+    ``identities``: :func:`storage.identity_digests` of ``manifest``, computed once per folder.
+    """
     if planned is None:
         return None
     try:
         attrs = storage.shard_attrs(path)
-        if attrs.get("config_sha256") not in storage.identity_digests(manifest):
+        if attrs.get("config_sha256") not in identities:
             return None  # made with other settings, or by a version without the digest
         if (attrs.get("start"), attrs.get("stop")) != tuple(planned):
             return None
