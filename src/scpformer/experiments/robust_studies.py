@@ -190,10 +190,20 @@ class RobustWarmstartSolver(ModelSolver):
             **out,
             f"{prefix}_status": solution.status.value,
             f"{prefix}_cost": solution.cost,
-            f"{prefix}_iterations": solution.iterations,
+            f"{prefix}_iterations": scvx_star_iterations(solution),
             f"{prefix}_scp_time": solution.timing.total if solution.timing else math.nan,
             f"{prefix}_converged": solution.converged,
         }
+
+
+def scvx_star_iterations(solution: Any) -> int:
+    """SCvx* solves of the passive-safety stage, also when it failed.
+
+    A run whose passive-safety stage does not converge returns the last converged stage (the
+    TPBVP here), whose ``iterations`` count that stage's solves (2-4), not the SCvx* run's.
+    """
+    stages = solution.extras.get("stage_iterations", {})
+    return int(stages.get("passive_safety", solution.iterations))
 
 
 # what each robust experiment runs: passive-safety modes, acceptance check, paper figures

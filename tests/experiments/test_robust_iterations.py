@@ -1,0 +1,19 @@
+"""The robust studies count the SCvx* solves of a failed run, not its fallback's."""
+
+import dataclasses
+
+from scpformer.data.executors import instance_rng
+from scpformer.data.robust_rendezvous_family import build
+from scpformer.experiments.robust_studies import scvx_star_iterations
+from scpformer.problems.robust_rendezvous.problem import solve
+from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig
+
+
+def test_a_run_stopped_at_the_cap_reports_the_scvx_star_solves_not_the_tpbvp_ones():
+    config = RobustSolverConfig()
+    capped = dataclasses.replace(config, scvx=dataclasses.replace(config.scvx, iter_max=2))
+    instance = build().sample(instance_rng(0, 639))  # needs more than 2 solves from the TPBVP
+    solution = solve(instance, capped, "deterministic", warmstart="tpbvp", verify=False)
+    assert not solution.converged and solution.extras["stage"] == "tpbvp"
+    assert solution.iterations == solution.extras["stage_iterations"]["tpbvp"] != 2
+    assert scvx_star_iterations(solution) == 2
