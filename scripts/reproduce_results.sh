@@ -13,7 +13,9 @@
 # rendezvous models, TPBVP_EPOCHS ["art:6 gru:4 lstm:4"] of the Table 2 models (Problem 1
 # twin), ROBUST_EPOCHS [8] of the robust ones, N_WS [9000] rendezvous instances and WS_EPOCHS
 # [8] of the ART model of the art-warmstart study (Figs. 4-6: trained on 3000 instances, ART
-# trailed CVX there; on 9000 it leads), N_PDG [4736] 6-DoF base instances (seed PDG_SEED [4];
+# trailed CVX there; on 9000 it leads), N_ROB_WS [4800] robust-rendezvous instances of the
+# three robust warm-start studies and their RTN and ROE models (the same seed: the first
+# N_ROB of them are $ROB's instances), N_PDG [4736] 6-DoF base instances (seed PDG_SEED [4];
 # x8 rotations), RAY [unset] Ray address.
 set -euo pipefail
 
@@ -25,6 +27,7 @@ SEED=${SEED:-0}
 N_RDV=${N_RDV:-3000}
 N_ROB=${N_ROB:-1200}
 N_WS=${N_WS:-9000}
+N_ROB_WS=${N_ROB_WS:-4800}
 WS_EPOCHS=${WS_EPOCHS:-8}
 N_PDG=${N_PDG:-4736}
 PDG_SEED=${PDG_SEED:-4}
@@ -35,6 +38,7 @@ TPB=$DATA/rdv-tpbvp
 RDV_WS=$DATA/rdv-ws$N_WS
 TPBVP_EPOCHS=${TPBVP_EPOCHS:-art:6 gru:4 lstm:4}
 ROB=$DATA/rob$N_ROB
+ROB_WS=$DATA/rob-ws$N_ROB_WS
 EPOCHS_FLAG=${EPOCHS:+--epochs $EPOCHS}
 RAY_FLAG=${RAY:+--ray $RAY}
 
@@ -99,22 +103,27 @@ run scpformer experiment run art-conditioning --model "$RUNS/art-small" "${commo
 # 4. robust ART paper: chance-constrained dataset (three-stage procedure), ART on RTN and on
 #    ROE states with the same budget, SCvx* warm-started by CVX and ART in both passive-safety
 #    modes (Figs. 5-6), the largest ART gain (Figs. 7-8) and the post hoc check (Figs. 9-10)
-if [ ! -f "$ROB/splits.h5" ]; then
-  run scpformer generate robust-rendezvous --n "$N_ROB" --seed "$SEED" --out "$ROB" \
-    --workers "$WORKERS"
-  run scpformer dataset split "$ROB" --fractions 0.8 0.1 0.1 --seed "$SEED"
-fi
+for dir_n in "$ROB:$N_ROB" "$ROB_WS:$N_ROB_WS"; do
+  dir=${dir_n%%:*}
+  if [ ! -f "$dir/splits.h5" ]; then
+    run scpformer generate robust-rendezvous --n "${dir_n##*:}" --seed "$SEED" --out "$dir" \
+      --workers "$WORKERS"
+    run scpformer dataset split "$dir" --fractions 0.8 0.1 0.1 --seed "$SEED"
+  fi
+done
+#    the warm-start studies' models learn from N_ROB_WS instances (on 960 training instances
+#    ART's guesses made more SCvx* runs fail than CVX's did)
 for frame in rtn roe; do
   if [ -f "$RUNS/art-robust-$frame-small/checkpoint.pt" ]; then resume=--resume; else resume=; fi
   # shellcheck disable=SC2086
-  run scpformer train art --data "$ROB" --out "$RUNS/art-robust-$frame-small" --preset small \
+  run scpformer train art --data "$ROB_WS" --out "$RUNS/art-robust-$frame-small" --preset small \
     --frame "$frame" --seed "$SEED" --epochs "${ROBUST_EPOCHS:-8}" --batch-size 32 --lr 0.001 \
     $resume
 done
 for name in robust-warmstart robust-trajectory robust-posthoc; do
   # shellcheck disable=SC2086
   run scpformer experiment run "$name" --model "$RUNS/art-robust-rtn-small" \
-    --model "$RUNS/art-robust-roe-small" --data "$ROB" --workers "$WORKERS" --seed "$SEED" \
+    --model "$RUNS/art-robust-roe-small" --data "$ROB_WS" --workers "$WORKERS" --seed "$SEED" \
     $RAY_FLAG --out "$OUT/$name"
 done
 # Table 3's forecast rows for the robust ART (issue 12), with the 4-epoch RTN model it reports

@@ -17,3 +17,19 @@ def test_a_run_stopped_at_the_cap_reports_the_scvx_star_solves_not_the_tpbvp_one
     assert not solution.converged and solution.extras["stage"] == "tpbvp"
     assert solution.iterations == solution.extras["stage_iterations"]["tpbvp"] != 2
     assert scvx_star_iterations(solution) == 2
+
+
+def test_shrinking_from_the_rejected_step_converges_where_oguris_rule_repeats_it():
+    """Instance 639: from the TPBVP, Oguri's halving re-solves one rejected step five times
+    (radius 5000 -> 312 m, the step inside) and ends at the cap; from the step's length the
+    same run converges within Table 1's 20 solves."""
+    instance = build().sample(instance_rng(0, 639))
+    config = RobustSolverConfig()
+    oguri = dataclasses.replace(
+        config, scvx=dataclasses.replace(config.scvx, shrink_from_step=False)
+    )
+    stalled = solve(instance, oguri, "deterministic", warmstart="tpbvp", verify=False)
+    solved = solve(instance, config, "deterministic", warmstart="tpbvp")
+    assert not stalled.converged and scvx_star_iterations(stalled) == 20
+    assert solved.converged and scvx_star_iterations(solved) < 20
+    assert solved.verification is not None and solved.verification.passed

@@ -18,6 +18,7 @@ active). SCvx* must reach z* from an infeasible guess, with multipliers tending 
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import time
 from dataclasses import replace
@@ -43,7 +44,8 @@ from scpformer.scp.solution import Status, Trajectory, Verification
 Z_STAR = np.array([-1.75, np.sqrt(15.0) / 4.0])
 CENTER = np.array([-2.0, 0.0])
 GUESS = np.array([0.5, 2.5])  # infeasible: |z| = 2.55, outside the circle
-PARAMS = SCvxStarParameters(r_init=0.5)  # Table 1 except r^(0), which is in ROE metres
+# Table 1 except r^(0), which is in ROE metres; Oguri's trust-region rule, as published
+PARAMS = SCvxStarParameters(r_init=0.5, shrink_from_step=False)
 
 
 def _point(z: np.ndarray) -> Trajectory:
@@ -131,6 +133,16 @@ def test_converges_to_the_analytic_optimum_from_an_infeasible_guess(solved):
     np.testing.assert_allclose(sol.trajectory.x[0], Z_STAR, atol=1e-4)
     assert sol.cost == pytest.approx(-1.75, abs=1e-4)
     assert sol.verification.passed and sol.timing.total > 0.0
+
+
+@pytest.mark.parametrize("r_init", [0.5, 1.0])
+def test_the_step_length_contraction_reaches_the_same_analytic_optimum(r_init):
+    """The default rule (a rejected step shrinks r from its own length) on the same problem:
+    29 solves from r^(0) = 0.5, 8 from 1 (Oguri's rule: 15 and 8)."""
+    params = dataclasses.replace(PARAMS, r_init=r_init, shrink_from_step=True, iter_max=40)
+    sol = SCvxStar(params).solve(CircleProblem(), _point(GUESS)).solution
+    assert sol.converged
+    np.testing.assert_allclose(sol.trajectory.x[0], Z_STAR, atol=1e-4)
 
 
 def test_multiplier_estimate_at_the_solution_is_the_kkt_multipliers(solved):
@@ -236,6 +248,15 @@ def test_inequality_multiplier_stays_nonnegative():
 )
 def test_trust_region_update(rho, r_after, accepted):
     assert update_trust_radius(1.0, rho, SCvxStarParameters()) == (r_after, accepted)
+
+
+def test_a_rejected_step_inside_the_region_shrinks_the_radius_from_its_length():
+    p = SCvxStarParameters()
+    assert update_trust_radius(100.0, -1.0, p, step_norm=3.0) == (1.5, False)
+    assert update_trust_radius(100.0, -1.0, p, step_norm=300.0) == (50.0, False)  # at the edge
+    assert update_trust_radius(100.0, 0.1, p, step_norm=3.0) == (50.0, True)  # accepted: Oguri
+    oguri = SCvxStarParameters(shrink_from_step=False)
+    assert update_trust_radius(100.0, -1.0, oguri, step_norm=3.0) == (50.0, False)
 
 
 def test_trust_radius_stays_within_bounds():
