@@ -4,7 +4,7 @@
 # the script after an interruption and finished work is kept (generate, train --resume and
 # experiment run all skip what is done).
 #
-#   scripts/reproduce_results.sh            # everything, default sizes (~5.5 h on 2 CPU cores)
+#   scripts/reproduce_results.sh            # everything, default sizes (~7.5 h on 2 CPU cores)
 #   DATA=/tmp/d RUNS=/tmp/r scripts/reproduce_results.sh
 #
 # Environment (defaults in brackets): DATA [/work/data] dataset root, RUNS [$DATA/runs] model
