@@ -64,7 +64,12 @@ from scpformer.problems.robust_rendezvous.instance import (
     RobustSampleRanges,
     sample_instances,
 )
-from scpformer.problems.robust_rendezvous.problem import STAGES, solve, solve_tpbvp
+from scpformer.problems.robust_rendezvous.problem import (
+    STAGES,
+    passive_safety_iterations,
+    solve,
+    solve_tpbvp,
+)
 from scpformer.problems.robust_rendezvous.safety import linear_model, trajectory_violations
 from scpformer.problems.robust_rendezvous.scenario import (
     WAYPOINTS,
@@ -163,7 +168,7 @@ def stage_fields(solution: Solution) -> dict[str, Any]:
     out: dict[str, Any] = {
         "stage": extras.get("stage") or "",
         "retried_from_tpbvp": bool(extras.get("retried_from_tpbvp", False)),
-        "iterations": extras.get("stage_iterations", {}).get("passive_safety", -1),
+        "iterations": passive_safety_iterations(solution, missing=-1),
     }
     for s, status in extras.get("stage_status", {}).items():
         out[f"stage_status_{s}"] = status

@@ -197,13 +197,11 @@ class RobustWarmstartSolver(ModelSolver):
 
 
 def scvx_star_iterations(solution: Any) -> int:
-    """SCvx* solves of the passive-safety stage, also when it failed.
+    """SCvx* solves of the passive-safety stage, also when it failed (the solution's own count
+    when no such stage ran)."""
+    from scpformer.problems.robust_rendezvous.problem import passive_safety_iterations
 
-    A run whose passive-safety stage does not converge returns the last converged stage (the
-    TPBVP here), whose ``iterations`` count that stage's solves (2-4), not the SCvx* run's.
-    """
-    stages = solution.extras.get("stage_iterations", {})
-    return int(stages.get("passive_safety", solution.iterations))
+    return passive_safety_iterations(solution, missing=solution.iterations)
 
 
 # what each robust experiment runs: passive-safety modes, acceptance check, paper figures

@@ -188,14 +188,14 @@ def update_trust_radius(
     A rejected step of length ``step_norm`` (``|z* - z_bar|_inf``, the trust region's units)
     shrinks from ``min(r, step_norm)`` when ``params.shrink_from_step`` (module docstring).
     """
-    rejected = rho < params.rho_0
-    if rejected and params.shrink_from_step and math.isfinite(step_norm):
-        r = min(r, step_norm)
+    accepted = rho >= params.rho_0
+    if not accepted and params.shrink_from_step:
+        r = min(r, step_norm)  # a NaN step length keeps r
     if rho < params.rho_1:
         r = max(r / params.alpha_1, params.r_min)
     elif rho >= params.rho_2:
         r = min(r * params.alpha_2, params.r_max)
-    return r, rho >= params.rho_0
+    return r, accepted
 
 
 def update_multipliers(

@@ -478,6 +478,16 @@ def solve(
     )
 
 
+def passive_safety_iterations(solution: Solution, missing: int) -> int:
+    """SCvx* solves of the passive-safety stage of a :func:`solve` result, ``missing`` when
+    that stage did not run.
+
+    A run whose passive-safety stage fails returns the last converged stage (the TPBVP, say),
+    whose ``iterations`` count that stage's solves (2-4), not the SCvx* run's.
+    """
+    return int(solution.extras.get("stage_iterations", {}).get("passive_safety", missing))
+
+
 def _three_stage_config(config: RobustSolverConfig) -> RobustSolverConfig:
     """``config`` with stage 3's cap raised to ``config.three_stage_iter_max`` solves."""
     iter_max = max(config.scvx.iter_max, config.three_stage_iter_max)
