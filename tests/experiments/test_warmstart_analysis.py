@@ -1,0 +1,82 @@
+"""The art-warmstart analysis on hand-made columns: the bootstrap interval of the improvement."""
+
+import math
+
+import numpy as np
+import pytest
+
+from scpformer.experiments.warmstart_study import (
+    WARMSTARTS,
+    Columns,
+    bin_stats,
+    improvement_interval,
+)
+
+
+def _columns(gaps: dict[str, np.ndarray], feasible: np.ndarray | None = None) -> Columns:
+    """Columns with J_CVX = 1 m/s, C_CVX(t_1) = 5 and the given gaps [mm/s] per warm start."""
+    n = len(gaps["art"])
+    ok = np.ones(n, dtype=bool) if feasible is None else feasible
+    ones = np.ones(n)
+    return Columns(
+        c=5.0 * ones,
+        j_cvx=ones,
+        cost={ws: 1.0 + 1e-3 * np.asarray(gaps[ws], dtype=float) for ws in WARMSTARTS},
+        feasible={ws: ok.copy() for ws in WARMSTARTS},
+        iterations={ws: 4.0 * ones for ws in WARMSTARTS},
+        ws_time={ws: 0.1 * ones for ws in WARMSTARTS},
+        scp_time={ws: 0.1 * ones for ws in WARMSTARTS},
+        history={ws: [np.ones(1)] * n for ws in WARMSTARTS},
+        generation=0.05 * ones,
+        ws_cost={ws: ones for ws in WARMSTARTS},
+        waypoint_miss={ws: np.zeros(n) for ws in WARMSTARTS},
+    )
+
+
+def test_an_exact_halving_has_a_point_interval_at_fifty_percent():
+    reference = np.random.default_rng(1).uniform(0.1, 2.0, 40)
+    cols = _columns({"tpbvp": reference, "convex": reference, "art": 0.5 * reference})
+    lo, hi = improvement_interval(cols, "convex", np.ones(40, dtype=bool))
+    assert lo == pytest.approx(50.0) and hi == pytest.approx(50.0)
+
+
+def _noisy_columns(rng: np.random.Generator, n: int) -> Columns:
+    """ART's gap is 0.7 times CVX's plus zero-mean noise: a true improvement of 30%."""
+    reference = rng.exponential(1.0, n)
+    art = 0.7 * reference + rng.normal(0.0, 0.3, n)
+    return _columns({"tpbvp": reference, "convex": reference, "art": art})
+
+
+def test_the_interval_holds_the_point_estimate_narrows_with_more_instances_and_is_seeded():
+    rng = np.random.default_rng(2)
+    widths = []
+    for n in (30, 3000):
+        cols, mask = _noisy_columns(rng, n), np.ones(n, dtype=bool)
+        point = bin_stats(cols, mask)["improvement_vs_convex"]
+        lo, hi = improvement_interval(cols, "convex", mask)
+        assert (lo, hi) == improvement_interval(cols, "convex", mask)  # seeded
+        assert lo < point < hi
+        widths.append(hi - lo)
+    assert widths[1] < 0.2 * widths[0]  # ~ 1 / sqrt(n)
+
+
+def test_the_ninety_percent_interval_covers_the_true_improvement_about_ninety_percent_of_the_time():
+    rng = np.random.default_rng(3)
+    trials, n = 200, 60
+    covered = 0
+    for trial in range(trials):
+        cols = _noisy_columns(rng, n)
+        lo, hi = improvement_interval(cols, "convex", np.ones(n, dtype=bool), draws=500, seed=trial)
+        covered += lo <= 30.0 <= hi
+    assert 0.8 * trials <= covered <= 0.97 * trials
+
+
+def test_only_instances_where_every_scp_solved_count_and_too_few_give_nan():
+    reference = np.array([1.0, 1.0, 1.0, 50.0])
+    feasible = np.array([True, True, True, False])  # the outlier's runs failed: left out
+    cols = _columns({"tpbvp": reference, "convex": reference, "art": 0.5 * reference}, feasible)
+    assert improvement_interval(cols, "convex", np.ones(4, dtype=bool)) == pytest.approx(
+        (50.0, 50.0)
+    )
+    lo, hi = improvement_interval(cols, "convex", np.array([True, False, False, False]))
+    assert math.isnan(lo) and math.isnan(hi)
