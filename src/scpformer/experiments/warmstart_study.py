@@ -337,6 +337,8 @@ def analyse(rows: list[dict[str, str]], out: Path, zeta_1: float = math.inf) -> 
     if not rows:
         report.sections.append(("Results", "No instance finished."))
         return report
+    # instance order, not the order the workers finished in: the bootstrap resamples positions
+    rows = sorted(rows, key=lambda row: int(row["index"]))
     cols = Columns.from_rows(rows)
     cum, bins = cumulative(cols), disjoint(cols)
     report.figures += _figures(cols, cum, out)
