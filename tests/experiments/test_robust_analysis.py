@@ -143,3 +143,16 @@ def test_with_check_replaces_a_rejected_art_run_by_the_cvx_started_one():
     assert checked[0] == rows[0] and rows[2]["chance_art_rtn_status"] == "max_iterations"
     stats = bin_stats(checked, "chance", ("rtn",), np.ones(3, dtype=bool))
     assert stats["art_rtn_infeasible_pct"] == 0.0
+
+
+def test_discordant_outcomes_count_the_paired_runs_and_give_the_exact_sign_test():
+    from scpformer.experiments.robust_studies import discordant_outcomes
+
+    # row 2: CVX converged, ART not; rows 0 and 1 concordant
+    assert discordant_outcomes(ROWS, "chance", "art_rtn") == (0, 1, 1.0)
+    rescued = [_row(i, 1.0, 1.2, 1.1, cvx_status="max_iterations") for i in range(5)]
+    only_art, only_cvx, p = discordant_outcomes(rescued + ROWS[:2], "chance", "art_rtn")
+    assert (only_art, only_cvx) == (5, 0)
+    assert p == pytest.approx(2 / 2**5)  # five of five one way: 2 * (1/2)^5
+    balanced = rescued + [_row(9, 1.0, 1.3, 1.5, art_status="max_iterations")] * 5
+    assert discordant_outcomes(balanced, "chance", "art_rtn")[2] == pytest.approx(1.0)

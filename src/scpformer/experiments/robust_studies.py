@@ -339,6 +339,32 @@ def cost_differences(rows: list[dict[str, str]], mode: str, source: str) -> np.n
     return (column(rows, f"{mode}_cvx_cost") - column(rows, f"{mode}_{source}_cost"))[ok]
 
 
+def discordant_outcomes(
+    rows: list[dict[str, str]], mode: str, source: str
+) -> tuple[int, int, float]:
+    """Instances whose SCvx* run converged only from ART, only from CVX, and the two-sided
+    exact sign-test p-value of that split (McNemar's exact test on the paired outcomes).
+
+    The two infeasibility rates compare the same instances, so they differ only through the
+    discordant pairs; with ``a`` and ``b`` of them, ``p = min(1, 2 P(X <= min(a, b)))`` for
+    ``X ~ Binomial(a + b, 1/2)``: the chance of a split at least this uneven if neither start
+    were better. ``p = 1`` without discordant pairs.
+    """
+    art = column(rows, f"{mode}_{source}_converged") == 1.0
+    cvx = column(rows, f"{mode}_cvx_converged") == 1.0
+    only_art, only_cvx = int(np.sum(art & ~cvx)), int(np.sum(cvx & ~art))
+    n = only_art + only_cvx
+    tail = sum(math.comb(n, k) for k in range(min(only_art, only_cvx) + 1)) / 2.0**n
+    return only_art, only_cvx, min(1.0, 2.0 * tail)
+
+
+def _discordant_note(rows: list[dict[str, str]], mode: str, source: str) -> str:
+    only_art, only_cvx, p = discordant_outcomes(rows, mode, source)
+    return (
+        f"converged only from ART / only from CVX: {only_art} / {only_cvx} (sign test p = {p:.2g})"
+    )
+
+
 def status_counts(rows: list[dict[str, str]], mode: str, source: str) -> dict[str, int]:
     """How the SCvx* runs from ``source`` ended: ``{status: count}``."""
     counts: dict[str, int] = {}
@@ -379,7 +405,7 @@ def analyse(
             (f"{figure}: ART's guesses and the check ({mode})", _check_table(rows, mode, frames)),
         ]
         report.comparisons += _comparisons(rows, mode, frames, stats)
-        report.comparisons += _checked_comparisons(mode, frames, stats, stats_checked)
+        report.comparisons += _checked_comparisons(mode, frames, stats, stats_checked, checked)
         report.figures.append(_figure(rows, mode, frames, stats, out))
     if len(frames) > 1:
         report.comparisons += _frame_comparisons(rows, frames)
@@ -567,7 +593,8 @@ def _comparisons(
             C(quantity=f"{name} vs {cvx}: infeasibility rate (all) [%]",
               paper="lower with ART" + (" (CVX high in the chance case)" if letter == "C" else ""),
               ours=pair(every, "infeasible_pct"),
-              note="without the check (as the paper's Figs. 5-6)"),
+              note="without the check (as the paper's Figs. 5-6); "
+              + _discordant_note(rows, mode, s)),
             C(quantity=f"{name} vs {cvx}: infeasibility rate at C_CVX >= {hardest['x']} [%]",
               paper="ART stays flat where CVX rises",
               ours=pair(hardest, "infeasible_pct"),
@@ -581,7 +608,11 @@ def _comparisons(
 
 
 def _checked_comparisons(
-    mode: str, frames: tuple[str, ...], stats: list[dict], checked: list[dict]
+    mode: str,
+    frames: tuple[str, ...],
+    stats: list[dict],
+    checked: list[dict],
+    checked_rows: list[dict[str, str]],
 ) -> list[rep.Comparison]:
     """Infeasibility and improvement with the check beside the raw ART warm start (Fig. 10)."""
     letter, out = MODES[mode], []
@@ -594,7 +625,8 @@ def _checked_comparisons(
                 ours=f"{rep.fmt(checked[0][f'{s}_infeasible_pct'])} / "
                 f"{rep.fmt(checked[0][f'{s}_improvement'])}, vs "
                 f"{rep.fmt(stats[0]['cvx_infeasible_pct'])}",
-                note=f"guesses accepted: {rep.fmt(checked[0][f'{s}_accepted_pct'])}%",
+                note=f"guesses accepted: {rep.fmt(checked[0][f'{s}_accepted_pct'])}%; "
+                + _discordant_note(checked_rows, mode, s),
             )
         )
     return out
