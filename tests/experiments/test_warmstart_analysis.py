@@ -80,3 +80,34 @@ def test_only_instances_where_every_scp_solved_count_and_too_few_give_nan():
     )
     lo, hi = improvement_interval(cols, "convex", np.array([True, False, False, False]))
     assert math.isnan(lo) and math.isnan(hi)
+
+
+def _csv_rows(n: int, seed: int) -> list[dict[str, str]]:
+    """Result rows as the study writes them (only the cells the analysis reads)."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for index in range(n):
+        gap_cvx = rng.exponential(1e-3)
+        gaps = {"tpbvp": 2 * gap_cvx, "convex": gap_cvx, "art": 0.8 * gap_cvx}
+        row = {"index": str(index), "c_cvx_t1": str(int(rng.integers(0, 45))), "j_cvx": "0.2",
+               "art_generation_s": "0.05"}  # fmt: skip
+        for ws in WARMSTARTS:
+            cost = 0.2 + gaps[ws] + rng.normal(0.0, 2e-4)
+            row |= {f"{ws}_cost": repr(cost), f"{ws}_feasible": "True",
+                    f"{ws}_iterations": str(int(rng.integers(2, 7))), f"{ws}_ws_time": "0.01",
+                    f"{ws}_scp_time": "0.05", f"{ws}_history": f"{cost + 1e-3} {cost}",
+                    f"{ws}_ws_cost": "0.21", f"{ws}_ws_waypoint_miss_m": "0.0"}  # fmt: skip
+        rows.append(row)
+    return rows
+
+
+def test_the_report_does_not_depend_on_the_order_the_workers_finished_in(tmp_path):
+    from scpformer.experiments.warmstart_study import analyse
+
+    rows = _csv_rows(80, seed=4)
+    shuffled = [rows[i] for i in np.random.default_rng(5).permutation(len(rows))]
+    first = analyse(rows, tmp_path).comparisons
+    second = analyse(shuffled, tmp_path).comparisons
+    assert [c.ours for c in first] == [c.ours for c in second]
+    assert [c.note for c in first] == [c.note for c in second]
+    assert any("bootstrap interval" in c.note for c in first)
