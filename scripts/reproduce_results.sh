@@ -87,8 +87,8 @@ run scpformer train art --data "$RDV_WS" --out "$RUNS/art-ws-small" --preset sma
 # 3. experiments (ART paper): each writes results.csv, PNG figures and report.md
 # shellcheck disable=SC2086
 common=(--data "$RDV" --workers "$WORKERS" --seed "$SEED" $RAY_FLAG)
-# shellcheck disable=SC2086
 #    (the whole test split, N_WS / 10 instances: the gaps are sub-mm/s, so the study needs them)
+# shellcheck disable=SC2086
 run scpformer experiment run art-warmstart --model "$RUNS/art-ws-small" --data "$RDV_WS" \
   --n "$((N_WS / 10))" --workers "$WORKERS" --seed "$SEED" $RAY_FLAG --out "$OUT/art-warmstart"
 run scpformer experiment run art-forecast-scp --model "$RUNS/art-small" \

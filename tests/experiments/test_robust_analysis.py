@@ -11,6 +11,7 @@ from scpformer.experiments.robust_studies import (
     analyse,
     bin_stats,
     cost_differences,
+    discordant_outcomes,
     status_counts,
     with_check,
 )
@@ -146,8 +147,6 @@ def test_with_check_replaces_a_rejected_art_run_by_the_cvx_started_one():
 
 
 def test_discordant_outcomes_count_the_paired_runs_and_give_the_exact_sign_test():
-    from scpformer.experiments.robust_studies import discordant_outcomes
-
     # row 2: CVX converged, ART not; rows 0 and 1 concordant
     assert discordant_outcomes(ROWS, "chance", "art_rtn") == (0, 1, 1.0)
     rescued = [_row(i, 1.0, 1.2, 1.1, cvx_status="max_iterations") for i in range(5)]

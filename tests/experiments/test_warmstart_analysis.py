@@ -8,6 +8,7 @@ import pytest
 from scpformer.experiments.warmstart_study import (
     WARMSTARTS,
     Columns,
+    analyse,
     bin_stats,
     improvement_interval,
 )
@@ -102,8 +103,6 @@ def _csv_rows(n: int, seed: int) -> list[dict[str, str]]:
 
 
 def test_the_report_does_not_depend_on_the_order_the_workers_finished_in(tmp_path):
-    from scpformer.experiments.warmstart_study import analyse
-
     rows = _csv_rows(80, seed=4)
     shuffled = [rows[i] for i in np.random.default_rng(5).permutation(len(rows))]
     first = analyse(rows, tmp_path).comparisons
