@@ -8,8 +8,8 @@
 #                                                     # art-robust, tscvx)
 #
 # Time on the 2-core development machine, from the logs of the shipped models (made while
-# other jobs kept the load at 5-10): rendezvous data 3 min + ART 18 min; robust data 21 min +
-# ART 19 min; 6-DoF data: the first 4736 instances of a --n 6000 run stored after 1 h 32 min
+# other jobs ran beside them): rendezvous data 15 min + ART 36 min; robust data 60 min + ART
+# 26 min; 6-DoF data: the first 4736 instances of a --n 6000 run stored after 1 h 32 min
 # of generation with other jobs beside it, then 7 min of augmentation with two workers (session
 # 15) + T-SCvx networks 20.6 min (the two side by side, one thread each). The whole script has
 # not been timed end to end, nor on an idle machine, where it should be shorter. Each
@@ -43,18 +43,18 @@ run() {
 
 art_rendezvous() {
     : >art-rendezvous.commands
-    run art-rendezvous scpformer generate rendezvous --n 3000 --seed 0 --out rdv3000 --workers "$WORKERS"
-    run art-rendezvous scpformer dataset split rdv3000 --fractions 0.8 0.1 0.1 --seed 0
-    run art-rendezvous scpformer train art --data rdv3000 --out art-small --preset small --frame rtn --epochs 8 --batch-size 32 --lr 0.001 --seed 0
-    python -m scpformer.pretrained.package art-rendezvous art-small --commands art-rendezvous.commands --out "$OUT"
+    run art-rendezvous scpformer generate rendezvous --n 9000 --seed 0 --out rdv9000 --workers "$WORKERS"
+    run art-rendezvous scpformer dataset split rdv9000 --fractions 0.8 0.1 0.1 --seed 0
+    run art-rendezvous scpformer train art --data rdv9000 --out art-small9k --preset small --frame rtn --epochs 8 --batch-size 32 --lr 0.001 --seed 0
+    python -m scpformer.pretrained.package art-rendezvous art-small9k --commands art-rendezvous.commands --out "$OUT"
 }
 
 art_robust() {
     : >art-robust.commands
-    run art-robust scpformer generate robust-rendezvous --mode chance --n 1200 --seed 0 --out rob1200 --workers "$WORKERS"
-    run art-robust scpformer dataset split rob1200 --fractions 0.8 0.1 0.1 --seed 0
-    run art-robust scpformer train art --data rob1200 --out art-robust-small --preset small --frame rtn --epochs 4 --batch-size 32 --lr 0.001 --seed 0
-    python -m scpformer.pretrained.package art-robust art-robust-small --commands art-robust.commands --out "$OUT"
+    run art-robust scpformer generate robust-rendezvous --mode chance --n 4800 --seed 0 --out rob4800 --workers "$WORKERS"
+    run art-robust scpformer dataset split rob4800 --fractions 0.8 0.1 0.1 --seed 0
+    run art-robust scpformer train art --data rob4800 --out art-robust-roe-small --preset small --frame roe --epochs 8 --batch-size 32 --lr 0.001 --seed 0
+    python -m scpformer.pretrained.package art-robust art-robust-roe-small --commands art-robust.commands --out "$OUT"
 }
 
 tscvx() {

@@ -29,10 +29,10 @@ def test_every_family_has_a_shipped_model_listed_in_the_manifest():
         assert (pretrained.PRETRAINED_DIR / name / "MODEL_CARD.md").is_file()
 
 
-@pytest.mark.parametrize("family", ["rendezvous", "robust-rendezvous"])
-def test_default_art_models_verify_and_load_without_training_state(family):
+@pytest.mark.parametrize("family, frame", [("rendezvous", "rtn"), ("robust-rendezvous", "roe")])
+def test_default_art_models_verify_and_load_without_training_state(family, frame):
     ckpt = load_checkpoint(default_model(family), family=family, kind="art")
-    assert ckpt.frame == "rtn" and ckpt.normalization is not None
+    assert ckpt.frame == frame and ckpt.normalization is not None
     assert ckpt.extra == {}
     assert all(p.dtype == torch.float32 for p in ckpt.model.parameters())
 

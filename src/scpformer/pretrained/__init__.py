@@ -10,7 +10,7 @@ family's model after checking every file of it against the manifest, so ``--mode
 folder             family                loaded by
 =================  ====================  ================================================
 ``art-rendezvous`` ``rendezvous``        ``--warmstart art`` (ART, RTN frame)
-``art-robust``     ``robust-rendezvous`` ``--warmstart art`` (robust ART, chance, RTN)
+``art-robust``     ``robust-rendezvous`` ``--warmstart art`` (robust ART, chance, ROE)
 ``tscvx``          ``pdg6dof``           ``--warmstart tscvx`` (``tight/``, ``solution/``)
 =================  ====================  ================================================
 
