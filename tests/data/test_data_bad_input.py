@@ -69,6 +69,12 @@ def test_a_corrupt_manifest_is_a_clear_error(toy_folder):
         generate(ToyFamily(), config(toy_folder))
 
 
+def test_a_manifest_missing_a_field_names_the_field(toy_folder):
+    (toy_folder / storage.MANIFEST_NAME).write_text('{"format_version": 1}')
+    with pytest.raises(DatasetError, match=r"manifest.json is corrupt: it has no field '\w+'"):
+        storage.read_manifest(toy_folder)
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [

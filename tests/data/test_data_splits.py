@@ -120,5 +120,6 @@ def test_splits_of_other_data_are_refused(tmp_path):
 
 
 def test_split_settings_are_validated():
-    with pytest.raises(ValueError, match=r"fractions must be 3 nonnegative numbers summing to 1"):
-        SplitConfig(fractions=(0.5, 0.5, 0.5))
+    for fractions in ((0.5, 0.5, 0.5), (float("nan"), 0.5, 0.5), (0.5, 0.5, float("nan"))):
+        with pytest.raises(ValueError, match=r"fractions must be 3 nonnegative numbers summing"):
+            SplitConfig(fractions=fractions)

@@ -141,6 +141,12 @@ def test_files_that_are_not_checkpoints_are_refused(tmp_path):
     text.write_text("hello\n")
     with pytest.raises(CheckpointError, match="not a readable"):
         _load(text)
+    binary = tmp_path / "binary.pt"
+    binary.write_bytes(b"\x00\x01garbage")
+    with pytest.raises(CheckpointError, match="not a readable") as err:
+        _load(binary)
+    assert "Unsupported operand" in str(err.value)  # the cause, not torch's advice
+    assert "weights_only" not in str(err.value)
     tensor = tmp_path / "tensor.pt"
     torch.save({"weights": torch.zeros(3)}, tensor)
     with pytest.raises(CheckpointError, match="not an scpformer checkpoint"):

@@ -41,7 +41,8 @@ class SplitConfig:
 
     def __post_init__(self) -> None:
         fractions = tuple(float(f) for f in self.fractions)
-        if len(fractions) != 3 or min(fractions) < 0.0 or abs(sum(fractions) - 1.0) > 1e-9:
+        nonnegative = all(f >= 0.0 for f in fractions)  # False for NaN as well
+        if len(fractions) != 3 or not nonnegative or not abs(sum(fractions) - 1.0) <= 1e-9:
             raise ValueError(
                 f"fractions must be 3 nonnegative numbers summing to 1, got {fractions}"
             )

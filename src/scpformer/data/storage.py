@@ -374,7 +374,9 @@ def read_manifest(folder: Path) -> Manifest:
         raise DatasetError(f"no dataset in {folder} ({MANIFEST_NAME} not found{hint})")
     try:
         return Manifest.from_dict(json.loads(path.read_text()))
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+    except KeyError as err:
+        raise DatasetError(f"{path} is corrupt: it has no field {err}") from None
+    except (json.JSONDecodeError, TypeError, ValueError) as err:
         raise DatasetError(f"{path} is corrupt: {err}") from None
 
 

@@ -158,6 +158,22 @@ def _write_payload(path: Path, payload: dict[str, Any]) -> Path:
     return path
 
 
+def _load_failure_reason(err: Exception) -> str:
+    """One line on why ``torch.load`` failed: the unpickler's own words when it gives them.
+
+    A file that is not a zip archive makes the weights-only unpickler raise a long message
+    whose first lines advise ``weights_only=False``; the cause ("Unsupported operand 95")
+    sits after ``WeightsUnpickler error:``, so that part is kept.
+    """
+    text = str(err).strip()
+    if not text:
+        return type(err).__name__
+    marker = "WeightsUnpickler error:"
+    if marker in text:
+        text = text.split(marker, 1)[1].strip()
+    return text.splitlines()[0][:160]
+
+
 def read_checkpoint(
     path: Path | str,
     *,
@@ -173,8 +189,7 @@ def read_checkpoint(
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # any failure to unpickle means unreadable
-        text = str(err).strip()
-        reason = text.splitlines()[0][:160] if text else type(err).__name__
+        reason = _load_failure_reason(err)
         raise CheckpointError(
             f"{path} is not a readable scpformer checkpoint (truncated or another format: {reason})"
         ) from None
