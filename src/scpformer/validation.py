@@ -77,10 +77,19 @@ def check_finite(
     if shape is not None and array.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
     if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite, got {value!r}")
+        raise ValueError(f"{name} must be finite, {_offending(value, ~np.isfinite(array))}")
     if nonnegative and np.any(array < 0.0):
-        raise ValueError(f"{name} must be nonnegative, got {value!r}")
+        raise ValueError(f"{name} must be nonnegative, {_offending(value, array < 0.0)}")
     return array
+
+
+def _offending(value: Any, bad: np.ndarray) -> str:
+    """``got VALUE`` for a few numbers; for a larger array, how many entries are bad and where
+    the first one is (the whole repr of a trajectory would bury the message)."""
+    if bad.size <= 8:
+        return f"got {value!r}"
+    first = tuple(int(i) for i in np.argwhere(bad)[0])
+    return f"but {int(bad.sum())} of its {bad.size} entries are not (the first at index {first})"
 
 
 def check_positive(name: str, value: Any) -> float:

@@ -59,7 +59,23 @@ PDG_CASES = {
         ValueError,
         "guess.p",
     ),
+    "guess-final-time-negative": (
+        lambda: solve_pdg(PDGInstance(), guess=guess(p=-np.ones(1))),
+        ValueError,
+        r"guess.p\[0\] \(the final time t_f\) must be positive",
+    ),
 }
+
+
+def test_a_bad_trajectory_is_summarized_not_printed():
+    u = np.ones(default_guess_shapes()["u"])
+    u[4, 1] = u[7, 2] = np.nan
+    with pytest.raises(ValueError) as err:
+        solve_pdg(PDGInstance(), guess=guess(u=u))
+    message = str(err.value)
+    assert message == (
+        f"guess.u must be finite, but 2 of its {u.size} entries are not (the first at index (4, 1))"
+    )
 
 
 @pytest.mark.parametrize("call, error, name", PDG_CASES.values(), ids=PDG_CASES.keys())

@@ -336,7 +336,7 @@ def solve(
     if guess is None:
         return solve_with_restart(problem, default, eta_init)
     if isinstance(guess, Trajectory | list | tuple | np.ndarray | dict):
-        guess = check_trajectory("guess", guess, default)
+        guess = _checked_guess(guess, default)
         return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
     from scpformer.problems.pdg6dof.guess import ANALYTIC_GUESSES
     from scpformer.warmstart.base import as_provider
@@ -353,7 +353,7 @@ def solve(
     result = provider.guess(instance)
     if result.trajectory is None:
         raise ValueError(f"guess: the warm start produced no trajectory ({result.record.reason})")
-    checked = check_trajectory("guess", result.trajectory, default)
+    checked = _checked_guess(result.trajectory, default)
     default_start = isinstance(provider, AnalyticWarmStart) and provider.profile == "cubic_profile"
     if default_start:  # the default cold start, named: the same solve as guess=None
         solution = solve_with_restart(problem, checked, eta_init)
@@ -365,6 +365,14 @@ def solve(
 RESTART_TF_FACTOR = 1.5  # final time of the restart's guess, times the stalled run's
 RESTART_MIN_BUDGET = 10  # least solves left for a restart to be tried
 RESTART_DRY_MARGIN = 0.01  # stalled with m_f below m_dry + this (m0 - m_dry): out of propellant
+
+
+def _checked_guess(guess: Any, default: Trajectory) -> Trajectory:
+    """``guess`` after :func:`check_trajectory` against the default start, with a positive
+    final time ``p[0] = t_f`` (a nonpositive one would reach the conic solver as a bound)."""
+    guess = check_trajectory("guess", guess, default)
+    check_positive("guess.p[0] (the final time t_f)", guess.p[0])
+    return guess
 
 
 def solve_with_restart(
