@@ -121,9 +121,10 @@ for frame in rtn roe; do
     --frame "$frame" --seed "$SEED" --epochs "${ROBUST_EPOCHS:-8}" --batch-size 32 --lr 0.001 \
     $resume
 done
-#    robust-warmstart on the whole test split (its default 60 cannot tell the failure rates
-#    apart), the other two at their defaults
-for name_n in "robust-warmstart:$((N_ROB_WS / 10))" robust-trajectory: robust-posthoc:; do
+#    robust-warmstart and robust-posthoc on the whole test split (their default 60 cannot tell
+#    the failure rates apart), robust-trajectory at its default
+for name_n in "robust-warmstart:$((N_ROB_WS / 10))" robust-trajectory: \
+  "robust-posthoc:$((N_ROB_WS / 10))"; do
   name=${name_n%%:*}
   n=${name_n##*:}
   # shellcheck disable=SC2086
