@@ -482,8 +482,9 @@ def passive_safety_iterations(solution: Solution, missing: int) -> int:
     """SCvx* solves of the passive-safety stage of a :func:`solve` result, ``missing`` when
     that stage did not run.
 
-    A run whose passive-safety stage fails returns the last converged stage (the TPBVP, say),
-    whose ``iterations`` count that stage's solves (2-4), not the SCvx* run's.
+    ``solution.iterations`` is the same number whenever that stage ran (:func:`_assemble`);
+    this reads it from ``extras`` so that a result stored before that rule, whose
+    ``iterations`` counted the TPBVP it fell back to, is still read right.
     """
     return int(solution.extras.get("stage_iterations", {}).get("passive_safety", missing))
 
@@ -525,7 +526,11 @@ def _assemble(
     requested: str,
     dynamics: str,
 ) -> Solution:
-    """The final feasible stage's trajectory under the requested stage's status."""
+    """The final feasible stage's trajectory under the requested stage's status and solve count.
+
+    ``iterations`` goes with ``status``: a passive-safety stage that ends at the cap reports its
+    own SCvx* solves (e.g. 20), not those of the TPBVP whose trajectory it falls back to.
+    """
     final = stages.get(requested)
     kept = next(
         (name for name in reversed(STAGES) if name in stages and stages[name].converged), None
@@ -555,4 +560,12 @@ def _assemble(
         extras["violation_budget"] = trajectory_violations(instance, x, u, mode,
                                                            dynamics=extras["dynamics"])  # fmt: skip
     history: list[IterationRecord] = source.history
-    return replace(source, status=status, message=message, extras=extras, history=history)
+    iterations = final.iterations if final is not None else source.iterations  # with status
+    return replace(
+        source,
+        status=status,
+        message=message,
+        extras=extras,
+        history=history,
+        iterations=iterations,
+    )
