@@ -198,10 +198,9 @@ class RobustWarmstartSolver(ModelSolver):
 
 def scvx_star_iterations(solution: Any) -> int:
     """SCvx* solves of the passive-safety stage, also when it failed (the solution's own count
-    when no such stage ran)."""
-    from scpformer.problems.robust_rendezvous.problem import passive_safety_iterations
-
-    return passive_safety_iterations(solution, missing=solution.iterations)
+    when no such stage ran): ``solution.iterations``, which the robust ``solve`` pairs with the
+    passive-safety stage's status (``problem._assemble``)."""
+    return int(solution.iterations)
 
 
 # what each robust experiment runs: passive-safety modes, acceptance check, paper figures

@@ -483,8 +483,8 @@ def passive_safety_iterations(solution: Solution, missing: int) -> int:
     that stage did not run.
 
     ``solution.iterations`` is the same number whenever that stage ran (:func:`_assemble`);
-    this reads it from ``extras`` so that a result stored before that rule, whose
-    ``iterations`` counted the TPBVP it fell back to, is still read right.
+    reading ``extras`` tells the runs where it did not (the TPBVP failed) apart, e.g. as -1 in
+    a dataset column.
     """
     return int(solution.extras.get("stage_iterations", {}).get("passive_safety", missing))
 
