@@ -10,7 +10,12 @@ from scpformer.dynamics import quaternion as quat
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof import symmetry as sym
 from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
-from scpformer.problems.pdg6dof.problem import PDGSolverConfig, solve, verify_trajectory
+from scpformer.problems.pdg6dof.problem import (
+    PDGSolverConfig,
+    solve,
+    solve_reference,
+    verify_trajectory,
+)
 from scpformer.scp.solution import Status, Trajectory
 
 
@@ -109,6 +114,9 @@ def test_a_solution_seen_in_the_canonical_frame_solves_the_canonical_instance(ti
 @pytest.mark.slow
 def test_solving_the_body_rolled_instance_gives_the_rolled_solution(tilted):
     # Independent of the mapping above: SCvx solves the rolled instance from its own guess.
+    # The default solves stop within the stationarity tolerance, where the cost is flat in the
+    # final time (0.05 U_T of t_f costs about 3e-4 U_M), so they agree in cost; the optimum
+    # itself, each run refined to full convergence, is the rolled one to 1e-2.
     instance, solution = tilted
     q_roll = quat.from_axis_angle([1.0, 0.0, 0.0], 2.0)
     rolled = instance_from_theta(sym.roll_theta(theta_vector(instance), q_roll), instance.constants)
@@ -116,6 +124,8 @@ def test_solving_the_body_rolled_instance_gives_the_rolled_solution(tilted):
     assert other.status is Status.CONVERGED, other.message
     propellant = instance.m0 + solution.cost
     assert other.cost == pytest.approx(solution.cost, abs=2e-3 * propellant)
-    assert other.trajectory.p[0] == pytest.approx(solution.trajectory.p[0], abs=3e-2)
-    expected = sym.roll_states(solution.trajectory.x, q_roll)
-    np.testing.assert_allclose(other.trajectory.x[:, 0:6], expected[:, 0:6], atol=5e-2)
+    reference = solve_reference(instance, PDGSolverConfig(), solution).trajectory
+    rolled_reference = solve_reference(rolled, PDGSolverConfig(), other).trajectory
+    assert rolled_reference.p[0] == pytest.approx(reference.p[0], abs=1e-2)
+    expected = sym.roll_states(reference.x, q_roll)
+    np.testing.assert_allclose(rolled_reference.x, expected, atol=1e-2)

@@ -23,6 +23,7 @@ from scpformer.problems.pdg6dof.instance import (
 )
 from scpformer.problems.pdg6dof.problem import (
     PDGSolverConfig,
+    conic_solves,
     propellant_gap,
     solve,
     solve_reference,
@@ -115,7 +116,11 @@ def warmstart_from_args(args: argparse.Namespace) -> object:
 
 def print_summary(solution: Solution, instance: PDGInstance) -> None:
     """A human-readable table of the solution."""
-    rows = [("status", solution.status.value), ("iterations", str(solution.iterations))]
+    rows = [
+        ("status", solution.status.value),
+        ("iterations", str(solution.iterations)),
+        ("  conic solves", str(conic_solves(solution))),
+    ]
     if solution.message:
         rows.append(("message", solution.message))
     if "tscvx" in solution.extras:
@@ -230,6 +235,7 @@ BENCH_FIELDS = (
     "index",
     "status",
     "iterations",
+    "conic_solves",
     "wall_s",
     "discretization_s",
     "solver_s",
@@ -250,6 +256,7 @@ def _bench_row(name: str, index: int, solution: Solution, wall: float) -> dict[s
         "index": index,
         "status": solution.status.value,
         "iterations": solution.iterations,
+        "conic_solves": conic_solves(solution),
         "wall_s": wall,
         "discretization_s": tm.discretization if tm else 0.0,
         "solver_s": tm.solver if tm else 0.0,
@@ -279,7 +286,7 @@ def summarize(rows: list[dict[str, object]]) -> list[str]:
     """Median/mean/p95 wall time, iterations, converged rate, time shares per set."""
     lines = [
         f"{'set':<8} {'n':>3} {'conv':>6} {'med s':>7} {'mean s':>7} {'p95 s':>7} "
-        f"{'med it':>6} {'solver':>7} {'discr':>6} {'verif':>6} {'other':>6}"
+        f"{'med it':>6} {'solves':>6} {'solver':>7} {'discr':>6} {'verif':>6} {'other':>6}"
     ]
     for name in dict.fromkeys(r["set"] for r in rows):
         sel = [r for r in rows if r["set"] == name]
@@ -291,11 +298,12 @@ def summarize(rows: list[dict[str, object]]) -> list[str]:
         }
         conv = np.mean([r["status"] == "converged" for r in sel])
         its = np.median([r["iterations"] for r in sel])
+        solves = np.median([r["conic_solves"] for r in sel])
         gaps = np.array([r["gap"] for r in sel], dtype=float)
         gaps = gaps[np.isfinite(gaps)]
         lines.append(
             f"{name:<8} {len(sel):>3} {conv:>6.0%} {np.median(wall):>7.3f} {wall.mean():>7.3f} "
-            f"{np.percentile(wall, 95):>7.3f} {its:>6.1f} {share['solver_s']:>7.0%} "
+            f"{np.percentile(wall, 95):>7.3f} {its:>6.1f} {solves:>6.1f} {share['solver_s']:>7.0%} "
             f"{share['discretization_s']:>6.0%} {share['verification_s']:>6.0%} "
             f"{share['other_s']:>6.0%}"
         )
@@ -303,7 +311,8 @@ def summarize(rows: list[dict[str, object]]) -> list[str]:
             lines.append(
                 f"{'':<8} propellant gap to the reference: median {np.median(gaps):.3%}, "
                 f"max {gaps.max():.3%}; iterations p95 "
-                f"{np.percentile([r['iterations'] for r in sel], 95):.0f}"
+                f"{np.percentile([r['iterations'] for r in sel], 95):.0f}, conic solves p95 "
+                f"{np.percentile([r['conic_solves'] for r in sel], 95):.0f}"
             )
     return lines
 
@@ -311,12 +320,13 @@ def summarize(rows: list[dict[str, object]]) -> list[str]:
 def per_instance_lines(rows: list[dict[str, object]]) -> list[str]:
     """One line per solve: set, index, status, iterations, wall time and its split."""
     lines = [
-        f"{'set':<8} {'#':>3} {'status':<20} {'it':>3} {'wall s':>7} {'solver':>7} "
+        f"{'set':<8} {'#':>3} {'status':<20} {'it':>3} {'cs':>3} {'wall s':>7} {'solver':>7} "
         f"{'discr':>7} {'cost':>8} {'tf':>6} {'gap':>8}"
     ]
     for r in rows:
         lines.append(
             f"{r['set']:<8} {r['index']:>3} {r['status']:<20} {r['iterations']:>3} "
+            f"{r['conic_solves']:>3} "
             f"{r['wall_s']:>7.3f} {r['solver_s']:>7.3f} {r['discretization_s']:>7.3f} "
             f"{r['cost']:>8.4f} {r['tf']:>6.3f} {r['gap']:>8.3%}"
         )

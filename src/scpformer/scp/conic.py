@@ -24,6 +24,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import cvxpy as cp
 
@@ -67,15 +68,21 @@ class ConicCall:
         return self.status in SOLVED
 
 
-def solve_timed(problem: cp.Problem, solver: str, reuse: bool = False) -> ConicCall:
+def solve_timed(
+    problem: cp.Problem,
+    solver: str,
+    reuse: bool = False,
+    settings: dict[str, dict[str, Any]] | None = None,
+) -> ConicCall:
     """Solve ``problem`` with its current parameter values and time the solver call alone.
 
     ``reuse`` updates the solver object of the previous call in place where the solver
     supports it (:data:`REUSE_OPTIONS`); cvxpy rebuilds it when the update is refused.
+    ``settings`` maps a solver name to the settings a problem family gives it.
     """
     name = SOLVERS[check_solver(solver)]
     in_place = reuse and solver in REUSE_OPTIONS
-    options = dict(REUSE_OPTIONS[solver]) if in_place else {}
+    options = solver_options(solver, in_place, settings)
     start = time.perf_counter()
     solver_time = 0.0
     try:
@@ -89,6 +96,15 @@ def solve_timed(problem: cp.Problem, solver: str, reuse: bool = False) -> ConicC
     except cp.SolverError as err:
         return ConicCall(f"solver_error: {err}", solver_time, time.perf_counter() - start)
     return ConicCall(str(problem.status), solver_time, time.perf_counter() - start)
+
+
+def solver_options(
+    solver: str, in_place: bool = False, settings: dict[str, dict[str, Any]] | None = None
+) -> dict[str, Any]:
+    """``settings[solver]`` (a family's own), with :data:`REUSE_OPTIONS` when the solver
+    object is to be updated in place."""
+    options = dict((settings or {}).get(solver, {}))
+    return (options | REUSE_OPTIONS.get(solver, {})) if in_place else options
 
 
 def start_cold(problem: cp.Problem) -> None:

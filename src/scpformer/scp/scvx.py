@@ -42,9 +42,11 @@ solves) it falls by 5-15% per 10 accepted iterations all the way. ``stall_window
 the test off.
 
 Second-order correction (``second_order_correction``, not in the paper): when the defects of a
-candidate push its ratio below ``rho_1`` the subproblem is solved once more aiming at the
-nonlinear flow at the candidate (:func:`_wants_correction`). ``iter_max`` counts every conic
-solve, corrections included.
+candidate push its ratio below ``rho_1`` the problem family corrects the candidate
+(``solve_correction``, :func:`_wants_correction`): the 6-DoF family first tries a least-change
+correction without a conic solve (:mod:`scpformer.problems.pdg6dof.correction`), else solves
+the subproblem once more aiming at the nonlinear flow at the candidate. ``iter_max`` counts
+every record of the history: conic solves and corrections.
 
 Defaults that differ from Table 1, measured on the 6-DoF problem (README, "A soft trust
 region"): ``lambda_ = 2`` instead of 500, and ``iter_max = 100`` instead of 20 (a safeguard:

@@ -18,6 +18,7 @@ from scipy.integrate import solve_ivp
 
 from scpformer.dynamics import powered_descent as pd
 from scpformer.problems.pdg6dof import constraints as con
+from scpformer.problems.pdg6dof.correction import LeastChangeCorrection
 from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.subproblem import (
@@ -26,12 +27,14 @@ from scpformer.problems.pdg6dof.subproblem import (
     trust_region_scales,
 )
 from scpformer.scp.conic import SOLVED, start_cold
-from scpformer.scp.discretization import FOHDiscretization, foh_discretize
+from scpformer.scp.discretization import FOHDiscretization, foh_discretize, foh_flow
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Status, Trajectory, Verification
 from scpformer.validation import check_positive, check_trajectory, check_type
 
 SOFT_BOX_FACTOR = 100.0  # hard box radius / eta under the soft trust region (a safeguard only)
+LEAST_CHANGE = "least_change"  # solver status of a correction made without a conic solve
+LEAST_CHANGE_STEPS = 3  # chord steps of the least-change correction before the conic one
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -67,6 +70,18 @@ class PDGSolverConfig:
     nonlinear defects then hold the ratio below ``rho_1``; the soft region lets each variable
     move as far as its own gradient asks (measurements in the README, "A soft trust region").
     ``prox_weight = 0`` is the hard box of Algorithm 1 exactly.
+
+    ``least_change_correction``: SCvx's second-order correction first moves the candidate by
+    the least change that cancels its defects along the linearization at the candidate
+    (:mod:`~scpformer.problems.pdg6dof.correction`, a few milliseconds), and re-solves the
+    conic subproblem only when that falls short of the ratio ``rho_1``. Near a solution
+    almost every accepted step of the 6-DoF problem needs a correction: the step is rejected
+    for its defects, the correction accepted with a ratio near 1 (the Maratos effect). On the
+    bench's 20 nominal instances (seed 0), 54 of 276 conic solves were such corrections; the
+    least-change correction replaced 33 of the 51 it was tried on (10 after one chord step,
+    21 after two, 2 after three). Conic solves per run: median 13 -> 11, p95 19 -> 17; the
+    propellant gap to the reference stayed small (median 0.003% -> 0.005%, max 0.056% ->
+    0.116%: the conic correction also re-optimizes the cost, the least change does not).
     """
 
     n_nodes: int = 50  # N, number of temporal nodes
@@ -74,6 +89,7 @@ class PDGSolverConfig:
     fix_roll: bool = False  # impose q_f = q_id and w_f = 0 literally (see constants docstring)
     prox_weight: float = 1e-2  # soft trust-region weight at eta = 1 (0: hard box, Algorithm 1)
     tight_tol: float = 1e-5  # a row is tight when g >= -tight_tol
+    least_change_correction: bool = True  # try the SOC without a conic solve first
     scvx: SCvxParameters = field(default_factory=SCvxParameters)
     verification: VerificationTolerances = field(default_factory=VerificationTolerances)
 
@@ -128,16 +144,18 @@ class PDGProblem:
         )
         defects = disc.defects(z.x)
         values = con.constraint_values(self.instance, z.x, z.u)
-        thrust_min = values[con.CONSTRAINT_NAMES.index("thrust_min")]
-        penalty = float(np.abs(defects).sum() + np.maximum(thrust_min, 0.0).sum())
         return Evaluation(
             cost=float(-z.x[-1, 13]),
-            penalty=penalty,
+            penalty=penalty(defects, values),
             max_defect=float(np.abs(defects).max()),
             tight_flags=con.tight_flags(values, self.config.tight_tol),
             linearization=disc,
             time=time.perf_counter() - start,
         )
+
+    def flow_defects(self, z: Trajectory) -> np.ndarray:
+        """The defects ``x_{k+1} - F_k(z)`` (K, 14) of ``z`` without its linearization."""
+        return z.x[1:] - foh_flow(self.dynamics, z.x, z.u, float(z.p[0]), self.config.n_sub)
 
     def solve_subproblem(
         self, z: Trajectory, evaluation: Evaluation, eta: float, lambda_: float, solver: str
@@ -158,11 +176,57 @@ class PDGProblem:
         lambda_: float,
         solver: str,
     ) -> Candidate:
-        """The subproblem about ``z`` with its affine term shifted by the candidate's defects."""
-        disc = candidate_evaluation.linearization
+        """The least-change correction when it passes the ratio test, else the subproblem about
+        ``z`` with its affine term shifted by the candidate's defects."""
+        cheap = self.least_change(evaluation, candidate, candidate_evaluation, lambda_)
+        if cheap is not None:
+            return cheap
+        return self.conic_correction(candidate, candidate_evaluation, eta, lambda_, solver)
+
+    def conic_correction(
+        self, candidate: Candidate, ev: Evaluation, eta: float, lambda_: float, solver: str
+    ) -> Candidate:
+        """The subproblem about the iterate of the candidate's solve, its affine term shifted
+        by the defects of the candidate (whose evaluation is ``ev``)."""
+        disc = ev.linearization
         assert isinstance(disc, FOHDiscretization) and candidate.trajectory is not None
         self.subproblem.shift_affine_term(disc.defects(candidate.trajectory.x))
         return self._solve(eta, lambda_, solver)
+
+    def least_change(
+        self,
+        evaluation: Evaluation,
+        candidate: Candidate,
+        candidate_evaluation: Evaluation,
+        lambda_: float,
+    ) -> Candidate | None:
+        """The candidate moved by :class:`~.correction.LeastChangeCorrection`, if that alone
+        gives a ratio (Eq. 14, against the first solve's ``Delta L``) of at least ``rho_1``
+        within ``LEAST_CHANGE_STEPS`` chord steps, every convex row kept.
+
+        ``None`` when the correction is off (``config.least_change_correction``) or falls
+        short; the conic correction then runs.
+        """
+        if not self.config.least_change_correction or candidate.trajectory is None:
+            return None
+        disc = candidate_evaluation.linearization
+        assert isinstance(disc, FOHDiscretization)
+        z = candidate.trajectory
+        correction = LeastChangeCorrection(
+            self.instance, disc, z, self.config.fix_roll, self.config.tight_tol
+        )
+        J_bar = evaluation.cost + lambda_ * evaluation.penalty
+        wanted = self.config.scvx.rho_1 * (J_bar - candidate.linear_cost)
+        defects = disc.defects(z.x)
+        for _ in range(LEAST_CHANGE_STEPS):
+            z = correction.step(z, defects)
+            if z is None:
+                return None
+            defects = self.flow_defects(z)
+            P_z = penalty(defects, con.constraint_values(self.instance, z.x, z.u))
+            if J_bar - (-z.x[-1, 13] + lambda_ * P_z) >= wanted and correction.keeps_convex_rows(z):
+                return replace(candidate, trajectory=z, status=LEAST_CHANGE, solver_time=0.0)
+        return None
 
     def _solve(self, eta: float, lambda_: float, solver: str) -> Candidate:
         """One conic solve with the trust region of radius ``eta`` (soft or hard, see config)."""
@@ -172,6 +236,19 @@ class PDGProblem:
 
     def verify(self, z: Trajectory) -> Verification:
         return verify_trajectory(self.instance, z, self.config)
+
+
+def conic_solves(solution: Solution) -> int:
+    """The records of ``solution.history`` that solved a conic subproblem (every one but the
+    least-change corrections)."""
+    return sum(record.solver_status != LEAST_CHANGE for record in solution.history)
+
+
+def penalty(defects: np.ndarray, values: np.ndarray) -> float:
+    """``P(z)`` of the module docstring from the defects (K, 14) and the inequality rows
+    (:func:`~scpformer.problems.pdg6dof.constraints.constraint_values`) of ``z``."""
+    thrust_min = values[con.CONSTRAINT_NAMES.index("thrust_min")]
+    return float(np.abs(defects).sum() + np.maximum(thrust_min, 0.0).sum())
 
 
 def candidate(sol: SubproblemSolution) -> Candidate:

@@ -37,8 +37,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from scpformer.problems.pdg6dof import constraints as con
-from scpformer.problems.pdg6dof.subproblem import PDGSubproblem, SubproblemSolution, failed_solution
-from scpformer.scp.conic import REUSE_OPTIONS, SOLVERS
+from scpformer.problems.pdg6dof.subproblem import (
+    CONIC_SETTINGS,
+    PDGSubproblem,
+    SubproblemSolution,
+    failed_solution,
+)
+from scpformer.scp.conic import SOLVERS, solver_options
 
 ALWAYS = -1  # owner of a conic row kept in every reduced problem
 BOX = -2  # owner of a row of the safeguard trust-region box
@@ -231,7 +236,7 @@ class ReducedSubproblem:
     ) -> object:
         """A Clarabel solver holding this data: the previous one updated in place when the
         kept rows and columns are the same (it keeps its symbolic factorization, as cvxpy's
-        ``reuse`` path does, :data:`scpformer.scp.conic.REUSE_OPTIONS`), else a new one."""
+        ``reuse`` path does, :func:`scpformer.scp.conic.solver_options`), else a new one."""
         if self._solver is not None and self._solver_key == key:
             try:
                 self._solver.update(P=P, q=q, A=A, b=b)
@@ -242,7 +247,7 @@ class ReducedSubproblem:
         cones = self._cones(rows)
         settings = clarabel.DefaultSettings()
         settings.verbose = False
-        for name, value in REUSE_OPTIONS["clarabel"].items():
+        for name, value in solver_options("clarabel", True, CONIC_SETTINGS).items():
             setattr(settings, name, value)
         self._solver = clarabel.DefaultSolver(P, q, A, b, cones, settings)
         self._solver_key, self._cone_count = key, len(cones) - 2

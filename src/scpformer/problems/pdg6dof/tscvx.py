@@ -37,6 +37,7 @@ import numpy as np
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import (
+    LEAST_CHANGE,
     SOFT_BOX_FACTOR,
     PDGProblem,
     PDGSolverConfig,
@@ -263,11 +264,13 @@ class TscvxProblem(PDGProblem):
         lambda_: float,
         solver: str,
     ) -> Candidate:
+        cheap = self.least_change(evaluation, candidate, candidate_evaluation, lambda_)
+        if cheap is not None:  # no conic solve: logged with the rows of the last one
+            self._log_solve(LEAST_CHANGE, self.log.rows_kept[-1], 0, 0)
+            return cheap
         if self.full_mode:
             return self._full(
-                super().solve_correction(
-                    z, evaluation, candidate, candidate_evaluation, eta, lambda_, solver
-                ),
+                self.conic_correction(candidate, candidate_evaluation, eta, lambda_, solver),
                 "full correction",
             )
         disc = candidate_evaluation.linearization
@@ -287,11 +290,14 @@ class TscvxProblem(PDGProblem):
 
     def _full(self, cand: Candidate, mode: str = "full") -> Candidate:
         self.tau_r = 0.0
-        self.log.modes.append(mode)
-        self.log.rows_kept.append(len(self.scales))
-        self.log.conic_rows.append(self.reduced.layout.n_rows)
-        self.log.repairs.append(0)
+        self._log_solve(mode, len(self.scales), self.reduced.layout.n_rows, 0)
         return cand
+
+    def _log_solve(self, mode: str, rows_kept: int, conic_rows: int, repairs: int) -> None:
+        self.log.modes.append(mode)
+        self.log.rows_kept.append(rows_kept)
+        self.log.conic_rows.append(conic_rows)
+        self.log.repairs.append(repairs)
 
     def _reduced(
         self, z: Trajectory, eta: float, lambda_: float, solver: str, mode: str = "reduced"
@@ -316,11 +322,8 @@ class TscvxProblem(PDGProblem):
             self._keep = self._keep | missing
             keep_box = keep_box or box_left
             repairs += 1
-        self.log.modes.append(mode)
-        self.log.rows_kept.append(int(self._keep.sum()))
         size = self.reduced.last_size
-        self.log.conic_rows.append(size.rows if size is not None else 0)
-        self.log.repairs.append(repairs)
+        self._log_solve(mode, int(self._keep.sum()), size.rows if size is not None else 0, repairs)
         return dataclasses.replace(candidate(sol), solver_time=solver_time)
 
     def _left_out_violations(
