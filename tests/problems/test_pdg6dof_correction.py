@@ -91,3 +91,22 @@ def test_least_change_corrections_replace_conic_solves_at_the_same_optimum():
     assert used and all(rec.accepted and rec.time_solver == 0.0 for rec in used)
     assert on.iterations - len(used) < off.iterations  # fewer conic solves
     assert abs(propellant_gap(instance, on.cost, off.cost)) < 1e-3
+
+
+def test_the_dynamics_rows_are_eq10_at_the_candidate(optimum):
+    from scpformer.problems.pdg6dof.correction import _dynamics_rows
+
+    problem = PDGProblem(PDGInstance(), PDGSolverConfig())
+    disc = problem.evaluate(_perturbed(optimum.trajectory, 1e-2)).linearization
+    n = optimum.trajectory.x.shape[0]
+    rng = np.random.default_rng(1)
+    dx, du, ds = rng.normal(size=(n, 14)), rng.normal(size=(n, 3)), rng.normal()
+    change = np.concatenate([dx.ravel(), du.ravel(), [ds]])
+    expected = dx[1:] - (
+        np.einsum("kij,kj->ki", disc.A, dx[:-1])
+        + np.einsum("kij,kj->ki", disc.Bm, du[:-1])
+        + np.einsum("kij,kj->ki", disc.Bp, du[1:])
+        + disc.S * ds
+    )
+    rows = _dynamics_rows(disc, optimum.trajectory.x)
+    np.testing.assert_allclose((rows @ change).reshape(n - 1, 14), expected, atol=1e-12)

@@ -4,7 +4,7 @@ from scipy.integrate import solve_ivp
 from scpformer.dynamics import powered_descent as pd
 from scpformer.problems.pdg6dof.guess import straight_line_guess
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.scp.discretization import foh_discretize
+from scpformer.scp.discretization import foh_discretize, foh_flow
 
 INSTANCE = PDGInstance(omega0_deg=(0.0, 5.0, -3.0))
 MODEL = INSTANCE.constants.model()
@@ -83,3 +83,10 @@ def test_sensitivities_match_finite_differences_of_the_flow():
     )
     np.testing.assert_allclose(disc.S[k], S_fd, atol=1e-6)
     np.testing.assert_allclose(disc.Bp[k], Bp_fd, atol=1e-6)
+
+
+def test_flow_alone_is_the_flow_of_the_full_discretization():
+    x, u, tf = reference()
+    for n_sub in (1, 2):
+        disc = foh_discretize(f, jac, x, u, tf, n_sub=n_sub)
+        np.testing.assert_array_equal(foh_flow(f, x, u, tf, n_sub), disc.x_next)

@@ -132,25 +132,19 @@ def _dynamics_rows(disc: FOHDiscretization, x: np.ndarray) -> sp.csr_array:
     n = x.shape[0]
     k = np.arange(n - 1)
     rows = _x_columns(k)  # row index (k, i) = 14 k + i, the same layout as x's columns
-    sigma = np.full((n - 1, 1), n * (N_X + N_U))
-    blocks = [  # (coefficients (K, 14, width), columns (K, width))
-        (np.ones((n - 1, N_X, 1)), None),
+    sigma = np.full((n - 1, 1), _n_columns(n) - 1)
+    blocks = [  # (coefficients (K, 14, width), columns (K, width)) of the terms of z*'s side
         (-disc.A, _x_columns(k)),
         (-disc.Bm, _u_columns(k, n)),
         (-disc.Bp, _u_columns(k + 1, n)),
         (-disc.S[..., None], sigma),
     ]
-    data, r_idx, c_idx = [], [], []
+    data, r_idx, c_idx = [np.ones(rows.size)], [rows.ravel()], [_x_columns(k + 1).ravel()]
     for values, cols in blocks:
-        if cols is None:  # the identity on x_{k+1}
-            data.append(values.ravel())
-            r_idx.append(rows.ravel())
-            c_idx.append(_x_columns(k + 1).ravel())
-            continue
         data.append(values.ravel())
         r_idx.append(np.repeat(rows.ravel(), cols.shape[1]))
         c_idx.append(np.broadcast_to(cols[:, None, :], values.shape).ravel())
-    shape = ((n - 1) * N_X, n * (N_X + N_U) + 1)
+    shape = ((n - 1) * N_X, _n_columns(n))
     entries = (np.concatenate(data), (np.concatenate(r_idx), np.concatenate(c_idx)))
     return sp.csr_array(sp.coo_array(entries, shape=shape))
 
@@ -163,8 +157,13 @@ def _fixed_rows(n: int, fix_roll: bool) -> sp.csr_array:
     return _unit_rows(cols, n)
 
 
+def _n_columns(n: int) -> int:
+    """Columns of the stacked change ``(x (n, 14), u (n, 3), sigma)``."""
+    return n * (N_X + N_U) + 1
+
+
 def _unit_rows(cols: np.ndarray, n: int) -> sp.csr_array:
-    shape = (cols.size, n * (N_X + N_U) + 1)
+    shape = (cols.size, _n_columns(n))
     return sp.csr_array((np.ones(cols.size), (np.arange(cols.size), cols)), shape=shape)
 
 
@@ -194,7 +193,7 @@ def _active_rows(
     _, nodes = np.nonzero(keep)
     g = grads[keep]  # (rows, 17)
     cols = np.hstack([_x_columns(nodes), _u_columns(nodes, n)])
-    shape = (nodes.size, n * (N_X + N_U) + 1)
+    shape = (nodes.size, _n_columns(n))
     entries = (g.ravel(), (np.repeat(np.arange(nodes.size), N_X + N_U), cols.ravel()))
     return sp.csr_array(sp.coo_array(entries, shape=shape)), keep
 
