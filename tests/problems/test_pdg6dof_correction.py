@@ -110,3 +110,13 @@ def test_the_dynamics_rows_are_eq10_at_the_candidate(optimum):
     )
     rows = _dynamics_rows(disc, optimum.trajectory.x)
     np.testing.assert_allclose((rows @ change).reshape(n - 1, 14), expected, atol=1e-12)
+
+
+def test_with_the_hard_box_a_least_change_step_stays_inside_the_box():
+    # Algorithm 1's hard box (no soft term): its steps end on the box, and a correction that
+    # would leave it is refused for the conic one, which keeps the box
+    instance = sample_instances(np.random.default_rng(0), 1, SampleRanges.nominal())[0]
+    solution = solve(instance, PDGSolverConfig(prox_weight=0.0))
+    used = [rec for rec in solution.history if rec.solver_status == LEAST_CHANGE]
+    assert used
+    assert all(rec.step_norm <= rec.trust_radius * (1.0 + 1e-9) for rec in used)

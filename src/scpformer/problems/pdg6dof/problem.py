@@ -178,7 +178,7 @@ class PDGProblem:
     ) -> Candidate:
         """The least-change correction when it passes the ratio test, else the subproblem about
         ``z`` with its affine term shifted by the candidate's defects."""
-        cheap = self.least_change(evaluation, candidate, candidate_evaluation, lambda_)
+        cheap = self.least_change(z, evaluation, candidate, candidate_evaluation, eta, lambda_)
         if cheap is not None:
             return cheap
         return self.conic_correction(candidate, candidate_evaluation, eta, lambda_, solver)
@@ -195,14 +195,17 @@ class PDGProblem:
 
     def least_change(
         self,
+        z_bar: Trajectory,
         evaluation: Evaluation,
         candidate: Candidate,
         candidate_evaluation: Evaluation,
+        eta: float,
         lambda_: float,
     ) -> Candidate | None:
         """The candidate moved by :class:`~.correction.LeastChangeCorrection`, if that alone
         gives a ratio (Eq. 14, against the first solve's ``Delta L``) of at least ``rho_1``
-        within ``LEAST_CHANGE_STEPS`` chord steps, every convex row kept.
+        within ``LEAST_CHANGE_STEPS`` chord steps, every convex row kept and the step from
+        ``z_bar`` inside the box of the trust region (radius ``eta``).
 
         ``None`` when the correction is off (``config.least_change_correction``) or falls
         short; the conic correction then runs.
@@ -217,6 +220,7 @@ class PDGProblem:
         )
         J_bar = evaluation.cost + lambda_ * evaluation.penalty
         wanted = self.config.scvx.rho_1 * (J_bar - candidate.linear_cost)
+        box = self.trust_region(eta)[1] * (1.0 + 1e-9)
         defects = disc.defects(z.x)
         for _ in range(LEAST_CHANGE_STEPS):
             z = correction.step(z, defects)
@@ -224,15 +228,21 @@ class PDGProblem:
                 return None
             defects = self.flow_defects(z)
             P_z = penalty(defects, con.constraint_values(self.instance, z.x, z.u))
-            if J_bar - (-z.x[-1, 13] + lambda_ * P_z) >= wanted and correction.keeps_convex_rows(z):
+            passes = J_bar - (-z.x[-1, 13] + lambda_ * P_z) >= wanted
+            if passes and correction.keeps_convex_rows(z) and self.step_norm(z, z_bar) <= box:
                 return replace(candidate, trajectory=z, status=LEAST_CHANGE, solver_time=0.0)
         return None
 
     def _solve(self, eta: float, lambda_: float, solver: str) -> Candidate:
         """One conic solve with the trust region of radius ``eta`` (soft or hard, see config)."""
-        weight = self.config.prox_weight / eta**2
-        box = SOFT_BOX_FACTOR * eta if weight > 0.0 else eta
+        weight, box = self.trust_region(eta)
         return candidate(self.subproblem.solve(eta, lambda_, solver, box=box, soft_weight=weight))
+
+    def trust_region(self, eta: float) -> tuple[float, float]:
+        """The soft weight and the box radius of the trust region of radius ``eta``: the
+        box is ``eta`` itself without the soft term (Algorithm 1), a far safeguard with it."""
+        weight = self.config.prox_weight / eta**2
+        return weight, SOFT_BOX_FACTOR * eta if weight > 0.0 else eta
 
     def verify(self, z: Trajectory) -> Verification:
         return verify_trajectory(self.instance, z, self.config)

@@ -38,7 +38,6 @@ from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import (
     LEAST_CHANGE,
-    SOFT_BOX_FACTOR,
     PDGProblem,
     PDGSolverConfig,
     candidate,
@@ -264,7 +263,7 @@ class TscvxProblem(PDGProblem):
         lambda_: float,
         solver: str,
     ) -> Candidate:
-        cheap = self.least_change(evaluation, candidate, candidate_evaluation, lambda_)
+        cheap = self.least_change(z, evaluation, candidate, candidate_evaluation, eta, lambda_)
         if cheap is not None:  # no conic solve: logged with the rows of the last one
             self._log_solve(LEAST_CHANGE, self.log.rows_kept[-1], 0, 0)
             return cheap
@@ -303,8 +302,7 @@ class TscvxProblem(PDGProblem):
         self, z: Trajectory, eta: float, lambda_: float, solver: str, mode: str = "reduced"
     ) -> Candidate:
         """Solve with ``self._keep``, adding left-out rows the candidate violates."""
-        weight = self.config.prox_weight / eta**2
-        box = SOFT_BOX_FACTOR * eta if weight > 0.0 else eta
+        weight, box = self.trust_region(eta)
         keep_box = not (self.params.drop_box and weight > 0.0)
         self.subproblem.set_trust_region(eta, lambda_, box, weight)
         solver_time, repairs = 0.0, 0
