@@ -68,10 +68,13 @@ def test_bench_summary_reports_median_and_max_propellant_gap():
     from scpformer.cli.pdg6dof import summarize
 
     rows = [
-        {"set": "nominal", "status": "converged", "iterations": it, "wall_s": 1.0,
-         "solver_s": 0.8, "discretization_s": 0.1, "verification_s": 0.05, "other_s": 0.05,
-         "gap": gap}
+        {"set": "nominal", "status": "converged", "iterations": it, "conic_solves": it - 2,
+         "wall_s": 1.0, "solver_s": 0.8, "discretization_s": 0.1, "verification_s": 0.05,
+         "other_s": 0.05, "gap": gap}
         for it, gap in ((10, 0.001), (20, 0.002), (30, 0.006))
     ]  # fmt: skip
     text = "\n".join(summarize(rows))
     assert "median 0.200%" in text and "max 0.600%" in text
+    # median records 20, median conic solves 18 (least-change corrections are not solves)
+    assert " 20.0   18.0 " in text, text
+    assert "conic solves p95 27" in text, text
