@@ -23,10 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
+from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES, constraint_values
 from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory, straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.problems.pdg6dof.problem import PDGProblem, PDGSolverConfig
+from scpformer.problems.pdg6dof.problem import PDGProblem, PDGSolverConfig, penalty
 from scpformer.problems.pdg6dof.tscvx import (
     TscvxParameters,
     TscvxPredictor,
@@ -138,6 +138,8 @@ class TscvxWarmStart:
 
 
 def _penalized_cost(instance: PDGInstance, config: PDGSolverConfig, z: Trajectory) -> float:
-    """``J = C + lambda P`` (Eq. 16) of the guess ``z`` on the full nonlinear problem."""
-    ev = PDGProblem(instance, config).evaluate(z)
-    return float(ev.cost + config.scvx.lambda_ * (ev.penalty + convex_excess(instance, z)))
+    """``J = C + lambda P`` (Eq. 16) of the guess ``z`` on the full nonlinear problem (its
+    flow alone: the linearization is the solver's to compute)."""
+    defects = PDGProblem(instance, config).flow_defects(z)
+    P = penalty(defects, constraint_values(instance, z.x, z.u)) + convex_excess(instance, z)
+    return float(-z.x[-1, 13] + config.scvx.lambda_ * P)
