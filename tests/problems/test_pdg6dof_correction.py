@@ -34,6 +34,10 @@ def _perturbed(z: Trajectory, size: float, seed: int = 0) -> Trajectory:
     return Trajectory(x=z.x.copy(), u=u, p=z.p + size * 0.5)
 
 
+def _values(z: Trajectory) -> np.ndarray:
+    return con.constraint_values(PDGInstance(), z.x, z.u)
+
+
 def _defects(problem: PDGProblem, z: Trajectory) -> np.ndarray:
     return problem.evaluate(z).linearization.defects(z.x)
 
@@ -46,11 +50,11 @@ def test_one_step_leaves_defects_of_second_order(optimum, size):
     correction = LeastChangeCorrection(
         problem.instance, problem.evaluate(z).linearization, z, False, 1e-5
     )
-    corrected = correction.step(z, _defects(problem, z))
+    corrected = correction.step(z, _defects(problem, z), _values(z))
     d1 = np.abs(_defects(problem, corrected)).max()
     # Newton on the defects: the residual is O(d0^2), far below d0 (measured ~1e-3 d0)
     assert d1 < 0.05 * d0, (d0, d1)
-    again = correction.step(corrected, _defects(problem, corrected))
+    again = correction.step(corrected, _defects(problem, corrected), _values(corrected))
     assert np.abs(_defects(problem, again)).max() < d1
 
 
@@ -60,7 +64,7 @@ def test_the_boundary_conditions_and_the_held_rows_are_kept(optimum):
     z = _perturbed(optimum.trajectory, 1e-2)
     held = con.constraint_values(instance, z.x, z.u) >= -1e-5
     correction = LeastChangeCorrection(instance, problem.evaluate(z).linearization, z, False, 1e-5)
-    corrected = correction.step(z, _defects(problem, z))
+    corrected = correction.step(z, _defects(problem, z), _values(z))
     np.testing.assert_allclose(corrected.x[0], z.x[0], atol=1e-12)
     last = fixed_terminal_columns(False)
     np.testing.assert_allclose(corrected.x[-1, last], z.x[-1, last], atol=1e-12)
@@ -75,10 +79,10 @@ def test_a_correction_that_breaks_a_convex_row_is_refused(optimum):
     problem = PDGProblem(instance, PDGSolverConfig())
     z = optimum.trajectory
     correction = LeastChangeCorrection(instance, problem.evaluate(z).linearization, z, False, 1e-5)
-    assert correction.keeps_convex_rows(z)
+    assert correction.keeps_convex_rows(z, _values(z))
     peak = np.linalg.norm(z.u, axis=1).max()
     too_much = Trajectory(x=z.x, u=z.u * 1.2 * instance.constants.T_max / peak, p=z.p)
-    assert not correction.keeps_convex_rows(too_much)  # thrust above T_max
+    assert not correction.keeps_convex_rows(too_much, _values(too_much))  # thrust above T_max
 
 
 def test_least_change_corrections_replace_conic_solves_at_the_same_optimum():

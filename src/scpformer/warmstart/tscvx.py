@@ -26,7 +26,12 @@ import numpy as np
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES, constraint_values
 from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory, straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.problems.pdg6dof.problem import PDGProblem, PDGSolverConfig, penalty
+from scpformer.problems.pdg6dof.problem import (
+    PDGProblem,
+    PDGSolverConfig,
+    final_mass_cost,
+    penalty,
+)
 from scpformer.problems.pdg6dof.tscvx import (
     TscvxParameters,
     TscvxPredictor,
@@ -127,7 +132,7 @@ class TscvxWarmStart:
         record = WarmStartRecord(
             source="tscvx",
             time_s=0.0,
-            cost=float(-trajectory.x[-1, 13]),
+            cost=final_mass_cost(trajectory),
             constraint_to_go=math.nan,
             accepted=accepted,
             reason=reason,
@@ -142,4 +147,4 @@ def _penalized_cost(instance: PDGInstance, config: PDGSolverConfig, z: Trajector
     flow alone: the linearization is the solver's to compute)."""
     defects = PDGProblem(instance, config).flow_defects(z)
     P = penalty(defects, constraint_values(instance, z.x, z.u)) + convex_excess(instance, z)
-    return float(-z.x[-1, 13] + config.scvx.lambda_ * P)
+    return final_mass_cost(z) + config.scvx.lambda_ * P

@@ -38,6 +38,10 @@ CONSTRAINT_NAMES: tuple[str, ...] = (
     "gimbal",
 )
 NONCONVEX_NAMES: frozenset[str] = frozenset({"thrust_min"})
+# rows of constraint_values that are convex (imposed exactly by every subproblem)
+CONVEX_ROWS: tuple[int, ...] = tuple(
+    i for i, name in enumerate(CONSTRAINT_NAMES) if name not in NONCONVEX_NAMES
+)
 STATE_CONSTRAINTS: frozenset[str] = frozenset({"mass", "glideslope", "tilt", "omega"})
 
 

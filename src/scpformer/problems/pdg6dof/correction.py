@@ -39,7 +39,6 @@ from scpformer.scp.discretization import FOHDiscretization
 from scpformer.scp.solution import Trajectory
 
 N_X, N_U = 14, 3
-CONVEX_NAMES = [name for name in con.CONSTRAINT_NAMES if name not in con.NONCONVEX_NAMES]
 
 
 class LeastChangeCorrection:
@@ -85,14 +84,14 @@ class LeastChangeCorrection:
         self._s2 = _metric(instance, n)
         self._solve = _factorized(C, self._s2)
 
-    def step(self, z: Trajectory, defects: np.ndarray) -> Trajectory | None:
-        """``z`` moved to cancel ``defects`` (K, 14) and the held rows' values; ``None``
-        when the linear algebra fails."""
+    def step(self, z: Trajectory, defects: np.ndarray, values: np.ndarray) -> Trajectory | None:
+        """``z`` moved to cancel its ``defects`` (K, 14) and the held rows of its ``values``
+        (:func:`~scpformer.problems.pdg6dof.constraints.constraint_values`); ``None`` when the
+        linear algebra fails."""
         n = z.x.shape[0]
-        values = con.constraint_values(self.instance, z.x, z.u)[self._active]
         r = np.zeros(self._n_rows)
         r[: self._n_dynamics] = -np.asarray(defects).ravel()
-        r[self._n_dynamics : self._n_dynamics + self._n_active] = -values
+        r[self._n_dynamics : self._n_dynamics + self._n_active] = -values[self._active]
         y = self._solve(r)
         if y is None:
             return None
@@ -105,15 +104,14 @@ class LeastChangeCorrection:
             p=np.asarray(z.p, dtype=float) + delta[-1],
         )
 
-    def keeps_convex_rows(self, z: Trajectory, tolerance: float = 1e-7) -> bool:
-        """No convex row of Eqs. 5-6 and neither final-time bound violated beyond
-        ``tolerance`` at ``z``."""
-        values = con.constraint_values(self.instance, z.x, z.u)
-        convex = [con.CONSTRAINT_NAMES.index(name) for name in CONVEX_NAMES]
+    def keeps_convex_rows(self, z: Trajectory, values: np.ndarray, tolerance: float = 1e-7) -> bool:
+        """No convex row of Eqs. 5-6 (of ``z``'s ``values``) and neither final-time bound
+        violated beyond ``tolerance`` at ``z``."""
         c = self.instance.constants
         tf = float(z.p[0])
         return bool(
-            values[convex].max() <= tolerance and c.tf_min - tolerance <= tf <= c.tf_max + tolerance
+            values[list(con.CONVEX_ROWS)].max() <= tolerance
+            and c.tf_min - tolerance <= tf <= c.tf_max + tolerance
         )
 
 

@@ -145,7 +145,7 @@ class PDGProblem:
         defects = disc.defects(z.x)
         values = con.constraint_values(self.instance, z.x, z.u)
         return Evaluation(
-            cost=float(-z.x[-1, 13]),
+            cost=final_mass_cost(z),
             penalty=penalty(defects, values),
             max_defect=float(np.abs(defects).max()),
             tight_flags=con.tight_flags(values, self.config.tight_tol),
@@ -222,14 +222,16 @@ class PDGProblem:
         wanted = self.config.scvx.rho_1 * (J_bar - candidate.linear_cost)
         box = self.trust_region(eta)[1] * (1.0 + 1e-9)
         defects = disc.defects(z.x)
+        values = con.constraint_values(self.instance, z.x, z.u)
         for _ in range(LEAST_CHANGE_STEPS):
-            z = correction.step(z, defects)
+            z = correction.step(z, defects, values)
             if z is None:
                 return None
             defects = self.flow_defects(z)
-            P_z = penalty(defects, con.constraint_values(self.instance, z.x, z.u))
-            passes = J_bar - (-z.x[-1, 13] + lambda_ * P_z) >= wanted
-            if passes and correction.keeps_convex_rows(z) and self.step_norm(z, z_bar) <= box:
+            values = con.constraint_values(self.instance, z.x, z.u)
+            J = final_mass_cost(z) + lambda_ * penalty(defects, values)
+            kept = correction.keeps_convex_rows(z, values)
+            if J_bar - J >= wanted and kept and self.step_norm(z, z_bar) <= box:
                 return replace(candidate, trajectory=z, status=LEAST_CHANGE, solver_time=0.0)
         return None
 
@@ -252,6 +254,11 @@ def conic_solves(solution: Solution) -> int:
     """The records of ``solution.history`` that solved a conic subproblem (every one but the
     least-change corrections)."""
     return sum(record.solver_status != LEAST_CHANGE for record in solution.history)
+
+
+def final_mass_cost(z: Trajectory) -> float:
+    """``C(z) = -m_N`` (Eq. 2)."""
+    return float(-z.x[-1, 13])
 
 
 def penalty(defects: np.ndarray, values: np.ndarray) -> float:

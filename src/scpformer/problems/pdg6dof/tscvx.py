@@ -173,8 +173,7 @@ def convex_excess(instance: PDGInstance, z: Trajectory) -> float:
     the convex rows exactly; positive when a reduced subproblem left a violated row out.
     """
     values = con.constraint_values(instance, z.x, z.u)
-    convex = [i for i, n in enumerate(con.CONSTRAINT_NAMES) if n not in con.NONCONVEX_NAMES]
-    return float(np.maximum(values[convex], 0.0).sum())
+    return float(np.maximum(values[list(con.CONVEX_ROWS)], 0.0).sum())
 
 
 @functools.lru_cache(maxsize=8)
