@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +53,21 @@ class RigidBodyModel:
     alpha_mdot: float  # fuel consumption per unit thrust, 1/(I_sp g0) [U_T/U_L]
     beta_mdot: float  # mass flow lost to back pressure, alpha P_amb A_noz [U_M/U_T]
     rho_SA_CA: float  # lumped aerodynamic coefficient rho S_A C_A [U_M/U_L]
+
+    @cached_property
+    def scalars(self) -> tuple[float, ...]:
+        """The constants :func:`dynamics_scalar` reads, as Python floats: the diagonal of
+        ``J_B``, ``r_T_B``, ``r_cp_B``, ``g_I``, then ``-0.5 rho S_A C_A``, ``alpha_mdot`` and
+        ``beta_mdot`` (computed once per model; a float of a numpy array costs a call)."""
+        return (
+            *np.diag(self.J_B).tolist(),
+            *self.r_T_B.tolist(),
+            *self.r_cp_B.tolist(),
+            *self.g_I.tolist(),
+            -0.5 * float(self.rho_SA_CA),
+            float(self.alpha_mdot),
+            float(self.beta_mdot),
+        )
 
 
 def aero_force(model: RigidBodyModel, v_B: Array) -> Array:
@@ -145,13 +161,11 @@ def dynamics_scalar(model: RigidBodyModel, x: Array, u: Array) -> Array:
     vbx = c00 * vx + c10 * vy + c20 * vz  # v_B = C^T v_I
     vby = c01 * vx + c11 * vy + c21 * vz
     vbz = c02 * vx + c12 * vy + c22 * vz
-    k = -0.5 * model.rho_SA_CA * math.sqrt(vbx * vbx + vby * vby + vbz * vbz)
+    jx, jy, jz, px, py, pz, cx, cy, cz, gx, gy, gz, drag, alpha, beta = model.scalars
+    k = drag * math.sqrt(vbx * vbx + vby * vby + vbz * vbz)
     ax, ay, az = k * vbx, k * vby, k * vbz
     fx, fy, fz = tx + ax, ty + ay, tz + az
-    g = model.g_I
     inv_m = 1.0 / m
-    (jx, jy, jz), (px, py, pz) = np.diag(model.J_B).tolist(), model.r_T_B.tolist()
-    cx, cy, cz = model.r_cp_B.tolist()
     mx = py * tz - pz * ty + cy * az - cz * ay - (wy * jz * wz - wz * jy * wy)
     my = pz * tx - px * tz + cz * ax - cx * az - (wz * jx * wx - wx * jz * wz)
     mz = px * ty - py * tx + cx * ay - cy * ax - (wx * jy * wy - wy * jx * wx)
@@ -160,9 +174,9 @@ def dynamics_scalar(model: RigidBodyModel, x: Array, u: Array) -> Array:
             vx,
             vy,
             vz,
-            (c00 * fx + c01 * fy + c02 * fz) * inv_m + g[0],
-            (c10 * fx + c11 * fy + c12 * fz) * inv_m + g[1],
-            (c20 * fx + c21 * fy + c22 * fz) * inv_m + g[2],
+            (c00 * fx + c01 * fy + c02 * fz) * inv_m + gx,
+            (c10 * fx + c11 * fy + c12 * fz) * inv_m + gy,
+            (c20 * fx + c21 * fy + c22 * fz) * inv_m + gz,
             0.5 * (-q1 * wx - q2 * wy - q3 * wz),
             0.5 * (q0 * wx + q2 * wz - q3 * wy),
             0.5 * (q0 * wy + q3 * wx - q1 * wz),
@@ -170,6 +184,6 @@ def dynamics_scalar(model: RigidBodyModel, x: Array, u: Array) -> Array:
             mx / jx,
             my / jy,
             mz / jz,
-            -model.alpha_mdot * math.sqrt(tx * tx + ty * ty + tz * tz) - model.beta_mdot,
+            -alpha * math.sqrt(tx * tx + ty * ty + tz * tz) - beta,
         ]
     )

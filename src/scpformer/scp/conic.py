@@ -9,10 +9,11 @@ This module holds what they share:
 * :func:`canonicalize` -- run cvxpy's parameter-to-data compilation ahead of the first solve
   (the result is what :func:`scpformer.cache.cached_pickle` keeps on disk);
 * :func:`solve_timed` -- cvxpy's three stages run by hand (cached parameter map -> conic solver
-  -> unpack), so that the conic solver call is timed on its own with the same clock as the
-  wall time around it; a failing solve is a status, never a raise. With ``reuse`` the solver
-  object of the previous call is updated in place instead of rebuilt (Clarabel keeps its
-  symbolic KKT factorization and equilibration; measured 74 -> 69 ms per 6-DoF subproblem);
+  -> unpack, or with :func:`variable_slices` the primal values alone), so that the conic
+  solver call is timed on its own with the same clock as the wall time around it; a failing
+  solve is a status, never a raise. With ``reuse`` the solver object of the previous call is
+  updated in place instead of rebuilt (Clarabel keeps its symbolic KKT factorization and
+  equilibration; measured 74 -> 69 ms per 6-DoF subproblem);
   :func:`start_cold` makes the next call build a fresh one, so that every SCP run (every
   instance) starts from the same solver state and gives the same bytes in any process;
 * :func:`batched_matvec` -- ``K`` small matrix-vector products as one affine expression,
@@ -23,10 +24,12 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import cvxpy as cp
+import numpy as np
 
 SOLVERS: dict[str, str] = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
 SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)  # statuses with a usable primal solution
@@ -55,12 +58,14 @@ class ConicCall:
     """Outcome of one :func:`solve_timed` call.
 
     ``status`` is cvxpy's status string, or ``"solver_error: ..."`` when the solver raised;
-    the variables of the problem hold the solution only when ``solved`` is true.
+    the solution (in the problem's variables, or in ``values`` when the call asked for the
+    primal values alone) is there only when ``solved`` is true.
     """
 
     status: str
     solver_time: float  # s inside the conic solver call (data in, raw solution out)
     wall_time: float  # s from the parameter values to the unpacked solution
+    values: dict[str, np.ndarray] = field(default_factory=dict)  # primal values by name
 
     @property
     def solved(self) -> bool:
@@ -68,23 +73,34 @@ class ConicCall:
         return self.status in SOLVED
 
 
+VariableSlices = Mapping[str, tuple[int, tuple[int, ...]]]  # name -> (offset, shape)
+
+
 def solve_timed(
     problem: cp.Problem,
     solver: str,
     reuse: bool = False,
     settings: dict[str, dict[str, Any]] | None = None,
+    primal: VariableSlices | None = None,
 ) -> ConicCall:
     """Solve ``problem`` with its current parameter values and time the solver call alone.
 
     ``reuse`` updates the solver object of the previous call in place where the solver
     supports it (:data:`REUSE_OPTIONS`); cvxpy rebuilds it when the update is refused.
     ``settings`` maps a solver name to the settings a problem family gives it.
+
+    Without ``primal`` the solution is unpacked into the problem's variables (and duals) as
+    ``problem.solve`` does. With the :func:`variable_slices` of ``problem`` only the primal
+    values of those variables are read from the solver's vector into ``ConicCall.values``;
+    cvxpy's unpacking (the inverse of every reduction, the duals of every constraint) costs
+    about 1 ms per 6-DoF subproblem, 2-3% of a solve, and the loops need none of it.
     """
     name = SOLVERS[check_solver(solver)]
     in_place = reuse and solver in REUSE_OPTIONS
     options = solver_options(solver, in_place, settings)
     start = time.perf_counter()
     solver_time = 0.0
+    values: dict[str, np.ndarray] = {}
     try:
         with warnings.catch_warnings():  # "inaccurate" is reported as a status instead
             warnings.simplefilter("ignore", UserWarning)
@@ -92,10 +108,40 @@ def solve_timed(
             t0 = time.perf_counter()
             raw = chain.solve_via_data(problem, data, in_place, False, options)
             solver_time = time.perf_counter() - t0
-            problem.unpack_results(raw, chain, inverse)
+            if primal is None:
+                problem.unpack_results(raw, chain, inverse)
+                status = str(problem.status)
+            else:
+                solution = chain.solver.invert(raw, inverse[-1])
+                status = str(solution.status)
+                if status in SOLVED:
+                    (x,) = solution.primal_vars.values()  # the stuffed variable vector
+                    values = {key: primal_value(x, primal, key) for key in primal}
     except cp.SolverError as err:
         return ConicCall(f"solver_error: {err}", solver_time, time.perf_counter() - start)
-    return ConicCall(str(problem.status), solver_time, time.perf_counter() - start)
+    return ConicCall(status, solver_time, time.perf_counter() - start, values)
+
+
+def variable_slices(
+    problem: cp.Problem, solver: str, variables: Mapping[str, cp.Variable]
+) -> VariableSlices:
+    """Where each of ``variables`` sits in the primal vector of ``problem``'s conic form.
+
+    Read from cvxpy's matrix stuffing (its ``var_offsets``); matched by variable name because
+    cvxpy replaces a variable with attributes (``nonneg``) by a free copy of the same name.
+    The names must be unique within the problem.
+    """
+    _, _, inverse = problem.get_problem_data(SOLVERS[check_solver(solver)], solver_opts={})
+    stuffing = next(d for d in inverse if hasattr(d, "var_offsets") and hasattr(d, "minimize"))
+    offsets = {var.name(): stuffing.var_offsets[vid] for vid, var in stuffing.id2var.items()}
+    return {key: (offsets[var.name()], var.shape) for key, var in variables.items()}
+
+
+def primal_value(x: np.ndarray, slices: VariableSlices, key: str) -> np.ndarray:
+    """The variable ``key`` read from a conic primal vector ``x`` (cvxpy's column-major order)."""
+    offset, shape = slices[key]
+    size = int(np.prod(shape))
+    return np.asarray(x[offset : offset + size]).reshape(shape, order="F")
 
 
 def solver_options(

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import DOP853
 
 from scpformer.dynamics import powered_descent as pd
 from scpformer.problems.pdg6dof import constraints as con
@@ -294,38 +294,67 @@ def propagate(
 
     Each interval is integrated from where the previous one ended (single shooting: the
     controls are applied open loop), and the control is linear inside it, so the adaptive
-    integrator never steps over a kink. Returns the states at ``samples_per_interval`` equally
-    spaced instants per interval plus the final one: ((N - 1) * samples_per_interval + 1, 14).
+    integrator never steps over a kink. Each interval starts with the step size the previous
+    one proposed, as one continuous integration would; the integrator's error control then
+    takes most intervals in one or two steps, against about twice the right-hand-side
+    evaluations when every interval restarts with scipy's initial-step heuristic (measured on
+    converged nominal trajectories: 900 instead of 1,550 evaluations, and a difference of at
+    most 1e-7 from a propagation at rtol 1e-13, four orders below the defect tolerance).
+    Returns the states at ``samples_per_interval`` equally spaced instants per interval plus
+    the final one: ((N - 1) * samples_per_interval + 1, 14).
     """
     tol = tol or VerificationTolerances()
     model = instance.constants.model()
     diagonal = np.count_nonzero(model.J_B - np.diag(np.diag(model.J_B))) == 0
     rhs_model = pd.dynamics_scalar if diagonal else pd.dynamics
     n = z.x.shape[0]
+    m = samples_per_interval
     dt = float(z.p[0]) / (n - 1)
-    fractions = np.linspace(0.0, 1.0, samples_per_interval + 1)
-    out = [instance.x0]
-    state = instance.x0
+    sample_times = np.linspace(0.0, 1.0, m + 1)[1:] * dt
+    out = np.empty(((n - 1) * m + 1, instance.x0.size))
+    out[0] = instance.x0
+    step = None
     for k in range(n - 1):
-        u_k, du = z.u[k], z.u[k + 1] - z.u[k]
+        u_k, slope = z.u[k], (z.u[k + 1] - z.u[k]) / dt
 
-        def rhs(t: float, x: np.ndarray, u_k: np.ndarray = u_k, du: np.ndarray = du) -> np.ndarray:
-            return rhs_model(model, x, u_k + (t / dt) * du)
+        def rhs(
+            t: float, x: np.ndarray, u_k: np.ndarray = u_k, slope: np.ndarray = slope
+        ) -> np.ndarray:
+            return rhs_model(model, x, u_k + t * slope)
 
-        result = solve_ivp(
-            rhs,
-            (0.0, dt),
-            state,
-            method="DOP853",
-            t_eval=fractions[1:] * dt,
-            rtol=tol.rtol,
-            atol=tol.atol,
-        )
-        if not result.success:
-            raise RuntimeError(f"nonlinear propagation failed on interval {k}: {result.message}")
-        out.extend(result.y.T)
-        state = result.y[:, -1]
-    return np.array(out)
+        try:
+            step = _integrate_interval(rhs, out[k * m], sample_times, out[1 + k * m :], step, tol)
+        except RuntimeError as err:
+            raise RuntimeError(f"nonlinear propagation failed on interval {k}: {err}") from None
+    return out
+
+
+def _integrate_interval(
+    rhs: Any,
+    state: np.ndarray,
+    sample_times: np.ndarray,
+    out: np.ndarray,
+    first_step: float | None,
+    tol: VerificationTolerances,
+) -> float:
+    """Integrate ``rhs`` from ``state`` at 0 to ``sample_times[-1]`` and write the states at
+    ``sample_times`` into the first rows of ``out`` (DOP853's dense output between steps, its
+    last step's state at the end). Returns the step size it proposes next."""
+    end = float(sample_times[-1])
+    first = min(first_step, end) if first_step else None
+    solver = DOP853(rhs, 0.0, state, end, rtol=tol.rtol, atol=tol.atol, first_step=first)
+    j, last = 0, len(sample_times) - 1
+    while solver.status == "running":
+        message = solver.step()
+        if solver.status == "failed":
+            raise RuntimeError(str(message))
+        if j < last and sample_times[j] <= solver.t:
+            dense = solver.dense_output()
+            while j < last and sample_times[j] <= solver.t:
+                out[j] = dense(sample_times[j])
+                j += 1
+    out[last] = solver.y
+    return float(solver.h_abs)
 
 
 def verify_trajectory(

@@ -43,7 +43,7 @@ from scpformer.problems.pdg6dof.subproblem import (
     SubproblemSolution,
     failed_solution,
 )
-from scpformer.scp.conic import SOLVERS, solver_options
+from scpformer.scp.conic import SOLVERS, VariableSlices, primal_value, solver_options
 
 ALWAYS = -1  # owner of a conic row kept in every reduced problem
 BOX = -2  # owner of a row of the safeguard trust-region box
@@ -64,7 +64,7 @@ class ConicLayout:
     soc_sizes: np.ndarray  # (n_cones,) dimensions of the second-order cones (last)
     owner_a: np.ndarray  # (m,) int
     owner_b: np.ndarray  # (m,) int
-    variables: dict[str, tuple[int, tuple[int, ...]]]  # name -> (column offset, shape)
+    variables: VariableSlices  # name -> (column offset, shape), PDGSubproblem.named_variables
 
     @property
     def n_rows(self) -> int:
@@ -80,18 +80,11 @@ class ConicLayout:
         lookup = np.concatenate([np.asarray(keep, dtype=bool), [keep_box, True]])
         return lookup[self.owner_a] | lookup[self.owner_b]  # ALWAYS = -1, BOX = -2
 
-    def value(self, solution: np.ndarray, name: str) -> np.ndarray:
-        """The variable ``name`` read from a conic primal vector (cvxpy's column-major order)."""
-        offset, shape = self.variables[name]
-        size = int(np.prod(shape))
-        return solution[offset : offset + size].reshape(shape, order="F")
-
 
 def conic_layout(sub: PDGSubproblem) -> ConicLayout:
     """Map the compiled Clarabel problem of ``sub`` (see the module docstring)."""
     data, _, inverse = sub.problem.get_problem_data(SOLVERS["clarabel"], solver_opts={})
     solver_data = inverse[-1].inverse_data
-    stuffing = next(d for d in inverse if hasattr(d, "var_offsets") and hasattr(d, "minimize"))
     ordered = [*solver_data["eq_constr"], *solver_data["other_constr"]]
     dims = data["dims"]
     n_nodes = sub.n_nodes
@@ -114,17 +107,13 @@ def conic_layout(sub: PDGSubproblem) -> ConicLayout:
             a = b = np.full(rows, BOX if constraint.id in box_ids else ALWAYS)
         owner_a.append(a)
         owner_b.append(b)
-    offsets = {var.name(): stuffing.var_offsets[vid] for vid, var in stuffing.id2var.items()}
-    variables = {  # by name: cvxpy replaces the nonneg buffer variable by a free copy
-        name: (offsets[var.name()], var.shape) for name, var in _named_variables(sub)
-    }
     layout = ConicLayout(
         n_zero=int(dims.zero),
         n_nonneg=int(dims.nonneg),
         soc_sizes=np.asarray(dims.soc, dtype=int),
         owner_a=np.concatenate(owner_a).astype(int),
         owner_b=np.concatenate(owner_b).astype(int),
-        variables=variables,
+        variables=sub.primal_slices("clarabel"),
     )
     if layout.n_rows != data["A"].shape[0]:
         raise RuntimeError(f"conic layout maps {layout.n_rows} rows, A has {data['A'].shape[0]}")
@@ -153,11 +142,6 @@ def _norm_owners(ordered: list[cp.Constraint], flag_of: dict[int, int]) -> dict[
                 owners.setdefault(var.id, []).append(flag_of[constraint.id])
     epigraphs = {_epigraph_id(c) for c in ordered if isinstance(c, cp.constraints.SOC)} - {None}
     return {vid: bases for vid, bases in owners.items() if vid in epigraphs}
-
-
-def _named_variables(sub: PDGSubproblem) -> list[tuple[str, cp.Variable]]:
-    groups = [(f"x{i}", var) for i, var in enumerate(sub.state_groups)]
-    return [*groups, ("u", sub.U), ("sigma", sub.sigma), ("nu", sub.nu), ("s", sub.buffers)]
 
 
 @dataclass(frozen=True)
@@ -267,19 +251,11 @@ class ReducedSubproblem:
     def _unpack(
         self, solution: np.ndarray, lambda_: float, status: str, solve_time: float, start: float
     ) -> SubproblemSolution:
-        lay = self.layout
-        n_groups = len(self.sub.state_groups)
-        x = np.hstack([lay.value(solution, f"x{i}") for i in range(n_groups)])
-        return PDGSubproblem.solution(
-            x,
-            lay.value(solution, "u"),
-            float(lay.value(solution, "sigma")),
-            lay.value(solution, "nu"),
-            lay.value(solution, "s"),
-            lambda_,
-            status,
-            solve_time,
-            time.perf_counter() - start,
+        values = {
+            key: primal_value(solution, self.layout.variables, key) for key in self.layout.variables
+        }
+        return self.sub.solution_from(
+            values, lambda_, status, solve_time, time.perf_counter() - start
         )
 
 

@@ -61,7 +61,14 @@ import numpy as np
 
 from scpformer.cache import cached_pickle
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.scp.conic import batched_matvec, canonicalize, check_solver, solve_timed
+from scpformer.scp.conic import (
+    VariableSlices,
+    batched_matvec,
+    canonicalize,
+    check_solver,
+    solve_timed,
+    variable_slices,
+)
 from scpformer.scp.discretization import FOHDiscretization
 
 
@@ -174,6 +181,19 @@ class PDGSubproblem:
         self._z_linear: np.ndarray | None = None  # affine term of the current linearization
         self._mass_offset_linear: np.ndarray | None = None  # c_k of the current linearization
         self._alpha_mdot = 0.0  # alpha of Eq. 4a (set_instance)
+        self._slices: dict[str, VariableSlices] = {}  # per solver: variable_slices
+
+    def named_variables(self) -> dict[str, cp.Variable]:
+        """The decision variables by name: the state groups ``x0, x1, ...``, ``u``, ``sigma``,
+        ``nu`` and the buffers ``s``."""
+        groups = {f"x{i}": var for i, var in enumerate(self.state_groups)}
+        return groups | {"u": self.U, "sigma": self.sigma, "nu": self.nu, "s": self.buffers}
+
+    def primal_slices(self, solver: str) -> VariableSlices:
+        """Where :meth:`named_variables` sit in the conic primal vector for ``solver``."""
+        if solver not in self._slices:
+            self._slices[solver] = variable_slices(self.problem, solver, self.named_variables())
+        return self._slices[solver]
 
     def _build(self) -> cp.Problem:
         X, U, sigma = self.X, self.U, self.sigma
@@ -363,12 +383,28 @@ class PDGSubproblem:
         ``soft_weight sum_i ((z_i - z_bar_i) / scale_i)^2`` to the cost.
         """
         self.set_trust_region(eta, lambda_, box, soft_weight)
-        call = solve_timed(self.problem, solver, reuse=True, settings=CONIC_SETTINGS)
-        if not call.solved or self.X.value is None:
+        slices = self.primal_slices(solver)
+        call = solve_timed(self.problem, solver, reuse=True, settings=CONIC_SETTINGS, primal=slices)
+        if not call.solved:
             return failed_solution(call.status, call.wall_time, call.solver_time)
+        return self.solution_from(
+            call.values, lambda_, call.status, call.solver_time, call.wall_time
+        )
+
+    def solution_from(
+        self,
+        values: dict[str, np.ndarray],
+        lambda_: float,
+        status: str,
+        solve_time: float,
+        wall_time: float,
+    ) -> SubproblemSolution:
+        """The :meth:`solution` of primal ``values`` keyed as :meth:`named_variables`."""
+        n_groups = len(self.state_groups)
+        x = np.hstack([values[f"x{i}"] for i in range(n_groups)])
         return self.solution(
-            self.X.value, self.U.value, float(self.sigma.value), self.nu.value,
-            self.buffers.value, lambda_, call.status, call.solver_time, call.wall_time,
+            x, values["u"], float(values["sigma"]), values["nu"], values["s"], lambda_,
+            status, solve_time, wall_time,
         )  # fmt: skip
 
     def set_trust_region(
