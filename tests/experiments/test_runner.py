@@ -1,3 +1,5 @@
+import json
+
 import numpy as np
 import pytest
 
@@ -39,6 +41,14 @@ def test_settings_may_grow_n_but_not_change_the_seed(tmp_path):
     check_settings(tmp_path, {"seed": 0, "n": 20})
     with pytest.raises(ValueError, match=r"other settings \(seed\)"):
         check_settings(tmp_path, {"seed": 1, "n": 20})
+
+
+def test_a_moved_results_folder_resumes_and_records_where_it_is_now(tmp_path):
+    check_settings(tmp_path / "a", {"seed": 0, "n": 10, "out": str(tmp_path / "a")})
+    (tmp_path / "a").rename(tmp_path / "b")
+    check_settings(tmp_path / "b", {"seed": 0, "n": 10, "out": str(tmp_path / "b")})
+    recorded = json.loads((tmp_path / "b" / "config.json").read_text())
+    assert recorded["out"] == str(tmp_path / "b")
 
 
 def test_series_round_trip_exactly():

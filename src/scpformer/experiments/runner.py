@@ -179,7 +179,8 @@ def theta_tasks(folder: Path, positions: Sequence[int]) -> list[InstanceTask]:
 def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
     """Record ``settings`` in ``OUT/config.json``; refuse a folder made with other settings.
 
-    ``n`` may differ (a larger run extends a smaller one); everything else must match.
+    ``n`` may differ (a larger run extends a smaller one), and so may where the folder is
+    (``out``: a moved or renamed results folder resumes); everything else must match.
     """
     path = out / CONFIG_NAME
     plain = json.loads(json.dumps(settings, default=str))
@@ -190,7 +191,7 @@ def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
             old = None
         if not isinstance(old, dict):
             raise ValueError(f"--out {out}: {CONFIG_NAME} is unreadable; use a new --out")
-        ignore = {"n", "workers", "ray", "time_limit"}
+        ignore = {"n", "out", "workers", "ray", "time_limit"}
         changed = sorted(
             k for k in set(old) | set(plain) if k not in ignore and old.get(k) != plain.get(k)
         )
