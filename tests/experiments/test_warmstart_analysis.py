@@ -11,6 +11,7 @@ from scpformer.experiments.warmstart_study import (
     analyse,
     bin_stats,
     improvement_interval,
+    iterations_saved_interval,
 )
 
 
@@ -81,6 +82,21 @@ def test_only_instances_where_every_scp_solved_count_and_too_few_give_nan():
     )
     lo, hi = improvement_interval(cols, "convex", np.array([True, False, False, False]))
     assert math.isnan(lo) and math.isnan(hi)
+
+
+def test_iterations_saved_are_paired_per_instance():
+    # ART always needs one iteration fewer than CVX on the same instance, while the counts
+    # spread from 2 to 10 across instances: a paired interval is the point 1, an unpaired
+    # one would be wide
+    rng = np.random.default_rng(6)
+    cvx = rng.integers(2, 11, 50).astype(float)
+    cols = _columns({ws: np.ones(50) for ws in WARMSTARTS})
+    cols.iterations.update(convex=cvx, art=cvx - 1.0)
+    assert iterations_saved_interval(cols, np.ones(50, dtype=bool)) == pytest.approx((1.0, 1.0))
+    noise = rng.integers(-2, 3, 50)  # now a saving of 1 +- noise: the interval holds the mean
+    cols.iterations.update(art=cvx - 1.0 + noise)
+    lo, hi = iterations_saved_interval(cols, np.ones(50, dtype=bool))
+    assert lo < 1.0 - noise.mean() < hi and hi - lo < 1.0
 
 
 def _csv_rows(n: int, seed: int) -> list[dict[str, str]]:
