@@ -7,9 +7,9 @@
 #   WORK=/tmp/pt scripts/build_pretrained.sh tscvx    # one model (art-rendezvous,
 #                                                     # art-robust, tscvx)
 #
-# Time on the 2-core development machine, from the logs of the shipped models (made while
-# other jobs ran beside them): rendezvous data 15 min + ART 36 min; robust data 60 min + ART
-# 26 min; 6-DoF data: the first 4736 instances of a --n 6000 run stored after 1 h 32 min
+# Time on the 2-core development machine, from the logs of the shipped models: rendezvous
+# data 23 min + ART 21 min (session 22, idle machine); made while other jobs ran beside them:
+# robust data 60 min + ART 26 min; 6-DoF data: the first 4736 instances of a --n 6000 run stored after 1 h 32 min
 # of generation with other jobs beside it, then 7 min of augmentation with two workers (session
 # 15) + T-SCvx networks 20.6 min (the two side by side, one thread each). The whole script has
 # not been timed end to end, nor on an idle machine, where it should be shorter. Each
@@ -43,10 +43,10 @@ run() {
 
 art_rendezvous() {
     : >art-rendezvous.commands
-    run art-rendezvous scpformer generate rendezvous --n 9000 --seed 0 --out rdv9000 --workers "$WORKERS"
-    run art-rendezvous scpformer dataset split rdv9000 --fractions 0.8 0.1 0.1 --seed 0
-    run art-rendezvous scpformer train art --data rdv9000 --out art-small9k --preset small --frame rtn --epochs 8 --batch-size 32 --lr 0.001 --seed 0
-    python -m scpformer.pretrained.package art-rendezvous art-small9k --commands art-rendezvous.commands --out "$OUT"
+    run art-rendezvous scpformer generate rendezvous --n 27000 --seed 0 --out rdv27000 --workers "$WORKERS"
+    run art-rendezvous scpformer dataset split rdv27000 --fractions 0.8 0.1 0.1 --seed 0
+    run art-rendezvous scpformer train art --data rdv27000 --out art-small27k --preset small --frame rtn --epochs 3 --batch-size 32 --lr 0.001 --seed 0
+    python -m scpformer.pretrained.package art-rendezvous art-small27k --commands art-rendezvous.commands --out "$OUT"
 }
 
 art_robust() {
