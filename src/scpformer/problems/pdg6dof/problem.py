@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -330,7 +331,7 @@ def propagate(
 
 
 def _integrate_interval(
-    rhs: Any,
+    rhs: Callable[[float, np.ndarray], np.ndarray],
     state: np.ndarray,
     sample_times: np.ndarray,
     out: np.ndarray,
