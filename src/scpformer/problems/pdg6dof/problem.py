@@ -337,10 +337,11 @@ def _integrate_interval(
     out: np.ndarray,
     first_step: float | None,
     tol: VerificationTolerances,
-) -> float:
+) -> float | None:
     """Integrate ``rhs`` from ``state`` at 0 to ``sample_times[-1]`` and write the states at
     ``sample_times`` into the first rows of ``out`` (DOP853's dense output between steps, its
-    last step's state at the end). Returns the step size it proposes next."""
+    last step's state at the end). Returns the step size it proposes next (``None``, and the
+    next interval starts with scipy's heuristic, if scipy does not expose it)."""
     end = float(sample_times[-1])
     first = min(first_step, end) if first_step else None
     solver = DOP853(rhs, 0.0, state, end, rtol=tol.rtol, atol=tol.atol, first_step=first)
@@ -355,7 +356,8 @@ def _integrate_interval(
                 out[j] = dense(sample_times[j])
                 j += 1
     out[last] = solver.y
-    return float(solver.h_abs)
+    proposed = getattr(solver, "h_abs", None)  # scipy's next step (not a documented attribute)
+    return float(proposed) if proposed else None
 
 
 def verify_trajectory(
