@@ -83,3 +83,12 @@ def test_scalar_truth_dynamics_agree_with_the_vectorized_model():
         np.testing.assert_allclose(
             pd.dynamics_scalar(model, xi, ui), pd.dynamics(model, xi, ui), atol=1e-12
         )
+
+
+def test_linearize_returns_the_dynamics_and_jacobians_bit_for_bit():
+    model = VehicleConstants(r_cp_B=(0.05, 0.02, -0.03), J_B_diag=(0.001, 0.01, 0.02)).model()
+    x, u = random_states(np.random.default_rng(7), 9)
+    f, A, B = pd.linearize(model, x, u)
+    np.testing.assert_array_equal(f, pd.dynamics(model, x, u))
+    for got, expected in zip((A, B), pd.jacobians(model, x, u), strict=True):
+        np.testing.assert_array_equal(got, expected)

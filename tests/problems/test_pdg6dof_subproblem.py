@@ -39,7 +39,7 @@ def test_mass_row_is_the_discretized_mass_for_any_thrust_at_the_reference_final_
     rng = np.random.default_rng(3)
     u = z.u + 0.3 * np.abs(z.u).max() * rng.standard_normal(z.u.shape)  # turns and scales
     sigma = float(z.p[0])
-    flow = foh_discretize(problem.dynamics, problem.jacobians, z.x, u, sigma, 2).x_next
+    flow = foh_discretize(problem.linearize, z.x, u, sigma, 2).x_next
     np.testing.assert_allclose(mass_row_bound(sub, z.x, u, sigma), flow[:, 13], rtol=0, atol=1e-12)
 
 
@@ -47,6 +47,6 @@ def test_mass_row_agrees_with_the_linearization_to_first_order_in_the_final_time
     problem, z, sub = linearized
     sigma = float(z.p[0])
     for d_sigma in (1e-2, 1e-3):
-        flow = foh_discretize(problem.dynamics, problem.jacobians, z.x, z.u, sigma + d_sigma, 2)
+        flow = foh_discretize(problem.linearize, z.x, z.u, sigma + d_sigma, 2)
         error = np.abs(mass_row_bound(sub, z.x, z.u, sigma + d_sigma) - flow.x_next[:, 13]).max()
         assert error < 1e-9 * (d_sigma / 1e-3) ** 2 + 1e-12  # the row is linear in sigma

@@ -15,8 +15,8 @@ def f(x, u):
     return pd.dynamics(MODEL, x, u)
 
 
-def jac(x, u):
-    return pd.jacobians(MODEL, x, u)
+def lin(x, u):
+    return pd.linearize(MODEL, x, u)
 
 
 def reference():
@@ -40,7 +40,7 @@ def integrate_interval(x0, u0, u1, tf, k):
 
 def test_flow_matches_adaptive_integration_of_each_interval():
     x, u, tf = reference()
-    disc = foh_discretize(f, jac, x, u, tf, n_sub=4)
+    disc = foh_discretize(lin, x, u, tf, n_sub=4)
     for k in (0, 25, N - 2):
         np.testing.assert_allclose(
             disc.x_next[k], integrate_interval(x[k], u[k], u[k + 1], tf, k), atol=1e-8
@@ -49,7 +49,7 @@ def test_flow_matches_adaptive_integration_of_each_interval():
 
 def test_linear_model_is_exact_at_the_reference_and_first_order_nearby():
     x, u, tf = reference()
-    disc = foh_discretize(f, jac, x, u, tf, n_sub=4)
+    disc = foh_discretize(lin, x, u, tf, n_sub=4)
     rng = np.random.default_rng(1)
     dx, du, ds = rng.normal(size=14), rng.normal(size=3), 0.3
     k = 4
@@ -68,13 +68,13 @@ def test_linear_model_is_exact_at_the_reference_and_first_order_nearby():
 
 def test_sensitivities_match_finite_differences_of_the_flow():
     x, u, tf = reference()
-    disc = foh_discretize(f, jac, x, u, tf, n_sub=8)
+    disc = foh_discretize(lin, x, u, tf, n_sub=8)
     k, h = 3, 1e-6
 
     def flow(xk=x[k], uk=u[k], ukp=u[k + 1], s=tf):
         xs, us = x.copy(), u.copy()
         xs[k], us[k], us[k + 1] = xk, uk, ukp
-        return foh_discretize(f, jac, xs, us, s, n_sub=8).x_next[k]
+        return foh_discretize(lin, xs, us, s, n_sub=8).x_next[k]
 
     S_fd = (flow(s=tf + h) - flow(s=tf - h)) / (2 * h)
     Bp_fd = np.stack(
@@ -88,5 +88,5 @@ def test_sensitivities_match_finite_differences_of_the_flow():
 def test_flow_alone_is_the_flow_of_the_full_discretization():
     x, u, tf = reference()
     for n_sub in (1, 2):
-        disc = foh_discretize(f, jac, x, u, tf, n_sub=n_sub)
+        disc = foh_discretize(lin, x, u, tf, n_sub=n_sub)
         np.testing.assert_array_equal(foh_flow(f, x, u, tf, n_sub), disc.x_next)

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 Array = NDArray[np.float64]
 DynamicsFn = Callable[[Array, Array], Array]
-JacobiansFn = Callable[[Array, Array], tuple[Array, Array]]
+LinearizeFn = Callable[[Array, Array], tuple[Array, Array, Array]]
 
 
 @dataclass(frozen=True)
@@ -51,8 +51,7 @@ class FOHDiscretization:
 
 
 def foh_discretize(
-    dynamics: DynamicsFn,
-    jacobians: JacobiansFn,
+    linearize: LinearizeFn,
     x: Array,
     u: Array,
     sigma: float,
@@ -62,8 +61,9 @@ def foh_discretize(
 
     Parameters
     ----------
-    dynamics, jacobians
-        Vectorized ``f(x, u)`` (K, n) and ``(df/dx, df/du)`` (K, n, n), (K, n, m).
+    linearize
+        Vectorized ``(f, df/dx, df/du)`` of shapes (K, n), (K, n, n), (K, n, m) in one call
+        (the dynamics and their Jacobians share most of their work).
     x, u
         Reference states (N, n) and controls (N, m) at the nodes.
     sigma
@@ -82,8 +82,7 @@ def foh_discretize(
     def rates(lam_p: float, state: Array, sens: Array) -> tuple[Array, Array]:
         lam_m = 1.0 - lam_p
         uu = lam_m * u_m + lam_p * u_p
-        f = dynamics(state, uu)
-        A, B = jacobians(state, uu)
+        f, A, B = linearize(state, uu)
         dsens = sigma * (A @ sens)
         dsens[:, :, n : n + m] += sigma * lam_m * B
         dsens[:, :, n + m : n + 2 * m] += sigma * lam_p * B

@@ -118,8 +118,8 @@ class PDGProblem:
     def dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return pd.dynamics(self.model, x, u)
 
-    def jacobians(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return pd.jacobians(self.model, x, u)
+    def linearize(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return pd.linearize(self.model, x, u)
 
     def initial_guess(self) -> Trajectory:
         """The default cold start: the cubic-profile guess (:mod:`.guess`)."""
@@ -140,9 +140,7 @@ class PDGProblem:
 
     def evaluate(self, z: Trajectory) -> Evaluation:
         start = time.perf_counter()
-        disc = foh_discretize(
-            self.dynamics, self.jacobians, z.x, z.u, float(z.p[0]), self.config.n_sub
-        )
+        disc = foh_discretize(self.linearize, z.x, z.u, float(z.p[0]), self.config.n_sub)
         defects = disc.defects(z.x)
         values = con.constraint_values(self.instance, z.x, z.u)
         return Evaluation(
