@@ -4,7 +4,7 @@ import cvxpy as cp
 import numpy as np
 import pytest
 
-from scpformer.scp.conic import SOLVERS, solve_timed, variable_slices
+from scpformer.scp.conic import SOLVERS, assign, solve_timed, variable_slices
 
 
 def _parametric_problem() -> tuple[cp.Problem, dict[str, cp.Variable], cp.Parameter]:
@@ -38,9 +38,39 @@ def test_primal_values_from_the_conic_vector_equal_cvxpys_unpacking(solver):
             np.testing.assert_array_equal(direct.values[name], value)
 
 
-def test_an_infeasible_problem_reads_no_primal_values():
+@pytest.mark.parametrize("solver", sorted(SOLVERS))
+def test_an_infeasible_problem_reads_no_primal_values(solver):
     x = cp.Variable(2, name="x")
     problem = cp.Problem(cp.Minimize(cp.sum(x)), [x >= 1.0, x <= 0.0])
-    call = solve_timed(problem, "clarabel", primal=variable_slices(problem, "clarabel", {"x": x}))
-    assert not call.solved and call.status.startswith("infeasible")
-    assert call.values == {}
+    call = solve_timed(problem, solver, primal=variable_slices(problem, solver, {"x": x}))
+    assert not call.solved and call.values == {}
+    if solver != "qoco":  # QOCO has no infeasibility detection: it reports a solver error
+        assert call.status.startswith("infeasible")
+
+
+def test_assign_gives_the_solve_that_cvxpys_setter_gives():
+    problem, variables, target = _parametric_problem()
+    value = np.random.default_rng(7).normal(size=(3, 2))
+    target.value = value
+    expected = solve_timed(problem, "clarabel")
+    x_set = np.array(variables["X"].value)
+    assign(target, value.tolist())  # any array-like; stored as a float array
+    assert isinstance(target.value, np.ndarray) and target.value.dtype == float
+    assert solve_timed(problem, "clarabel").status == expected.status
+    np.testing.assert_array_equal(variables["X"].value, x_set)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        (np.zeros(3), r"'r': shape \(3,\), expected \(\)"),
+        (np.nan, "'r': value contains NaN"),
+        (-1e-9, "'r' is nonneg"),
+    ],
+)
+def test_assign_rejects_what_the_subproblem_cannot_take_and_keeps_the_old_value(value, message):
+    radius = cp.Parameter(nonneg=True, name="r")
+    assign(radius, 2.0)
+    with pytest.raises(ValueError, match=message):
+        assign(radius, value)
+    assert radius.value == 2.0

@@ -16,6 +16,8 @@ This module holds what they share:
   equilibration; measured 74 -> 69 ms per 6-DoF subproblem);
   :func:`start_cold` makes the next call build a fresh one, so that every SCP run (every
   instance) starts from the same solver state and gives the same bytes in any process;
+* :func:`assign` -- write a parameter's value in the SCP loops with the checks that matter
+  (shape, NaN, sign) instead of cvxpy's projection test;
 * :func:`batched_matvec` -- ``K`` small matrix-vector products as one affine expression,
   vectorized over the horizon.
 """
@@ -30,6 +32,7 @@ from typing import Any
 
 import cvxpy as cp
 import numpy as np
+from numpy.typing import ArrayLike
 
 SOLVERS: dict[str, str] = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
 SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)  # statuses with a usable primal solution
@@ -112,10 +115,8 @@ def solve_timed(
                 problem.unpack_results(raw, chain, inverse)
                 status = str(problem.status)
             else:
-                solution = chain.solver.invert(raw, inverse[-1])
-                status = str(solution.status)
+                status, x = primal_solution(chain.solver, raw, inverse[-1])
                 if status in SOLVED:
-                    (x,) = solution.primal_vars.values()  # the stuffed variable vector
                     values = {key: primal_value(x, primal, key) for key in primal}
     except cp.SolverError as err:
         return ConicCall(f"solver_error: {err}", solver_time, time.perf_counter() - start)
@@ -135,6 +136,22 @@ def variable_slices(
     stuffing = next(d for d in inverse if hasattr(d, "var_offsets") and hasattr(d, "minimize"))
     offsets = {var.name(): stuffing.var_offsets[vid] for vid, var in stuffing.id2var.items()}
     return {key: (offsets[var.name()], var.shape) for key, var in variables.items()}
+
+
+def primal_solution(solver: Any, raw: Any, inverse_data: Any) -> tuple[str, np.ndarray | None]:
+    """cvxpy's status and the stuffed primal vector of a raw solver result, nothing else.
+
+    For Clarabel they are read from its result (``status``, ``x``) through cvxpy's own status
+    map; cvxpy's ``invert`` would also split ``z`` into a dual value per constraint, about
+    0.5 ms per 6-DoF subproblem that no loop uses. Other solvers go through ``invert``.
+    """
+    if solver.name() == cp.CLARABEL:
+        return solver.STATUS_MAP.get(str(raw.status), cp.SOLVER_ERROR), raw.x
+    solution = solver.invert(raw, inverse_data)
+    if solution.status not in SOLVED:
+        return str(solution.status), None
+    (x,) = solution.primal_vars.values()
+    return str(solution.status), x
 
 
 def primal_value(x: np.ndarray, slices: VariableSlices, key: str) -> np.ndarray:
@@ -162,6 +179,32 @@ def start_cold(problem: cp.Problem) -> None:
     guarantees that a run does not depend on what the process solved before.
     """
     problem._solver_cache.clear()
+
+
+def assign(parameter: cp.Parameter, value: ArrayLike) -> None:
+    """``parameter.value = value`` for the SCP loops, with the checks that matter here.
+
+    cvxpy's setter tests every value against a projection onto the parameter's attributes
+    (``np.allclose`` of the difference), about 60 us per assignment and some 5 ms per 6-DoF
+    SCvx run. This checks what that test would catch in these loops -- the shape, NaN (which
+    cvxpy rejects too) and the sign of a ``nonneg`` parameter -- and stores the float array.
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter, for a wrong shape, a NaN or a negative value of a ``nonneg``
+        parameter.
+    """
+    array = np.asarray(value, dtype=float)
+    if array.shape != parameter.shape:
+        raise ValueError(
+            f"parameter {parameter.name()!r}: shape {array.shape}, expected {parameter.shape}"
+        )
+    if np.isnan(array).any():
+        raise ValueError(f"parameter {parameter.name()!r}: value contains NaN")
+    if parameter.attributes["nonneg"] and (array < 0.0).any():
+        raise ValueError(f"parameter {parameter.name()!r} is nonneg, got a negative value")
+    parameter.save_value(array)
 
 
 def batched_matvec(M: cp.Expression, V: cp.Expression, rows: int, cols: int) -> cp.Expression:

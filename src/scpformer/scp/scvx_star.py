@@ -78,7 +78,7 @@ from typing import Protocol
 import cvxpy as cp
 import numpy as np
 
-from scpformer.scp.conic import check_solver
+from scpformer.scp.conic import assign, check_solver
 from scpformer.scp.solution import (
     IterationRecord,
     Solution,
@@ -308,11 +308,12 @@ class PenaltyTerm:
 
     def assign(self, *, lambda_: np.ndarray, mu: np.ndarray, w: float, r: float) -> None:
         """Write the multipliers, weight and trust radius into the parameters."""
-        self.w.value, self.r.value = float(w), float(r)
+        assign(self.w, w)
+        assign(self.r, r)
         if self.lambda_ is not None:
-            self.lambda_.value = np.asarray(lambda_, dtype=float)
+            assign(self.lambda_, lambda_)
         if self.mu is not None:
-            self.mu.value = np.asarray(mu, dtype=float)
+            assign(self.mu, mu)
 
     def buffers(self) -> tuple[np.ndarray, np.ndarray]:
         """Values of ``xi`` and ``zeta`` after a solve (empty arrays when absent)."""

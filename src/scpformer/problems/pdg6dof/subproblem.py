@@ -63,6 +63,7 @@ from scpformer.cache import cached_pickle
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.scp.conic import (
     VariableSlices,
+    assign,
     batched_matvec,
     canonicalize,
     check_solver,
@@ -293,24 +294,24 @@ class PDGSubproblem:
     def set_instance(self, instance: PDGInstance) -> None:
         """Write the boundary conditions and constraint bounds of ``instance``.
 
-        A no-op when they already hold ``instance`` (cvxpy validates every assignment: about
-        1 ms for these eleven parameters, at every SCvx iteration otherwise).
+        A no-op when they already hold ``instance``, so that the SCvx loop can call it at every
+        iteration for free.
         """
         if instance is self._instance:
             return
         self._instance = instance
         c = instance.constants
-        self.x0.value = instance.x0
-        self.r_f.value = np.array(c.r_f)
-        self.v_f.value = np.array(c.v_f)
-        self.m_dry.value = c.m_dry
-        self.tan_gs.value = instance.tan_gamma_gs
-        self.tilt_bound.value = instance.tilt_bound
-        self.omega_max.value = math.radians(c.omega_max_deg)
-        self.T_min.value = c.T_min
-        self.T_max.value = c.T_max
-        self.cos_delta.value = math.cos(math.radians(c.delta_max_deg))
-        self.tf_bounds.value = np.array([c.tf_min, c.tf_max])
+        assign(self.x0, instance.x0)
+        assign(self.r_f, np.array(c.r_f))
+        assign(self.v_f, np.array(c.v_f))
+        assign(self.m_dry, c.m_dry)
+        assign(self.tan_gs, instance.tan_gamma_gs)
+        assign(self.tilt_bound, instance.tilt_bound)
+        assign(self.omega_max, math.radians(c.omega_max_deg))
+        assign(self.T_min, c.T_min)
+        assign(self.T_max, c.T_max)
+        assign(self.cos_delta, math.cos(math.radians(c.delta_max_deg)))
+        assign(self.tf_bounds, np.array([c.tf_min, c.tf_max]))
         self._alpha_mdot = c.model().alpha_mdot
         self.scale_x, self.scale_u, self.scale_sigma = trust_region_scales(instance)
 
@@ -319,18 +320,18 @@ class PDGSubproblem:
     ) -> None:
         """Write the FOH matrices and the reference trajectory of the current iterate."""
         k = disc.A.shape[0]
-        self.A.value = disc.A.reshape(k, -1)
-        self.Bm.value = disc.Bm.reshape(k, -1)
-        self.Bp.value = disc.Bp.reshape(k, -1)
-        self.S.value = disc.S
-        self.z.value = disc.z
+        assign(self.A, disc.A.reshape(k, -1))
+        assign(self.Bm, disc.Bm.reshape(k, -1))
+        assign(self.Bp, disc.Bp.reshape(k, -1))
+        assign(self.S, disc.S)
+        assign(self.z, disc.z)
         self._z_linear = disc.z
-        self.x_ref.value = x
-        self.u_ref.value = u
-        self.sigma_ref.value = sigma
+        assign(self.x_ref, x)
+        assign(self.u_ref, u)
+        assign(self.sigma_ref, sigma)
         norms = np.linalg.norm(u, axis=1, keepdims=True)
         safe = np.where(norms > 0.0, norms, 1.0)
-        self.thrust_dir.value = np.where(norms > 0.0, u / safe, np.array([1.0, 0.0, 0.0]))
+        assign(self.thrust_dir, np.where(norms > 0.0, u / safe, np.array([1.0, 0.0, 0.0])))
         self._set_mass_row(disc, x, u, sigma)
 
     def _set_mass_row(
@@ -341,19 +342,19 @@ class PDGSubproblem:
         S_k^m sigma_bar`` (any difference between the discretization's integral and
         :data:`MASS_QUADRATURE`, e.g. for ``n_sub != 2``, goes into ``c_k``)."""
         rate = sigma * self._alpha_mdot / (self.n_nodes - 1)
-        self.mass_rate.value = rate
+        assign(self.mass_rate, rate)
         offset = (
             disc.x_next[:, MASS] - x[:-1, MASS] + rate * mean_thrust(u) - disc.S[:, MASS] * sigma
         )
-        self.mass_offset.value = offset
+        assign(self.mass_offset, offset)
         self._mass_offset_linear = offset
 
     def shift_affine_term(self, defects: np.ndarray) -> None:
         """Second-order correction: ``z_k <- z_k - d_k`` with the defects ``d`` (K, 14) of a
         candidate, so that the linearized dynamics aim at the nonlinear flow there (the SOC
         step of SQP, Nocedal & Wright Sec. 15.5); ``set_linearization`` undoes it."""
-        self.z.value = self._z_linear - defects
-        self.mass_offset.value = self._mass_offset_linear - defects[:, MASS]
+        assign(self.z, self._z_linear - defects)
+        assign(self.mass_offset, self._mass_offset_linear - defects[:, MASS])
 
     def _set_soft_weights(self, weight: float) -> None:
         """Weights ``weight / scale_g^2`` of the soft trust region and their products with
@@ -361,12 +362,12 @@ class PDGSubproblem:
         w_cols = weight / self.scale_x**2
         w_groups = w_cols[[start for _, start, _ in STATE_GROUPS]]
         w_u, w_sigma = weight / self.scale_u[0] ** 2, weight / self.scale_sigma**2
-        self.w_x.value = w_groups
-        self.w_u.value = w_u
-        self.w_sigma.value = w_sigma
-        self.wx_ref.value = self.x_ref.value * w_cols
-        self.wu_ref.value = self.u_ref.value * w_u
-        self.wsigma_ref.value = self.sigma_ref.value * w_sigma
+        assign(self.w_x, w_groups)
+        assign(self.w_u, w_u)
+        assign(self.w_sigma, w_sigma)
+        assign(self.wx_ref, self.x_ref.value * w_cols)
+        assign(self.wu_ref, self.u_ref.value * w_u)
+        assign(self.wsigma_ref, self.sigma_ref.value * w_sigma)
 
     def solve(
         self,
@@ -412,10 +413,10 @@ class PDGSubproblem:
     ) -> None:
         """Write the trust region (box radius ``box``, default ``eta``; soft weight) and lambda."""
         box = eta if box is None else box
-        self.eta_x.value = box * self.scale_x
-        self.eta_u.value = box * self.scale_u
-        self.eta_sigma.value = box * self.scale_sigma
-        self.lambda_.value = lambda_
+        assign(self.eta_x, box * self.scale_x)
+        assign(self.eta_u, box * self.scale_u)
+        assign(self.eta_sigma, box * self.scale_sigma)
+        assign(self.lambda_, lambda_)
         if self.soft:
             self._set_soft_weights(soft_weight)
 

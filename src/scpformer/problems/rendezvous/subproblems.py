@@ -36,6 +36,7 @@ import numpy as np
 from scpformer.cache import cached_pickle
 from scpformer.scp.conic import (
     SOLVED,
+    assign,
     batched_matvec,
     canonicalize,
     check_solver,
@@ -117,10 +118,10 @@ class RendezvousSubproblem:
     ) -> None:
         """Write ``Phi_k`` (N, 6, 6), ``Phi_k B_k`` (N, 6, 3) [s] and the boundary ROE [m]."""
         n = self.n_nodes
-        self.phi.value = np.asarray(Phi).reshape(n, 36)
-        self.gamma.value = np.asarray(Gamma).reshape(n, 18) / U_SCALE
-        self.x_init.value = np.asarray(x_init, dtype=float)
-        self.x_dock.value = np.asarray(x_dock, dtype=float)
+        assign(self.phi, np.asarray(Phi).reshape(n, 36))
+        assign(self.gamma, np.asarray(Gamma).reshape(n, 18) / U_SCALE)
+        assign(self.x_init, x_init)
+        assign(self.x_dock, x_dock)
 
     def set_final_approach(
         self, x_wp: np.ndarray, A: np.ndarray, c: np.ndarray, b: np.ndarray, d: float
@@ -130,18 +131,18 @@ class RendezvousSubproblem:
         ``A`` (n_cone, 3, 6) = ``D Psi_k``, ``c`` (n_cone, 6) = ``n^T D Psi_k / cos gamma``,
         ``b`` (3,) = ``-apex``, ``d`` = ``-n^T apex / cos gamma``.
         """
-        self.x_wp.value = np.asarray(x_wp, dtype=float)
-        self.cone_A.value = np.asarray(A).reshape(A.shape[0], 18)
-        self.cone_c.value = np.asarray(c, dtype=float)
-        self.cone_b.value = np.asarray(b, dtype=float)
-        self.cone_d.value = float(d)
+        assign(self.x_wp, x_wp)
+        assign(self.cone_A, np.asarray(A).reshape(A.shape[0], 18))
+        assign(self.cone_c, c)
+        assign(self.cone_b, b)
+        assign(self.cone_d, d)
 
     def set_keep_out(self, a: np.ndarray, b: np.ndarray, x_ref: np.ndarray, zeta: float) -> None:
         """Write the cut ``a_k^T x_k >= b_k`` (Eqs. 15-16) and the trust region (Eq. 17)."""
-        self.koz_a.value = np.asarray(a, dtype=float)
-        self.koz_b.value = np.asarray(b, dtype=float)
-        self.x_ref.value = np.asarray(x_ref, dtype=float)
-        self.zeta.value = float(zeta)
+        assign(self.koz_a, a)
+        assign(self.koz_b, b)
+        assign(self.x_ref, x_ref)
+        assign(self.zeta, zeta)
 
     # -- solve ---------------------------------------------------------------------------
     def solve(self, solver: str = "clarabel") -> SubproblemSolution:

@@ -48,6 +48,7 @@ import numpy as np
 from scpformer.cache import cached_pickle
 from scpformer.scp.conic import (
     SOLVED,
+    assign,
     batched_matvec,
     canonicalize,
     check_solver,
@@ -147,11 +148,11 @@ class SafetySubproblem:
         """Write ``Phi_i`` (N, 6, 6), ``Phi_i B_i`` (N, 6, 3) [s], the boundary ROE [m] and the
         affine terms ``f_i`` (N, 6) [m] (zeros when ``None``)."""
         n = self.n_nodes
-        self.phi.value = np.asarray(Phi, dtype=float).reshape(n, 36)
-        self.gamma.value = np.asarray(Gamma, dtype=float).reshape(n, 18) / U_SCALE
-        self.f.value = np.zeros((n, 6)) if f is None else np.asarray(f, dtype=float)
-        self.x_init.value = np.asarray(x_init, dtype=float)
-        self.x_final.value = np.asarray(x_final, dtype=float)
+        assign(self.phi, np.asarray(Phi, dtype=float).reshape(n, 36))
+        assign(self.gamma, np.asarray(Gamma, dtype=float).reshape(n, 18) / U_SCALE)
+        assign(self.f, np.zeros((n, 6)) if f is None else np.asarray(f, dtype=float))
+        assign(self.x_init, x_init)
+        assign(self.x_final, x_final)
 
     def set_iterate(
         self,
@@ -168,12 +169,12 @@ class SafetySubproblem:
     ) -> None:
         """Write the reference, the linearized safety rows (N, K, ...), multipliers, weight and
         radius."""
-        self.x_ref.value = np.asarray(x_ref, dtype=float)
-        self.u_ref.value = U_SCALE * np.asarray(u_ref, dtype=float)
-        self.a_x.value = np.asarray(a_x, dtype=float).reshape(-1, 6)
-        self.a_u.value = np.asarray(a_u, dtype=float).reshape(-1, 3) / U_SCALE
-        self.c.value = np.asarray(c, dtype=float).reshape(-1)
-        self.u_radius.value = U_SCALE * u_trust_scale * float(r)
+        assign(self.x_ref, x_ref)
+        assign(self.u_ref, U_SCALE * np.asarray(u_ref, dtype=float))
+        assign(self.a_x, np.asarray(a_x, dtype=float).reshape(-1, 6))
+        assign(self.a_u, np.asarray(a_u, dtype=float).reshape(-1, 3) / U_SCALE)
+        assign(self.c, np.asarray(c, dtype=float).reshape(-1))
+        assign(self.u_radius, U_SCALE * u_trust_scale * float(r))
         self.term.assign(lambda_=np.zeros(0), mu=mu, w=w, r=r)
 
     # -- solve ---------------------------------------------------------------------------
