@@ -146,12 +146,19 @@ def primal_solution(solver: Any, raw: Any, inverse_data: Any) -> tuple[str, np.n
     0.5 ms per 6-DoF subproblem that no loop uses. Other solvers go through ``invert``.
     """
     if solver.name() == cp.CLARABEL:
-        return solver.STATUS_MAP.get(str(raw.status), cp.SOLVER_ERROR), raw.x
+        return clarabel_status(raw), raw.x
     solution = solver.invert(raw, inverse_data)
     if solution.status not in SOLVED:
         return str(solution.status), None
     (x,) = solution.primal_vars.values()
     return str(solution.status), x
+
+
+def clarabel_status(result: Any) -> str:
+    """cvxpy's status string for a Clarabel result (``SOLVER_ERROR`` for an unknown one)."""
+    from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL
+
+    return CLARABEL.STATUS_MAP.get(str(result.status), cp.SOLVER_ERROR)
 
 
 def primal_value(x: np.ndarray, slices: VariableSlices, key: str) -> np.ndarray:

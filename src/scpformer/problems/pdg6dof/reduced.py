@@ -43,11 +43,17 @@ from scpformer.problems.pdg6dof.subproblem import (
     SubproblemSolution,
     failed_solution,
 )
-from scpformer.scp.conic import SOLVERS, VariableSlices, primal_value, solver_options
+from scpformer.scp.conic import (
+    SOLVED,
+    SOLVERS,
+    VariableSlices,
+    clarabel_status,
+    primal_value,
+    solver_options,
+)
 
 ALWAYS = -1  # owner of a conic row kept in every reduced problem
 BOX = -2  # owner of a row of the safeguard trust-region box
-CLARABEL_STATUS = {"Solved": cp.OPTIMAL, "AlmostSolved": cp.OPTIMAL_INACCURATE}
 
 
 @dataclass(frozen=True)
@@ -208,8 +214,8 @@ class ReducedSubproblem:
             flags_kept=int(np.count_nonzero(keep)),
             iterations=int(result.iterations),
         )
-        status = CLARABEL_STATUS.get(str(result.status), str(result.status))
-        if status not in CLARABEL_STATUS.values():
+        status = clarabel_status(result)
+        if status not in SOLVED:
             return failed_solution(status, time.perf_counter() - start, solve_time)
         full = np.zeros(cols.size)
         full[cols] = np.asarray(result.x)
