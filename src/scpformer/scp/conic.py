@@ -32,6 +32,7 @@ from typing import Any
 
 import cvxpy as cp
 import numpy as np
+from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL
 from numpy.typing import ArrayLike
 
 SOLVERS: dict[str, str] = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
@@ -156,8 +157,6 @@ def primal_solution(solver: Any, raw: Any, inverse_data: Any) -> tuple[str, np.n
 
 def clarabel_status(result: Any) -> str:
     """cvxpy's status string for a Clarabel result (``SOLVER_ERROR`` for an unknown one)."""
-    from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL
-
     return CLARABEL.STATUS_MAP.get(str(result.status), cp.SOLVER_ERROR)
 
 
