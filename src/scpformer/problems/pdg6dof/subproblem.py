@@ -302,8 +302,8 @@ class PDGSubproblem:
         self._instance = instance
         c = instance.constants
         assign(self.x0, instance.x0)
-        assign(self.r_f, np.array(c.r_f))
-        assign(self.v_f, np.array(c.v_f))
+        assign(self.r_f, c.r_f)
+        assign(self.v_f, c.v_f)
         assign(self.m_dry, c.m_dry)
         assign(self.tan_gs, instance.tan_gamma_gs)
         assign(self.tilt_bound, instance.tilt_bound)
@@ -311,7 +311,7 @@ class PDGSubproblem:
         assign(self.T_min, c.T_min)
         assign(self.T_max, c.T_max)
         assign(self.cos_delta, math.cos(math.radians(c.delta_max_deg)))
-        assign(self.tf_bounds, np.array([c.tf_min, c.tf_max]))
+        assign(self.tf_bounds, (c.tf_min, c.tf_max))
         self._alpha_mdot = c.model().alpha_mdot
         self.scale_x, self.scale_u, self.scale_sigma = trust_region_scales(instance)
 
