@@ -19,6 +19,37 @@ def test_a_nonpositive_velocity_scale_is_a_usage_error_naming_the_flag(scale, ru
     assert "converged" not in done.stdout  # rejected before any solve
 
 
+@pytest.mark.parametrize("scale", ["-0.1", "1.5", "nan"])
+def test_an_attitude_scale_outside_0_1_is_a_usage_error_naming_the_flag(scale, run_benchmark):
+    done = run_benchmark("pdg6dof_embersarc.py", "--draws", "1", "--attitude-scale", scale)
+    assert done.returncode == 2
+    assert "--attitude-scale" in done.stderr
+    assert "converged" not in done.stdout
+
+
+def test_the_attitude_scale_shrinks_the_tilt_about_its_axis_and_the_rates():
+    from scpformer.dynamics import quaternion as quat
+
+    script = _embersarc_script()
+    state = script.draw_initial_state(np.random.default_rng(0))
+
+    def angle_axis(s):
+        q = quat.normalize(s["q"])
+        return 2.0 * np.arctan2(np.linalg.norm(q[1:]), q[0]), q[1:] / np.linalg.norm(q[1:])
+
+    same = script.scaled_attitude(state, 1.0)
+    np.testing.assert_allclose(same["q"], state["q"], atol=1e-15)
+    upright = script.scaled_attitude(state, 0.0)
+    np.testing.assert_allclose(upright["q"], [1.0, 0.0, 0.0, 0.0], atol=1e-15)
+    assert not upright["omega_deg"].any()
+    half = script.scaled_attitude(state, 0.5)
+    (angle, axis), (angle_half, axis_half) = angle_axis(state), angle_axis(half)
+    assert angle > 0.1 and angle_half == pytest.approx(0.5 * angle, rel=1e-12)
+    np.testing.assert_allclose(axis_half, axis, atol=1e-12)
+    np.testing.assert_allclose(half["omega_deg"], 0.5 * state["omega_deg"])
+    np.testing.assert_allclose(half["r"], state["r"])
+
+
 def _embersarc_script():
     spec = importlib.util.spec_from_file_location("pdg6dof_embersarc", SCRIPT)
     module = importlib.util.module_from_spec(spec)
