@@ -150,7 +150,7 @@ class SafetySubproblem:
         n = self.n_nodes
         assign(self.phi, np.asarray(Phi, dtype=float).reshape(n, 36))
         assign(self.gamma, np.asarray(Gamma, dtype=float).reshape(n, 18) / U_SCALE)
-        assign(self.f, np.zeros((n, 6)) if f is None else np.asarray(f, dtype=float))
+        assign(self.f, np.zeros((n, 6)) if f is None else f)
         assign(self.x_init, x_init)
         assign(self.x_final, x_final)
 
@@ -173,7 +173,7 @@ class SafetySubproblem:
         assign(self.u_ref, U_SCALE * np.asarray(u_ref, dtype=float))
         assign(self.a_x, np.asarray(a_x, dtype=float).reshape(-1, 6))
         assign(self.a_u, np.asarray(a_u, dtype=float).reshape(-1, 3) / U_SCALE)
-        assign(self.c, np.asarray(c, dtype=float).reshape(-1))
+        assign(self.c, np.reshape(c, -1))
         assign(self.u_radius, U_SCALE * u_trust_scale * float(r))
         self.term.assign(lambda_=np.zeros(0), mu=mu, w=w, r=r)
 
