@@ -20,8 +20,9 @@ the draws stay the same); the script prints one line per draw and exits 1 unless
 converged.
 
 Measured (docs/embersarc-scenario.md; seed 0, 3 draws, single deterministic runs): with the
-stall test and restart (session 13) ours converges on draw 0 (68 solves, verified) and stalls
-at infeasible stationary points on draws 1 and 2 at velocity scale 1.0; before them it ended in
+stall test and restart (session 13) ours converges on draw 0 (68 solves, verified; 46 with
+session 24's restart of a creeping run) and fails on draws 1 and 2 (stalled or at the cap) at
+velocity scale 1.0; before them it ended in
 max_iterations on all three. At velocity scale 0.8 it converges (verified) on draws 0 and 1.
 EmbersArc's own solver (its commit c2dbab6, K = 40, fixed t_f = 15 s, run verbatim outside
 the repository) reports "converged" on all three draws at 1.0, but its convergence test is a

@@ -185,4 +185,80 @@ def test_an_instance_out_of_propellant_stalls_early_without_a_restart():
     assert sol.iterations < 40  # not the 100 of the iteration cap
     assert sol.trajectory is not None and not sol.verification.passed
     assert sol.trajectory.x[-1, 13] == pytest.approx(2.0, abs=1e-6)  # burned to m_dry
-    assert "restart" not in sol.extras  # a longer flight would only burn more
+    # no restart from a longer flight, which would only burn more (a run stopped by the first
+    # run's looser test continues from its last iterate)
+    assert sol.extras.get("restart", {}).get("tf_guess") is None
+
+
+def _scripted_first_run(nominal, penalties, iterations):
+    """``nominal`` dressed as a first run stopped by the restart's looser stall test: its
+    accepted records carry ``penalties``, it used ``iterations`` solves."""
+    from dataclasses import replace
+
+    template = next(rec for rec in nominal.history if rec.accepted)
+    history = [
+        replace(template, iteration=i + 1, accepted=True, penalty=p)
+        for i, p in enumerate(penalties)
+    ]
+    return replace(
+        nominal, status=Status.STALLED, message="stalled after", history=history,
+        iterations=iterations,
+    )  # fmt: skip
+
+
+def _script_solve_scvx(monkeypatch, first, then):
+    """Make the restart logic's ``solve_scvx`` return ``first``, then ``then``; the returned
+    list collects each call's ``(guess, params, prior_penalties)``."""
+    from scpformer.problems.pdg6dof import problem as pdg
+
+    calls = []
+
+    def scripted(problem, guess, params, eta_init=None, prior_penalties=()):
+        calls.append((guess, params, list(prior_penalties)))
+        return first if len(calls) == 1 else then
+
+    monkeypatch.setattr(pdg, "solve_scvx", scripted)
+    return calls
+
+
+@pytest.mark.parametrize(
+    ("fall", "continued"), [(0.1, True), (0.01, False)], ids=["creeping", "stalled"]
+)
+def test_a_stopped_first_run_without_budget_for_a_restart(nominal, monkeypatch, fall, continued):
+    """Fewer than RESTART_MIN_BUDGET solves left: a run that fell by 10% over the window
+    (stopped by the looser test of the first run) continues from its last iterate with the
+    solves left; one that fell by 1% (stalled by the configured test) is returned as it is."""
+    from scpformer.problems.pdg6dof import problem as pdg
+    from scpformer.scp.scvx import SCvxParameters
+
+    window = SCvxParameters().stall_window
+    penalties = list(0.2 * (1.0 - fall) ** (np.arange(window + 1) / window))
+    iter_max = SCvxParameters().iter_max
+    first = _scripted_first_run(nominal, penalties, iter_max - pdg.RESTART_MIN_BUDGET + 1)
+    calls = _script_solve_scvx(monkeypatch, first, nominal)
+    sol = solve(PDGInstance())
+    assert calls[0][1].stall_decrease == pdg.RESTART_DECREASE  # the first run's looser test
+    if not continued:
+        assert len(calls) == 1 and sol is first
+        return
+    guess, params, prior = calls[1]
+    assert guess is first.trajectory  # not a new cubic profile
+    assert prior == penalties  # the configured stall test sees the first run's iterations
+    assert params.iter_max == pdg.RESTART_MIN_BUDGET - 1
+    assert params.stall_decrease == SCvxParameters().stall_decrease  # the configured test
+    assert sol.iterations == first.iterations + nominal.iterations
+    assert sol.extras["restart"]["tf_guess"] is None
+
+
+def test_a_creeping_first_run_restarts_from_a_longer_final_time(nominal, monkeypatch):
+    from scpformer.problems.pdg6dof import problem as pdg
+
+    penalties = list(np.linspace(0.2, 0.19, 16))  # 5% over the window: slow, not stalled
+    first = _scripted_first_run(nominal, penalties, 30)
+    calls = _script_solve_scvx(monkeypatch, first, nominal)
+    sol = solve(PDGInstance())
+    guess, params, _ = calls[1]
+    tf_first = float(first.trajectory.p[0])
+    assert float(guess.p[0]) == pytest.approx(pdg.RESTART_TF_FACTOR * tf_first)
+    assert params.iter_max == 100 - 30
+    assert sol.status is nominal.status and sol.extras["restart"]["after"] == 30

@@ -5,9 +5,9 @@ from scpformer.scp.scvx import (
     Candidate,
     Evaluation,
     SCvxParameters,
-    _stalled,
     meets_stopping_test,
     solve_scvx,
+    stalled,
     update_trust_radius,
 )
 from scpformer.scp.solution import IterationRecord, Status, Trajectory, Verification
@@ -82,14 +82,14 @@ def test_bad_parameters_name_the_field(kwargs, field):
 def test_the_stall_test_fires_only_on_a_flat_penalty_above_its_floor_after_a_full_window():
     w = P.stall_window
     flat = [0.5] * 3 + [0.06] * w  # penalty flat over the last window
-    assert not _stalled(P, flat[:w])  # not a full window yet
-    assert _stalled(P, [*flat, 0.0599])
+    assert not stalled(P, flat[:w])  # not a full window yet
+    assert stalled(P, [*flat, 0.0599])
     falling = [0.3 * 0.97**i for i in range(w + 5)]  # 3% per accepted iterate: slow progress
-    assert not _stalled(P, falling)
+    assert not stalled(P, falling)
     rising_then_flat = [0.05] + [0.2] * w  # a penalty above its value a window ago
-    assert _stalled(P, rising_then_flat)
-    assert not _stalled(P, [1e-4] * (w + 2))  # nearly feasible: creeping cost, not a stall
-    assert not _stalled(SCvxParameters(stall_window=0), flat)
+    assert stalled(P, rising_then_flat)
+    assert not stalled(P, [1e-4] * (w + 2))  # nearly feasible: creeping cost, not a stall
+    assert not stalled(SCvxParameters(stall_window=0), flat)
 
 
 class ScriptedProblem:

@@ -39,7 +39,9 @@ as ``Status.STALLED``. Measured on 10 instances of ``generate pdg6dof``'s distri
 end at ``iter_max`` (most of them out of propellant: the final mass at ``m_dry``), the penalty
 is flat to two digits from iteration 15-25 on; on 12 instances that converge slowly (75-94
 solves) it falls by 5-15% per 10 accepted iterations all the way. ``stall_window = 0`` turns
-the test off.
+the test off. The 6-DoF family runs its default start's first run with a looser
+``stall_decrease`` and restarts it with a longer final time
+(:func:`scpformer.problems.pdg6dof.problem.solve_with_restart`).
 
 Second-order correction (``second_order_correction``, not in the paper): when the defects of a
 candidate push its ratio below ``rho_1`` the problem family corrects the candidate
@@ -69,7 +71,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -227,12 +229,15 @@ def solve_scvx(
     params: SCvxParameters | None = None,
     eta_init: float | None = None,
     radius_update: RadiusUpdate | None = None,
+    prior_penalties: Sequence[float] = (),
 ) -> Solution:
     """Run SCvx from ``guess``; ``eta_init`` overrides ``params.eta_init`` (e.g. T-SCvx's 0.01).
 
     ``params.iter_max`` counts subproblem solves, second-order corrections included; every
     solve is one record of the history. ``radius_update(eta, rho, params) -> (eta, accepted)``
     replaces Eq. 15 (:func:`update_trust_radius`), e.g. by T-SCvx's Eq. 22.
+    ``prior_penalties`` are the accepted penalties of a run that ``guess`` continues: the stall
+    test sees them before this run's own.
     """
     radius_update = radius_update or update_trust_radius
     params = params or SCvxParameters()
@@ -243,7 +248,7 @@ def solve_scvx(
     J_bar = ev_bar.cost + params.lambda_ * ev_bar.penalty
     history: list[IterationRecord] = []
     status, message = Status.MAX_ITERATIONS, ""
-    penalties: list[float] = []  # of the accepted iterates, for the stall test
+    penalties = list(prior_penalties)  # of the accepted iterates, for the stall test
     bar_negligible = False  # z_bar feasible enough to be returned as converged
     while len(history) < params.iter_max:
         t_iter = time.perf_counter()
@@ -298,7 +303,7 @@ def solve_scvx(
             status = Status.CONVERGED
             break
         penalties.append(ev.penalty)
-        if _stalled(params, penalties):
+        if stalled(params, penalties):
             status, message = Status.STALLED, _stall_message(params, penalties, len(history))
             break
     return _finish(problem, z_bar, ev_bar, status, message, history, start, clock)
@@ -324,7 +329,7 @@ def _certifies_stationary(
     return J_bar - linear_cost <= params.eps_opt * max(1.0, abs(J_bar))
 
 
-def _stalled(params: SCvxParameters, penalties: list[float]) -> bool:
+def stalled(params: SCvxParameters, penalties: list[float]) -> bool:
     """The stall test of the module docstring on the accepted iterates' penalties."""
     window = params.stall_window
     if window == 0 or len(penalties) <= window or penalties[-1] <= params.stall_penalty:
