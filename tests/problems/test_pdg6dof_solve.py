@@ -181,13 +181,11 @@ def test_an_instance_out_of_propellant_stalls_early_without_a_restart():
     # m0 = 2.05 leaves 0.05 U_M of propellant: far too little to land from the nominal state
     sol = solve(PDGInstance(m0=2.05))
     assert sol.status is Status.STALLED
-    assert "stalled after" in sol.message and "infeasible" in sol.message
+    assert "stalled out of propellant" in sol.message and "lacks the propellant" in sol.message
     assert sol.iterations < 40  # not the 100 of the iteration cap
     assert sol.trajectory is not None and not sol.verification.passed
     assert sol.trajectory.x[-1, 13] == pytest.approx(2.0, abs=1e-6)  # burned to m_dry
-    # no restart from a longer flight, which would only burn more (a run stopped by the first
-    # run's looser test continues from its last iterate)
-    assert sol.extras.get("restart", {}).get("tf_guess") is None
+    assert "restart" not in sol.extras  # a longer flight would only burn more
 
 
 def _scripted_first_run(nominal, penalties, iterations):
