@@ -200,7 +200,9 @@ def write_figures(plot: Path, solution: Solution, instance: PDGInstance) -> None
 
     x, u = solution.trajectory.x, solution.trajectory.u
     plot_trajectory(solution.t, x, u, constants_record(instance), path=plot)
-    plot_history([rec.summary() for rec in solution.history], path=history_plot_path(plot))
+    restart_after = solution.extras.get("restart", {}).get("after")
+    rows = [rec.summary() for rec in solution.history]
+    plot_history(rows, path=history_plot_path(plot), restart_after=restart_after)
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:

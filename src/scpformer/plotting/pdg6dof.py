@@ -353,6 +353,22 @@ def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
     return np.array([np.nan if r[key] is None else float(r[key]) for r in rows], dtype=float)
 
 
+def _history_markers(
+    ax, it: np.ndarray, vals: np.ndarray, rejected: np.ndarray, corrected: np.ndarray
+) -> None:
+    """Markers of :func:`plot_history`: filled circles for accepted conic solves, hollow for
+    rejected candidates, diamonds for least-change corrections (labelled when present)."""
+    kinds = (
+        (~rejected & ~corrected, "o", _TRAJ_COLOR, "accepted"),
+        (rejected, "o", "white", "rejected"),
+        (corrected & ~rejected, "D", _TRAJ_COLOR, "least-change correction"),
+    )
+    for mask, marker, face, label in kinds:
+        if mask.any():
+            ax.plot(it[mask], vals[mask], linestyle="none", marker=marker, markersize=4.5,
+                    markerfacecolor=face, markeredgecolor=_TRAJ_COLOR, label=label)  # fmt: skip
+
+
 def _autoscale_log(ax, values: np.ndarray) -> None:
     """Log-y when all finite values are positive, symlog if some are, else linear."""
     finite = values[np.isfinite(values)]
@@ -371,6 +387,7 @@ def _autoscale_log(ax, values: np.ndarray) -> None:
 def plot_history(
     history_rows: Sequence[Mapping[str, Any]],
     path: str | PathLike[str] | None = None,
+    restart_after: int | None = None,
 ) -> Figure:
     """Plot an SCvx convergence history.
 
@@ -378,9 +395,15 @@ def plot_history(
     ----------
     history_rows : sequence of mappings
         One mapping per iteration with keys ``iteration``, ``cost``, ``penalty``,
-        ``trust_radius`` and ``virtual_control_norm``; ``None`` values are skipped.
+        ``trust_radius`` and ``virtual_control_norm``; ``None`` values are skipped. Optional
+        keys (those of :meth:`~scpformer.scp.solution.IterationRecord.summary`): rows with
+        ``accepted`` false are drawn as hollow markers (a rejected candidate), rows with
+        ``solver_status == "least_change"`` as diamonds (a correction without a conic solve).
     path : path-like, optional
         If given, the figure is saved there in the format its suffix names (dpi 120).
+    restart_after : int, optional
+        Iterations of a first run that was restarted (``Solution.extras["restart"]["after"]``):
+        a dashed vertical line marks where the restart begins.
 
     Returns
     -------
@@ -412,9 +435,15 @@ def plot_history(
         ("trust_radius", "Trust-region radius", "radius", True),
         ("virtual_control_norm", "Virtual control", r"$\|\nu\|$", True),
     )
+    rejected = np.array([row.get("accepted", True) is False for row in rows])
+    corrected = np.array([row.get("solver_status") == "least_change" for row in rows])
     for ax, (key, title, ylabel, log) in zip(axes.flat, panels, strict=True):
         vals = _column(rows, key)
-        ax.plot(it, vals, color=_TRAJ_COLOR, marker="o", markersize=4, linewidth=1.4)
+        ax.plot(it, vals, color=_TRAJ_COLOR, linewidth=1.4)
+        _history_markers(ax, it, vals, rejected, corrected)
+        if restart_after is not None:
+            ax.axvline(restart_after + 0.5, color="0.4", linestyle="--", linewidth=1.0,
+                       label="restart")  # fmt: skip
         if log:
             _autoscale_log(ax, vals)
         ax.set_title(title)
@@ -424,7 +453,10 @@ def plot_history(
     for ax in axes[-1]:
         ax.set_xlabel("iteration")
         ax.xaxis.get_major_locator().set_params(integer=True)
-    fig.suptitle(f"SCvx convergence ({len(rows)} iterations)", fontsize=13)
+    if rejected.any() or corrected.any() or restart_after is not None:
+        axes.flat[0].legend(loc="best", fontsize=8)
+    solves = len(rows) - int(corrected.sum())
+    fig.suptitle(f"SCvx convergence ({len(rows)} iterations, {solves} conic solves)", fontsize=13)
 
     _save(fig, path)
     return fig
