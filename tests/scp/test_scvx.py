@@ -154,3 +154,17 @@ def test_a_predicted_decrease_is_no_certificate_under_a_small_radius():
     small = SCvxParameters(eta_init=0.5, eta_ub=0.5, iter_max=3)
     solution = solve_scvx(problem, ScriptedProblem._z(0), small)
     assert solution.status is Status.MAX_ITERATIONS
+
+
+def test_a_candidate_whose_nonlinear_penalty_is_not_finite_is_rejected():
+    # candidate 1's flow overflowed (penalty nan): it must count as infinitely bad, not as a
+    # step whose ratio is undefined (which SCvx accepts as "no predicted change")
+    problem = ScriptedProblem(
+        costs=[0.0, -3.0, -2.0], penalties=[1.0, np.nan, 0.0], predictions=[None, -3.0, -2.0]
+    )
+    params = SCvxParameters(iter_max=2, second_order_correction=False)
+    solution = solve_scvx(problem, ScriptedProblem._z(0), params)
+    first = solution.history[0]
+    assert not first.accepted and first.J == np.inf
+    assert first.trust_radius == params.eta_init and solution.history[1].trust_radius < 2.0
+    assert solution.history[1].accepted and solution.cost == -2.0

@@ -354,13 +354,19 @@ def _ratio(delta_J: float, delta_L: float) -> float:
 def _evaluated(
     problem: ConvexifiedProblem, cand: Candidate, params: SCvxParameters, clock: dict[str, float]
 ) -> tuple[Evaluation, float] | None:
-    """Nonlinear evaluation and penalized cost ``J`` (Eq. 16) of a candidate; None if failed."""
+    """Nonlinear evaluation and penalized cost ``J`` (Eq. 16) of a candidate; None if failed.
+
+    A candidate far from the iterate can make the nonlinear flow overflow; its ``J`` is then
+    ``inf``, so that the ratio test rejects it (a nan ``J`` would make the ratio nan, which
+    reads as "the subproblem predicts no change" and accepts the step).
+    """
     clock["solver"] += cand.solver_time
     if not cand.ok or cand.trajectory is None:
         return None
     ev = problem.evaluate(cand.trajectory)
     clock["discretization"] += ev.time
-    return ev, ev.cost + params.lambda_ * ev.penalty
+    J = ev.cost + params.lambda_ * ev.penalty
+    return ev, J if math.isfinite(J) else math.inf
 
 
 def _wants_correction(

@@ -139,8 +139,12 @@ class PDGProblem:
         )
 
     def evaluate(self, z: Trajectory) -> Evaluation:
+        """The nonlinear cost, penalty and linearization about ``z``. A candidate far outside
+        the region the dynamics were linearized in can make the flow overflow: its defects
+        are then inf or nan, quietly, and SCvx rejects it (``J = inf``)."""
         start = time.perf_counter()
-        disc = foh_discretize(self.linearize, z.x, z.u, float(z.p[0]), self.config.n_sub)
+        with np.errstate(over="ignore", invalid="ignore"):
+            disc = foh_discretize(self.linearize, z.x, z.u, float(z.p[0]), self.config.n_sub)
         defects = disc.defects(z.x)
         values = con.constraint_values(self.instance, z.x, z.u)
         return Evaluation(
@@ -153,8 +157,11 @@ class PDGProblem:
         )
 
     def flow_defects(self, z: Trajectory) -> np.ndarray:
-        """The defects ``x_{k+1} - F_k(z)`` (K, 14) of ``z`` without its linearization."""
-        return z.x[1:] - foh_flow(self.dynamics, z.x, z.u, float(z.p[0]), self.config.n_sub)
+        """The defects ``x_{k+1} - F_k(z)`` (K, 14) of ``z`` without its linearization (inf or
+        nan, quietly, where the flow overflows: see :meth:`evaluate`)."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            flow = foh_flow(self.dynamics, z.x, z.u, float(z.p[0]), self.config.n_sub)
+        return z.x[1:] - flow
 
     def solve_subproblem(
         self, z: Trajectory, evaluation: Evaluation, eta: float, lambda_: float, solver: str
