@@ -541,36 +541,46 @@ def solve_with_restart(
     """
     params = problem.config.scvx
     first = solve_scvx(problem, guess, _first_run_params(params), eta_init=eta_init)
-    budget = params.iter_max - first.iterations
     if first.status is not Status.STALLED:
         return first
     instance, c = problem.instance, problem.instance.constants
-    out_of_propellant = first.trajectory.x[-1, 13] <= c.m_dry + RESTART_DRY_MARGIN * (
-        instance.m0 - c.m_dry
-    )
     penalties = [r.penalty for r in first.history if r.accepted]
-    if out_of_propellant:
-        return _out_of_propellant(first, params, penalties)
+    if first.trajectory.x[-1, 13] <= c.m_dry + RESTART_DRY_MARGIN * (instance.m0 - c.m_dry):
+        return _out_of_propellant(first, params.stall_window, penalties)
+    budget = params.iter_max - first.iterations
     if budget < RESTART_MIN_BUDGET:
-        if stalled(params, penalties):
-            return first
-        if budget < 1:  # stopped by the looser test on its last solve
-            message = f"no convergence in {first.iterations} iterations (slow progress)"
-            return replace(first, status=Status.MAX_ITERATIONS, message=message)
-        rest = solve_scvx(
-            problem, first.trajectory, replace(params, iter_max=budget), eta_init,
-            prior_penalties=penalties,
-        )  # fmt: skip
-        return _joined(first, rest, None)
+        return _continued(problem, first, penalties, budget, eta_init)
     tf = min(RESTART_TF_FACTOR * float(first.trajectory.p[0]), c.tf_max)
     restart_guess = cubic_profile_trajectory(instance, problem.config.n_nodes, tf)
     second = solve_scvx(problem, restart_guess, replace(params, iter_max=budget), eta_init)
     return _joined(first, second, tf)
 
 
-def _out_of_propellant(first: Solution, params: SCvxParameters, penalties: list[float]) -> Solution:
+def _continued(
+    problem: PDGProblem,
+    first: Solution,
+    penalties: list[float],
+    budget: int,
+    eta_init: float | None,
+) -> Solution:
+    """A first run stopped with too few solves left for a restart: returned as it is when the
+    configured stall test holds, else continued from its last iterate under that test (which
+    sees the first run's accepted ``penalties``) with the ``budget`` left."""
+    params = problem.config.scvx
+    if stalled(params, penalties):
+        return first
+    if budget < 1:  # stopped by the looser test on its last solve
+        message = f"no convergence in {first.iterations} iterations (slow progress)"
+        return replace(first, status=Status.MAX_ITERATIONS, message=message)
+    rest = solve_scvx(
+        problem, first.trajectory, replace(params, iter_max=budget), eta_init,
+        prior_penalties=penalties,
+    )  # fmt: skip
+    return _joined(first, rest, None)
+
+
+def _out_of_propellant(first: Solution, window: int, penalties: list[float]) -> Solution:
     """``first`` as a run stalled out of propellant (no restart: a longer flight burns more)."""
-    window = params.stall_window
     message = (
         f"stalled out of propellant after {first.iterations} iterations: the final mass is at "
         f"the dry mass and the penalty fell only from {penalties[-1 - window]:.3g} to "
