@@ -1,6 +1,7 @@
 """Every bad input of generation gets a clear message, and no finished shard is lost."""
 
 import errno
+import json
 
 import numpy as np
 import pytest
@@ -72,6 +73,40 @@ def test_a_corrupt_manifest_is_a_clear_error(toy_folder):
 def test_a_manifest_missing_a_field_names_the_field(toy_folder):
     (toy_folder / storage.MANIFEST_NAME).write_text('{"format_version": 1}')
     with pytest.raises(DatasetError, match=r"manifest.json is corrupt: it has no field '\w+'"):
+        storage.read_manifest(toy_folder)
+
+
+def _tampered(folder, edit):
+    path = folder / storage.MANIFEST_NAME
+    data = json.loads(path.read_text())
+    edit(data)
+    path.write_text(json.dumps(data))
+
+
+@pytest.mark.parametrize("name", ["../victim.h5", "/tmp/victim.h5", "sub/shard.h5", ".h5", None])
+def test_a_manifest_naming_a_shard_outside_the_folder_is_corrupt_and_nothing_is_deleted(
+    toy_folder, name
+):
+    victim = toy_folder.parent / "victim.h5"
+    victim.write_text("not yours")
+    _tampered(toy_folder, lambda data: data["shards"][0].update(file=name))
+    with pytest.raises(DatasetError, match=r"manifest.json is corrupt: shard file"):
+        generate(ToyFamily(), config(toy_folder))
+    assert victim.read_text() == "not yours"
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d["shards"][0].update(count="x"), r"count must be an integer >= 0, got 'x'"),
+        (lambda d: d["shards"][0].update(stop=-1), r"stop must be an integer >= 0"),
+        (lambda d: d.update(n="abc"), r"n must be an integer >= 0, got 'abc'"),
+        (lambda d: d.update(shard_size=0), r"shard_size must be an integer >= 1, got 0"),
+    ],
+)
+def test_a_manifest_with_a_wrongly_typed_number_names_it(toy_folder, edit, message):
+    _tampered(toy_folder, edit)
+    with pytest.raises(DatasetError, match=r"manifest.json is corrupt: .*" + message):
         storage.read_manifest(toy_folder)
 
 

@@ -69,8 +69,26 @@ class ShardInfo:
     bytes: int  # file size
     status_counts: dict[str, int] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        # a manifest names its shards; a name that leaves the folder ("../x.h5", "/tmp/x")
+        # would let a regeneration delete a file outside the dataset
+        if not isinstance(self.file, str) or Path(self.file).name != self.file:
+            raise ValueError(f"shard file {self.file!r} is not a file name inside the folder")
+        if not self.file.endswith(".h5") or self.file.startswith("."):
+            raise ValueError(f"shard file {self.file!r} is not a shard (*.h5)")
+        for name in ("start", "stop", "count", "bytes"):
+            _require_count(f"shard {self.file}: {name}", getattr(self, name))
+        if self.stop < self.start:
+            raise ValueError(f"shard {self.file}: stop {self.stop} before start {self.start}")
+
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+
+def _require_count(what: str, value: Any, least: int = 0) -> None:
+    """Raise ``ValueError`` unless ``value`` is an int (not a bool) of at least ``least``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < least:
+        raise ValueError(f"{what} must be an integer >= {least}, got {value!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,6 +112,12 @@ class Manifest:
     shards: tuple[ShardInfo, ...] = ()
     runs: tuple[dict[str, Any], ...] = ()  # one record per (re)start: backend, workers, limits
     format_version: int = FORMAT_VERSION
+
+    def __post_init__(self) -> None:
+        _require_count("n", self.n)
+        _require_count("shard_size", self.shard_size, least=1)
+        _require_count("seed", self.seed)
+        _require_count("format_version", self.format_version, least=1)
 
     # -- plan and progress -------------------------------------------------------------------
     def planned_ranges(self) -> list[tuple[int, int]]:
