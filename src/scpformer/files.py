@@ -8,6 +8,7 @@ any earlier file at the path untouched.
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import tempfile
@@ -56,8 +57,9 @@ def check_output_file(path: str | Path, what: str, formats: tuple[str, ...] | No
     Raises
     ------
     ValueError
-        Naming ``what`` and the path: an existing folder, a parent that is a file, a folder
-        without write permission (or on a read-only file system), an unknown suffix.
+        Naming ``what`` and the path: an existing folder, device, pipe or socket, a parent that
+        is a file, a folder without write permission (or on a read-only file system), an
+        unknown suffix.
     """
     path = Path(path)
     if formats is not None and path.suffix.lower().lstrip(".") not in formats:
@@ -65,6 +67,8 @@ def check_output_file(path: str | Path, what: str, formats: tuple[str, ...] | No
         raise ValueError(f"{what} {path}: unknown figure format {path.suffix!r}; use {shown}")
     if path.is_dir():
         raise ValueError(f"{what} {path} is a folder; give a file name")
+    if path.exists() and not path.is_file():
+        raise ValueError(f"{what} {path} is not a regular file (a device, pipe or socket)")
     if path.exists() and not os.access(path, os.W_OK):
         raise ValueError(f"{what} {path}: the file is not writable")
     parent = path.absolute().parent
@@ -92,10 +96,16 @@ def check_output_folder(path: str | Path, what: str) -> Path:
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary name, fsync and a rename.
 
-    Raises ``OSError`` (e.g. ``ENOSPC``) with the temporary file removed and any earlier file
-    at ``path`` untouched.
+    A symbolic link is written through (its target replaced, the link kept). Raises
+    ``OSError`` (e.g. ``ENOSPC``) with the temporary file removed and any earlier file at
+    ``path`` untouched, and ``FileExistsError`` when ``path`` is there but is not a regular
+    file (a device, pipe or socket would be replaced by the rename).
     """
     path = Path(path)
+    if path.is_symlink():
+        path = path.resolve()
+    if path.exists() and not path.is_file():
+        raise FileExistsError(errno.EEXIST, "exists and is not a regular file", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     with _naming(path, tmp):

@@ -38,7 +38,10 @@ def places(tmp_path, read_only_dir):
     (folder / "keep.txt").write_text("precious")
     (tmp_path / "file.txt").write_text("precious")
     (tmp_path / "old.npz").write_bytes(b"an earlier solution")
+    os.mkfifo(tmp_path / "fifo.npz")
     return {
+        "{fifo}": str(tmp_path / "fifo.npz"),
+        "{name}": tmp_path.name,
         "{tmp}": str(tmp_path),
         "{dir}": str(folder),
         "{file}": str(tmp_path / "file.txt"),
@@ -133,6 +136,16 @@ FLAG_CASES = {
         "is a folder",
     ),
     "instance-missing": (["solve", "pdg6dof", "--instance", "{tmp}/nope.json"], "not found"),
+    "out-is-a-device": (["solve", "pdg6dof", "--out", "/dev/null"], "not a regular file"),
+    "out-is-a-pipe": (["solve", "pdg6dof", "--out", "{fifo}"], "not a regular file"),
+    "out-and-plot-the-same-file": (
+        ["solve", "pdg6dof", "--out", "{tmp}/same.png", "--plot", "{tmp}/same.png"],
+        "both write",
+    ),
+    "rendezvous-out-and-plot-the-same-file": (
+        ["solve", "rendezvous", "--out", "{tmp}/r.svg", "--plot", "{tmp}/../{name}/r.svg"],
+        "both write",
+    ),
 }
 
 

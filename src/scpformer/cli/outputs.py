@@ -17,7 +17,8 @@ def check_solve_outputs(out: Path | None, plot: Path | None, *figures: Path | No
     Raises
     ------
     ValueError
-        Naming the flag and the path (see :func:`scpformer.files.check_output_file`).
+        Naming the flag and the path (see :func:`scpformer.files.check_output_file`), or
+        both flags when ``--out`` and a figure would be the same file.
     """
     if out is not None:
         check_output_file(out, "--out")
@@ -25,6 +26,8 @@ def check_solve_outputs(out: Path | None, plot: Path | None, *figures: Path | No
         for path in (plot, *figures):
             if path is not None:
                 check_output_file(path, "--plot", FIGURE_FORMATS)
+                if out is not None and Path(path).resolve() == Path(out).resolve():
+                    raise ValueError(f"--out and --plot both write {out}; give two file names")
 
 
 def write_csv(path: Path, fields: Sequence[str], rows: Iterable[dict[str, Any]]) -> None:
