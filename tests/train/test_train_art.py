@@ -154,6 +154,11 @@ def test_an_existing_run_is_not_overwritten_and_resumes_only_as_itself(toy_rdv, 
         _train(toy_rdv, tmp_path / "run", 2, kind="gru", resume=True)
     result = _train(toy_rdv, tmp_path / "new", 1, resume=True)  # nothing to resume: starts
     assert result.resumed_from == 0
+    (tmp_path / "new" / "checkpoint.pt").unlink()  # a run that lost its checkpoint
+    kept = {f.name: f.read_bytes() for f in (tmp_path / "new").iterdir() if f.is_file()}
+    with pytest.raises(ValueError, match=r"holds no checkpoint\.pt to resume from"):
+        _train(toy_rdv, tmp_path / "new", 2, resume=True)
+    assert {f.name: f.read_bytes() for f in (tmp_path / "new").iterdir() if f.is_file()} == kept
     with pytest.raises(ValueError, match="only epochs and device may change, not lr"):
         _train(toy_rdv, tmp_path / "run", 2, resume=True, lr=0.5)
     with pytest.raises(ValueError, match="used preset 'small', not 'paper'"):

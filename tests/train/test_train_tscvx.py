@@ -203,6 +203,12 @@ def test_resume_continues_and_an_existing_run_is_not_overwritten(fake_pdg, tmp_p
     result = train(fake_pdg, run, networks=("tight",), overrides=FAST | {"epochs": 2},
                    resume=True)  # fmt: skip
     assert [r.epoch for r in result.networks["tight"].states[-1].history] == [1, 2]
+    lost = next(run.rglob("checkpoint.pt"))  # a network that lost its checkpoint
+    lost.unlink()
+    kept = {str(f): f.read_bytes() for f in run.rglob("*") if f.is_file()}
+    with pytest.raises(ValueError, match=r"holds no checkpoint\.pt to resume from"):
+        train(fake_pdg, run, networks=("tight",), overrides=FAST | {"epochs": 3}, resume=True)
+    assert {str(f): f.read_bytes() for f in run.rglob("*") if f.is_file()} == kept
 
 
 def test_evaluation_on_the_test_split_writes_its_files(fake_pdg, tmp_path):

@@ -44,6 +44,7 @@ from scpformer.train.checkpoint import (
     from_plain,
     manifest_digest,
     read_checkpoint,
+    refuse_resume_without_checkpoint,
     save_checkpoint,
 )
 from scpformer.train.config import TrainConfig, train_config
@@ -276,6 +277,8 @@ def _previous_run(out: Path, kind: str, frame: str | None, resume: bool) -> dict
             f"{out} already holds a training run: pass --resume to continue it, or another --out"
         )
     if not exists:
+        if resume:
+            refuse_resume_without_checkpoint(out)
         return None
     payload = read_checkpoint(out, kind=kind, frame=frame)
     payload["extra"] = from_plain(payload["extra"])

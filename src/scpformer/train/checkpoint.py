@@ -46,6 +46,18 @@ FORMAT_VERSION = 1
 _NUMPY_TAG = "__numpy__"
 
 
+def refuse_resume_without_checkpoint(folder: Path) -> None:
+    """Raise ``ValueError`` when ``--resume`` points at a run ``folder`` whose checkpoint is
+    gone while other files of the run remain: a new run would overwrite them."""
+    if (folder / CHECKPOINT_NAME).is_file() or not folder.is_dir():
+        return
+    if any(path.is_file() for path in folder.iterdir()):
+        raise ValueError(
+            f"--resume: {folder} holds no {CHECKPOINT_NAME} to resume from; its other files "
+            "would be overwritten by a new run (give another --out, or empty the folder)"
+        )
+
+
 class CheckpointError(ValueError):
     """A checkpoint that is missing, unreadable or does not fit what it is loaded for."""
 

@@ -76,6 +76,7 @@ from scpformer.train.checkpoint import (
     from_plain,
     manifest_digest,
     read_checkpoint,
+    refuse_resume_without_checkpoint,
     save_checkpoint,
 )
 from scpformer.train.config import TrainConfig, train_config
@@ -513,6 +514,8 @@ def _fit_fold(
 ) -> tuple[FitState, Any]:
     """Train one network on one fold in ``folder`` (resuming its checkpoint when asked)."""
     previous = None
+    if resume:
+        refuse_resume_without_checkpoint(folder)
     if resume and (folder / CHECKPOINT_NAME).is_file():
         previous = read_checkpoint(folder, kind=kind, family=FAMILY)
         previous["extra"] = from_plain(previous["extra"])
