@@ -108,6 +108,15 @@ def check_in_range(name: str, value: Any, low: float, high: float) -> float:
     return number
 
 
+def check_interval(name: str, value: Any) -> tuple[float, float]:
+    """``(low, high)`` as floats after checking two finite numbers with ``low <= high`` (a
+    sampling range); ``ValueError`` naming ``name`` otherwise."""
+    low, high = check_finite(name, value, shape=(2,))
+    if low > high:
+        raise ValueError(f"{name} must satisfy low <= high, got ({low:g}, {high:g})")
+    return float(low), float(high)
+
+
 def check_trajectory(name: str, value: Any, like: Any) -> Any:
     """Return ``value`` after checking it has ``like``'s type and finite ``x``, ``u``, ``p``
     of ``like``'s shapes (a warm start checked against the default initial guess).

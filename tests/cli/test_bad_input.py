@@ -136,6 +136,14 @@ FLAG_CASES = {
         "is a folder",
     ),
     "instance-missing": (["solve", "pdg6dof", "--instance", "{tmp}/nope.json"], "not found"),
+    "generate-range-inverted": (
+        ["generate", "rendezvous", "--n", "2", "--out", "{tmp}/g", "--range-horizon-orbits", "3", "1"],
+        "ranges.horizon_orbits must satisfy low <= high",
+    ),
+    "generate-range-nan": (
+        ["generate", "rendezvous", "--n", "2", "--out", "{tmp}/gen", "--range-da-m", "nan", "1"],
+        "ranges.da_m must be finite",
+    ),
     "out-is-a-device": (["solve", "pdg6dof", "--out", "/dev/null"], "not a regular file"),
     "out-is-a-pipe": (["solve", "pdg6dof", "--out", "{fifo}"], "not a regular file"),
     "out-and-plot-the-same-file": (

@@ -10,6 +10,7 @@ with ``(dex, dey) = de (cos phi, sin phi)`` and ``(dix, diy) = di (cos theta, si
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,7 +20,7 @@ import numpy as np
 
 from scpformer.dynamics.roe import psi_matrix
 from scpformer.problems.rendezvous.scenario import RendezvousScenario, TargetOrbit
-from scpformer.validation import check_finite, known_fields, read_json
+from scpformer.validation import check_finite, check_interval, known_fields, read_json
 
 #: Default initial relative orbit: a de = 80 m and a di = 140 m, both at 90 deg (e/i vector
 #: separation, Table 1), 50 m ahead; its Problem 2 solution crosses the keep-out zone.
@@ -141,6 +142,13 @@ class SampleRanges:
     di_margin_m: tuple[float, float] = (5.0, 30.0)  # a di - r_n,koz [m]
     phi_deg: tuple[float, float] = (85.0, 95.0)  # phase phi of the relative e vector [deg]
     theta_deg: tuple[float, float] = (85.0, 95.0)  # phase theta of the relative i vector [deg]
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            interval = check_interval(f"ranges.{f.name}", getattr(self, f.name))
+            object.__setattr__(self, f.name, interval)
+        if self.horizon_orbits[0] <= 0.0:
+            raise ValueError(f"ranges.horizon_orbits must be positive, got {self.horizon_orbits}")
 
 
 def sample_roe0(

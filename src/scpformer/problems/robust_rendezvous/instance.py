@@ -34,7 +34,7 @@ from scpformer.problems.robust_rendezvous.scenario import (
     check_waypoint,
     robust_target,
 )
-from scpformer.validation import check_finite, known_fields, read_json
+from scpformer.validation import check_finite, check_interval, known_fields, read_json
 
 #: Nominal initial RTN state of Table 1: (-4 km, -17.5 km, 0) and (0, 6.849 m/s, 0).
 X0_RTN_TABLE1 = (-4000.0, -17500.0, 0.0, 0.0, 6.849, 0.0)
@@ -174,10 +174,7 @@ class RobustSampleRanges:
 
     def __post_init__(self) -> None:
         for name in ("dr_r_m", "dr_t_m", "dv_t_m_s"):
-            lo, hi = check_finite(f"ranges.{name}", getattr(self, name), shape=(2,))
-            if lo > hi:
-                raise ValueError(f"ranges.{name} must satisfy low <= high, got ({lo}, {hi})")
-            object.__setattr__(self, name, (float(lo), float(hi)))
+            object.__setattr__(self, name, check_interval(f"ranges.{name}", getattr(self, name)))
         if not self.waypoints:
             raise ValueError("ranges.waypoints must not be empty")
         object.__setattr__(self, "waypoints", tuple(check_waypoint(w) for w in self.waypoints))
