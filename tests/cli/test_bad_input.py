@@ -70,6 +70,7 @@ def fill(argv: list[str], places: dict[str, str]) -> list[str]:
     return argv
 
 
+GENERATE = ["generate", "rendezvous", "--n", "2", "--out", "{tmp}/gen"]
 FLAG_CASES = {
     # counts and seeds: refused by the argument's type, naming the flag
     "bench-n-nominal-negative": (["bench", "pdg6dof", "--n-nominal", "-1"], "--n-nominal"),
@@ -137,11 +138,11 @@ FLAG_CASES = {
     ),
     "instance-missing": (["solve", "pdg6dof", "--instance", "{tmp}/nope.json"], "not found"),
     "generate-range-inverted": (
-        ["generate", "rendezvous", "--n", "2", "--out", "{tmp}/g", "--range-horizon-orbits", "3", "1"],
+        [*GENERATE, "--range-horizon-orbits", "3", "1"],
         "ranges.horizon_orbits must satisfy low <= high",
     ),
     "generate-range-nan": (
-        ["generate", "rendezvous", "--n", "2", "--out", "{tmp}/gen", "--range-da-m", "nan", "1"],
+        [*GENERATE, "--range-da-m", "nan", "1"],
         "ranges.da_m must be finite",
     ),
     "out-is-a-device": (["solve", "pdg6dof", "--out", "/dev/null"], "not a regular file"),
