@@ -64,6 +64,12 @@ def test_a_corrupt_run_folder_is_a_one_line_error(tmp_path, capsys):
     assert _one_error_line(capsys).startswith("scpformer: error: --model")
 
 
+def test_a_model_for_another_node_count_is_a_one_line_error(capsys):
+    argv = ["solve", "pdg6dof", "--warmstart", "tscvx", "--model", "default", "--n-nodes", "20"]
+    assert main(argv) == 2
+    assert "predicts N = 50 nodes, the solve has 20" in _one_error_line(capsys)
+
+
 def test_model_without_tscvx_is_refused(tmp_path, capsys):
     assert main(["solve", "pdg6dof", "--model", str(tmp_path)]) == 2
     assert "--warmstart tscvx, kdtree or interp only" in _one_error_line(capsys)

@@ -79,6 +79,7 @@ class TscvxWarmStart:
     def guess_for(self, instance: PDGInstance, config: PDGSolverConfig) -> WarmStartResult:
         """The guess under ``config`` (its node count and lambda)."""
         check_instance(instance, PDGInstance, "pdg6dof")
+        self._check_nodes(config)
         start = time.perf_counter()
         from scpformer.data.pdg6dof_family import theta_vector
 
@@ -119,11 +120,21 @@ class TscvxWarmStart:
         self, instance: PDGInstance, config: PDGSolverConfig, eta_init: float | None = None
     ) -> Solution:
         """T-SCvx (Algorithm 2) from this provider's guess; ``extras`` hold both records."""
+        self._check_nodes(config)
         params = self.params if eta_init is None else replace(self.params, eta_init=eta_init)
         result = self.guess_for(instance, config)
         solution = solve_tscvx(instance, config, result.trajectory, self.tight(instance), params)
         return replace(solution, extras={**solution.extras,
                                          "warmstart": result.record.to_dict()})  # fmt: skip
+
+    def _check_nodes(self, config: PDGSolverConfig) -> None:
+        """Refuse a solve on another node count than the model predicts (its rows and nodes
+        would not line up)."""
+        if int(self.predictor.n_nodes) != config.n_nodes:
+            raise ValueError(
+                f"the warm start's model predicts N = {int(self.predictor.n_nodes)} nodes, the "
+                f"solve has {config.n_nodes} (--n-nodes); train a model for that N"
+            )
 
     @staticmethod
     def _result(
