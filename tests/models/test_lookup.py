@@ -229,3 +229,8 @@ def test_unknown_kind_raises(train):
 def test_interpolation_needs_more_points_than_dimensions(train):
     with pytest.raises(ValueError, match=r"needs more than 3 points"):
         InterpolationTable(np.zeros((3, 3)), np.zeros((3, 2)))
+
+
+def test_interpolation_in_one_dimension_is_refused_with_the_way_out():
+    with pytest.raises(ValueError, match=r"at least 2 dimensions, the PCA kept 1; use n_comp"):
+        InterpolationTable(np.arange(5.0)[:, None], np.zeros((5, 2)))

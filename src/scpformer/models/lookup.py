@@ -147,6 +147,12 @@ class InterpolationTable:
     """Linear interpolation on the Delaunay triangulation; the nearest value outside the hull."""
 
     def __init__(self, points: np.ndarray, values: np.ndarray, *, leaf_size: int = 40) -> None:
+        if points.shape[1] < 2:  # scipy triangulates in 2 or more dimensions only
+            raise ValueError(
+                f"interpolation needs inputs of at least 2 dimensions, the PCA kept "
+                f"{points.shape[1]}; use n_components >= 2 and data that vary in 2 or more "
+                "parameters, or the k-d tree"
+            )
         if len(points) <= points.shape[1]:
             raise ValueError(
                 f"interpolation in {points.shape[1]} dimensions needs more than "
