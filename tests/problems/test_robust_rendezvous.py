@@ -111,6 +111,7 @@ def test_waypoints_are_750_m_on_r_bar_and_v_bar_at_rest(waypoint, expected):
         (lambda: ProcessNoise(Q_roe=np.zeros((6, 6)).tolist()), "Q_roe"),
         (lambda: RobustScenario(n_safety=0), "n_safety"),
         (lambda: RobustScenario(t_safety_orbits=-1.0), "t_safety_orbits"),
+        (lambda: RobustScenario(t_safety_orbits=0.0), "t_safety_orbits must be positive"),
         (lambda: RobustScenario(koz_semi_axes_m=(200.0, 0.0, 200.0)), "koz_semi_axes_m"),
         (lambda: RobustInstance.from_dict({"x0": [0] * 6}), "x0"),
         (lambda: RobustInstance.from_dict({"uncertainty": {"delta": 2.0}}), "delta"),
@@ -434,6 +435,8 @@ def test_the_papers_stm_model_remains_available_and_is_reported(tpbvp):
 def test_sample_peaks_ranks_local_maxima_and_pads_with_the_highest():
     h = np.array([[0.0, 2.0, 1.0, 3.0, 0.5, 0.6], [5.0, 4.0, 3.0, 2.0, 1.0, 0.0]])
     np.testing.assert_array_equal(sample_peaks(h, 3), [[3, 1, 5], [0, 0, 0]])
+    # fewer samples per arc than peaks asked for (N_safety = 2)
+    np.testing.assert_array_equal(sample_peaks(h[:, :2], 3), [[1, 1, 1], [0, 0, 0]])
 
 
 def test_every_dip_of_an_arc_between_samples_is_refined(tpbvp):

@@ -338,6 +338,8 @@ def sample_peaks(h: np.ndarray, k: int) -> np.ndarray:
     padded = np.pad(h, ((0, 0), (1, 1)), constant_values=-np.inf)
     is_peak = (h >= padded[:, :-2]) & (h >= padded[:, 2:])
     ranked = np.argsort(-np.where(is_peak, h, -np.inf), axis=1, kind="stable")[:, :k]
+    if ranked.shape[1] < k:  # fewer samples than k (N_safety < k): repeat the highest
+        ranked = np.concatenate([ranked, np.repeat(ranked[:, :1], k - ranked.shape[1], 1)], 1)
     n_peaks = is_peak.sum(axis=1, keepdims=True)
     return np.where(np.arange(k)[None, :] < n_peaks, ranked, ranked[:, :1])
 

@@ -99,9 +99,8 @@ class RobustScenario:
         object.__setattr__(self, "n_ae_to_koz", switch)
         for name in ("horizon_orbits", "waypoint_distance_m"):
             object.__setattr__(self, name, check_positive(f"scenario.{name}", getattr(self, name)))
-        t_safe = float(check_finite("scenario.t_safety_orbits", self.t_safety_orbits, shape=()))
-        if t_safe < 0.0:
-            raise ValueError(f"scenario.t_safety_orbits must be >= 0, got {t_safe}")
+        # a free drift of no duration leaves no arc to sample (and no passive safety to impose)
+        t_safe = check_positive("scenario.t_safety_orbits", self.t_safety_orbits)
         object.__setattr__(self, "t_safety_orbits", t_safe)
         for name in ("ae_semi_axes_m", "koz_semi_axes_m"):
             object.__setattr__(self, name, _axes(f"scenario.{name}", getattr(self, name)))
