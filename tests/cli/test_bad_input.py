@@ -145,6 +145,10 @@ FLAG_CASES = {
         [*GENERATE, "--range-da-m", "nan", "1"],
         "ranges.da_m must be finite",
     ),
+    "rendezvous-art-rtg-huge": (
+        ["solve", "rendezvous", "--warmstart", "art", "--rtg=-1e300"],
+        "art warm start produced non-finite states",
+    ),
     "out-is-a-device": (["solve", "pdg6dof", "--out", "/dev/null"], "not a regular file"),
     "out-is-a-pipe": (["solve", "pdg6dof", "--out", "{fifo}"], "not a regular file"),
     "out-and-plot-the-same-file": (

@@ -596,8 +596,14 @@ def _warm_start(
     x = np.asarray(result.trajectory.x, dtype=float)
     u = np.asarray(result.trajectory.u, dtype=float)
     J = result.record.cost if u.shape == (n, 3) and math.isfinite(result.record.cost) else math.inf
-    if x.shape != (n + 1, 6) or not np.all(np.isfinite(x)):
-        raise ValueError(f"warmstart states must be finite with shape ({n + 1}, 6), got {x.shape}")
+    if x.shape != (n + 1, 6):
+        raise ValueError(f"warmstart states must have shape ({n + 1}, 6), got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(
+            f"the {result.record.source} warm start produced non-finite states (nan or inf at "
+            f"{int(np.sum(~np.isfinite(x).all(axis=1)))} of {n + 1} nodes): check its inputs "
+            "(for ART: --rtg, --ctg) and its model"
+        )
     return x, J, result.solution, result.record
 
 
