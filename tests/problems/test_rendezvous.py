@@ -322,7 +322,7 @@ def test_warm_starts_by_name_trajectory_or_array_reach_a_feasible_solution(nomin
     from_convex = solve(sampled, "scp", "convex", verify=False)
     assert from_tpbvp.status is from_convex.status is Status.CONVERGED
     assert from_tpbvp.cost == pytest.approx(from_convex.cost, rel=1e-4)
-    with pytest.raises(ValueError, match=r"warmstart states must have shape \(101, 6\), got \(50, 6\)"):
+    with pytest.raises(ValueError, match=r"states must have shape \(101, 6\), got \(50, 6\)"):
         solve(instance, "scp", np.zeros((50, 6)))
     with pytest.raises(ValueError, match="warmstart must be one of"):
         solve(instance, "scp", "art")
