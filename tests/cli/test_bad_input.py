@@ -149,6 +149,10 @@ FLAG_CASES = {
         ["solve", "rendezvous", "--warmstart", "art", "--rtg=-1e300"],
         "art warm start produced non-finite states",
     ),
+    "generate-n-beyond-the-plan": (
+        ["generate", "rendezvous", "--n", "1000000000000", "--out", "{tmp}/gen"],
+        "n must be at most 100,000,000",
+    ),
     "out-is-a-device": (["solve", "pdg6dof", "--out", "/dev/null"], "not a regular file"),
     "out-is-a-pipe": (["solve", "pdg6dof", "--out", "{fifo}"], "not a regular file"),
     "out-and-plot-the-same-file": (

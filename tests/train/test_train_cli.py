@@ -54,7 +54,9 @@ def test_bad_data_is_a_one_line_error(toy_unsplit, toy_other_family, tmp_path, c
     assert _train("gru", "--data", str(toy_other_family), *out) == 2
     one_line_error(capsys, "reads rendezvous or robust-rendezvous data, not pdg6dof")
     assert _train("lstm", "--data", str(toy_unsplit), *out, "--lr", "-1") == 2
-    one_line_error(capsys, "lr must be positive")
+    one_line_error(capsys, "lr must be a positive finite number")
+    assert _train("art", "--data", str(toy_unsplit), *out, "--lr", "inf") == 2
+    one_line_error(capsys, "lr must be a positive finite number, got inf")
     assert _train("art", "--data", str(toy_unsplit), *out, "--twin", "tpbvp") == 2
     one_line_error(capsys, "no splits in")
 

@@ -39,6 +39,9 @@ from scpformer.data.storage import Manifest, ShardInfo
 START_METHODS = ("forkserver", "spawn", "fork")
 
 
+MAX_INSTANCES = 10**8  # base instances of one dataset (the papers' largest: 400,000)
+
+
 @dataclass(frozen=True, kw_only=True)
 class GenerateConfig:
     """How to generate a dataset; ``n``, ``seed`` and ``shard_size`` define it, the rest how."""
@@ -58,6 +61,11 @@ class GenerateConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or int(value) != value or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value}")
+        if self.n > MAX_INSTANCES:
+            raise ValueError(
+                f"n must be at most {MAX_INSTANCES:,} (the plan of shards is held in memory), "
+                f"got {self.n:,}"
+            )
         if int(self.seed) != self.seed or self.seed < 0:
             raise ValueError(f"seed must be a nonnegative integer, got {self.seed}")
         if self.workers is not None and (int(self.workers) != self.workers or self.workers < 1):

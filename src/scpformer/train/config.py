@@ -11,6 +11,7 @@ decay). A models package may refine both through ``scpformer.models.TRAIN_DEFAUL
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -43,8 +44,8 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if not self.lr > 0.0:
-            raise ValueError(f"lr must be positive, got {self.lr!r}")
+        if not 0.0 < self.lr < math.inf:
+            raise ValueError(f"lr must be a positive finite number, got {self.lr!r}")
         for name in ("weight_decay", "grad_clip"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be nonnegative, got {getattr(self, name)!r}")
