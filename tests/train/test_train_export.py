@@ -98,6 +98,13 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
         assert len(err) == 1 and message in err[0], (run, err)
     with pytest.raises(CheckpointError, match="is not a readable"):
         export_run(tmp_path / "bad", tmp_path / "a.onnx")
+    for opset in ("5", "99"):  # before LayerNormalization; beyond the exporter
+        argv = ["export", "--model", str(tmp_path / "run"), "--onnx", str(tmp_path / "a.onnx")]
+        assert main([*argv, "--opset", opset]) == 2
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert len(err) == 1 and "opset must be an integer from 17 to" in err[0], err
+        assert captured.out == ""  # no graph dumped
 
 
 def test_a_kind_without_an_export_entry_is_an_error_naming_it(tmp_path):

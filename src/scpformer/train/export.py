@@ -202,6 +202,17 @@ def check_output(onnx_file: Path) -> None:
         raise ValueError(f"--onnx {onnx_file}: folder {folder} is not writable")
 
 
+def check_opset(opset: int) -> int:
+    """``opset`` if the TorchScript exporter writes it and it has LayerNormalization (17 on),
+    else ``ValueError`` naming the range."""
+    from torch.onnx import _constants  # the exporter's own limit (private; 20 in torch 2.13)
+
+    highest = int(getattr(_constants, "ONNX_TORCHSCRIPT_EXPORTER_MAX_OPSET", 20))
+    if isinstance(opset, bool) or not isinstance(opset, int) or not 17 <= opset <= highest:
+        raise ValueError(f"opset must be an integer from 17 to {highest}, got {opset!r}")
+    return opset
+
+
 def export_run(
     run: Path | str,
     onnx_file: Path | str,
@@ -222,6 +233,7 @@ def export_run(
     onnx_file = Path(onnx_file)
     if not tolerance > 0.0:
         raise ValueError(f"tolerance must be positive, got {tolerance!r}")
+    check_opset(opset)
     check_output(onnx_file)
     networks = run_networks(run)
     checkpoints = [(name, load_for_export(path)) for name, path in networks]
