@@ -160,3 +160,5 @@ def read_json(path: str | Path, what: str = "instance") -> Any:
         raise ValueError(f"cannot read {what} file {path}: {err.strerror}") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise ValueError(f"malformed JSON in {path}: {err}") from None
+    except RecursionError:
+        raise ValueError(f"malformed JSON in {path}: nested too deeply") from None

@@ -208,6 +208,9 @@ def test_malformed_instance_json_names_the_file(tmp_path, capsys):
     path = tmp_path / "instance.json"
     path.write_text('{"r0": [4, 4,')
     run_one_line_error(capsys, ["solve", "pdg6dof", "--instance", str(path)], 2, str(path))
+    path.write_text('{"r0": ' + "[" * 100_000 + "]" * 100_000 + "}")  # beyond the recursion limit
+    argv = ["solve", "rendezvous", "--instance", str(path)]
+    run_one_line_error(capsys, argv, 2, "nested too deeply")
 
 
 def test_a_full_disk_at_out_names_the_path_and_keeps_the_earlier_file(
