@@ -200,6 +200,17 @@ def test_repair_rebuilds_the_deleted_manifest_from_the_shards(toy, capsys):
     assert main(["dataset", "verify", str(toy)]) == 0
 
 
+@pytest.mark.parametrize("text", ["", '{"family": ', "[]"], ids=["empty", "truncated", "list"])
+def test_repair_rebuilds_an_unreadable_manifest_and_keeps_it_aside(toy, capsys, text):
+    original = storage.read_manifest(toy)
+    (toy / storage.MANIFEST_NAME).write_text(text)
+    assert main(["dataset", "repair", str(toy)]) == 0
+    assert "kept as manifest.json.corrupt" in capsys.readouterr().err
+    assert (toy / "manifest.json.corrupt").read_text() == text
+    assert storage.read_manifest(toy).shards == original.shards
+    assert main(["dataset", "verify", str(toy)]) == 0
+
+
 def test_resume_adopts_the_shards_of_a_deleted_manifest(toy, capsys):
     (toy / storage.MANIFEST_NAME).unlink()
     (toy / "shard-00002.h5").unlink()

@@ -345,24 +345,36 @@ def rebuild_manifest(folder: Path, notice: NoticeCallback) -> Manifest:
     """Rebuild a deleted ``folder/manifest.json`` from the headers its shards carry.
 
     Shards whose identity digest, range and checksums match are listed; others are left in
-    place and named through ``notice``.
+    place and named through ``notice``. A manifest that cannot be read (empty, truncated,
+    tampered) is moved aside to ``manifest.json.corrupt`` and rebuilt the same way.
 
     Raises
     ------
     DatasetError
-        When the folder still has a manifest, holds no shard, or no shard carries a header.
+        When the folder still has a readable manifest, holds no shard, or no shard carries a
+        header.
     """
     folder = Path(folder)
-    if (folder / storage.MANIFEST_NAME).exists():
-        raise DatasetError(
-            f"{folder} has a {storage.MANIFEST_NAME}; nothing to rebuild (check it with "
-            f"`scpformer dataset verify {folder}`)"
-        )
+    manifest_path = folder / storage.MANIFEST_NAME
+    if manifest_path.exists():
+        try:
+            storage.read_manifest(folder)
+        except DatasetError:
+            pass  # unreadable: rebuilt below, the old file kept aside
+        else:
+            raise DatasetError(
+                f"{folder} has a {storage.MANIFEST_NAME}; nothing to rebuild (check it with "
+                f"`scpformer dataset verify {folder}`)"
+            )
     paths = sorted(folder.glob(storage.SHARD_GLOB)) if folder.is_dir() else []
     if not paths:
         raise DatasetError(f"no shard files in {folder}: nothing to rebuild a manifest from")
     manifest = _latest_header(paths)
     with storage.locked_folder(folder):
+        if manifest_path.exists():
+            aside = manifest_path.with_name(storage.MANIFEST_NAME + ".corrupt")
+            manifest_path.replace(aside)
+            notice(f"{storage.MANIFEST_NAME} could not be read; kept as {aside.name}")
         planned = {storage.shard_name(i): r for i, r in enumerate(manifest.planned_ranges())}
         identities = storage.identity_digests(manifest)
         for path in paths:
