@@ -82,6 +82,7 @@ FLAG_CASES = {
     ),
     "bench-seed-negative": (["bench", "pdg6dof", "--seed", "-1"], "--seed"),
     "rendezvous-bench-n-zero": (["bench", "rendezvous", "--n", "0"], "--n"),
+    "tscvx-bench-warmup-negative": (["bench", "tscvx", "--warmup", "-1"], "--warmup"),
     "robust-bench-n-negative": (["bench", "robust-rendezvous", "--n", "-1"], "--n"),
     "rendezvous-seed-negative": (["solve", "rendezvous", "--seed", "-1"], "--seed"),
     "robust-seed-negative": (["solve", "robust-rendezvous", "--seed", "-1"], "--seed"),

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scpformer.cli.argtypes import int_at_least
 from scpformer.cli.commands import command_help
 
 
@@ -44,10 +45,11 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
         type=Path,
         help="trained run folder (RUN/tight, RUN/solution), or 'default': the shipped networks",
     )
-    parser.add_argument("--repeats", type=int, default=500, help="timed calls per case (500)")
-    parser.add_argument("--warmup", type=int, default=20, help="untimed calls first (20)")
-    parser.add_argument("--batch", type=int, default=64, help="batch of the throughput case (64)")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (1)")
+    count, at_least_one = int_at_least(0), int_at_least(1)
+    parser.add_argument("--repeats", type=at_least_one, default=500, help="timed calls per case")
+    parser.add_argument("--warmup", type=count, default=20, help="untimed calls first (20)")
+    parser.add_argument("--batch", type=at_least_one, default=64, help="throughput batch (64)")
+    parser.add_argument("--threads", type=at_least_one, default=1, help="torch threads (1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of theta and weights (0)")
     parser.set_defaults(handler=run_bench)
 
