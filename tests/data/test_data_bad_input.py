@@ -102,6 +102,7 @@ def test_a_manifest_naming_a_shard_outside_the_folder_is_corrupt_and_nothing_is_
         (lambda d: d["shards"][0].update(stop=-1), r"stop must be an integer >= 0"),
         (lambda d: d.update(n="abc"), r"n must be an integer >= 0, got 'abc'"),
         (lambda d: d.update(shard_size=0), r"shard_size must be an integer >= 1, got 0"),
+        (lambda d: d.update(format_version=99), r"format_version 99 is newer than this scpformer"),
     ],
 )
 def test_a_manifest_with_a_wrongly_typed_number_names_it(toy_folder, edit, message):

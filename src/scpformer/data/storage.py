@@ -118,6 +118,11 @@ class Manifest:
         _require_count("shard_size", self.shard_size, least=1)
         _require_count("seed", self.seed)
         _require_count("format_version", self.format_version, least=1)
+        if self.format_version > FORMAT_VERSION:
+            raise ValueError(
+                f"format_version {self.format_version} is newer than this scpformer reads "
+                f"({FORMAT_VERSION}): update scpformer"
+            )
 
     # -- plan and progress -------------------------------------------------------------------
     def planned_ranges(self) -> list[tuple[int, int]]:
