@@ -10,10 +10,12 @@ from scpformer.problems.pdg6dof.problem import (
     LEAST_CHANGE,
     PDGProblem,
     PDGSolverConfig,
+    propagate,
     propellant_gap,
     solve,
 )
 from scpformer.problems.pdg6dof.subproblem import fixed_terminal_columns
+from scpformer.scp.scvx import Candidate, SCvxParameters
 from scpformer.scp.solution import Status, Trajectory
 
 pytestmark = pytest.mark.slow
@@ -118,9 +120,43 @@ def test_the_dynamics_rows_are_eq10_at_the_candidate(optimum):
 
 def test_with_the_hard_box_a_least_change_step_stays_inside_the_box():
     # Algorithm 1's hard box (no soft term): its steps end on the box, and a correction that
-    # would leave it is refused for the conic one, which keeps the box
+    # would leave it is refused for the conic one, which keeps the box (polish off: it
+    # removes the defects that call for these corrections)
     instance = sample_instances(np.random.default_rng(0), 1, SampleRanges.nominal())[0]
-    solution = solve(instance, PDGSolverConfig(prox_weight=0.0))
+    config = PDGSolverConfig(prox_weight=0.0, scvx=SCvxParameters(polish=False))
+    solution = solve(instance, config)
     used = [rec for rec in solution.history if rec.solver_status == LEAST_CHANGE]
     assert used
     assert all(rec.step_norm <= rec.trust_radius * (1.0 + 1e-9) for rec in used)
+
+
+@pytest.mark.parametrize("size", [3e-3, 1e-3])
+def test_polish_moves_an_iterate_onto_the_nonlinear_flow(optimum, size):
+    instance = PDGInstance()
+    config = PDGSolverConfig()
+    problem = PDGProblem(instance, config)
+    z0 = optimum.trajectory  # a step of the final time alone: defects O(size), no row broken
+    z = Trajectory(x=z0.x.copy(), u=z0.u.copy(), p=z0.p + size * 0.5)
+    conic = Candidate(z, -2.0, 0.0, 0.0, "optimal", 0.02, True)
+    polished = problem.polish(conic, problem.evaluate(z))
+    assert polished is not None and polished.solver_time == 0.0  # no conic solve
+    assert polished.linear_cost == conic.linear_cost
+    z1 = polished.trajectory
+    before = np.abs(problem.flow_defects(z)).max()
+    assert np.abs(problem.flow_defects(z1)).max() <= 0.1 * config.scvx.defect_tol < before
+    # an independent check: DOP853 from x_0 under z1's controls lands on z1's nodes
+    np.testing.assert_allclose(propagate(instance, z1), z1.x, atol=50 * config.scvx.defect_tol)
+    np.testing.assert_allclose(z1.x[0], z.x[0], atol=1e-12)
+    last = fixed_terminal_columns(False)
+    np.testing.assert_allclose(z1.x[-1, last], z.x[-1, last], atol=1e-12)
+    values = con.constraint_values(instance, z1.x, z1.u)
+    assert values[list(con.CONVEX_ROWS)].max() <= 1e-7
+
+
+def test_a_polish_that_would_break_a_convex_row_is_refused(optimum):
+    # thrust pushed past T_max at most nodes: holding those rows at g = 0 alone is not
+    # enough once the step is this large, and polish refuses rather than return it
+    problem = PDGProblem(PDGInstance(), PDGSolverConfig())
+    z = _perturbed(optimum.trajectory, 0.3, seed=3)
+    conic = Candidate(z, -2.0, 0.0, 0.0, "optimal", 0.02, True)
+    assert problem.polish(conic, problem.evaluate(z)) is None

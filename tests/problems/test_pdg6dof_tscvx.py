@@ -65,7 +65,11 @@ def test_oracle_rows_reach_the_cold_optimum_with_reduced_subproblems(cold):
 def test_tscvx_runs_algorithm_1_exactly_with_the_hard_box_and_no_quadratic_term(cold):
     # prox_weight 0: the conic data has no P matrix; the reduced subproblem must not need one
     scvx = SCvxParameters(
-        lambda_=500.0, iter_max=20, second_order_correction=False, stopping="table1"
+        lambda_=500.0,
+        iter_max=20,
+        second_order_correction=False,
+        polish=False,
+        stopping="table1",
     )
     config = PDGSolverConfig(prox_weight=0.0, scvx=scvx)
     solution = solve(PDGInstance(), config, guess=TscvxWarmStart(OraclePredictor(cold)))

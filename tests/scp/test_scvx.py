@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -72,6 +74,7 @@ def test_a_small_step_under_a_throttled_trust_region_is_not_convergence():
         ({"stall_window": 2.5}, "stall_window"),
         ({"stall_decrease": 1.5}, "stall_decrease"),
         ({"stall_penalty": 0.0}, "stall_penalty"),
+        ({"polish_penalty": 0.0}, "polish_penalty"),
     ],
 )
 def test_bad_parameters_name_the_field(kwargs, field):
@@ -168,3 +171,57 @@ def test_a_candidate_whose_nonlinear_penalty_is_not_finite_is_rejected():
     assert not first.accepted and first.J == np.inf
     assert first.trust_radius == params.eta_init and solution.history[1].trust_radius < 2.0
     assert solution.history[1].accepted and solution.cost == -2.0
+
+
+class PolishingProblem(ScriptedProblem):
+    """A ScriptedProblem whose ``polish`` maps candidate ``i`` to the trajectory
+    ``polished[i]`` (``None`` when absent), recording what it was asked and what each
+    subproblem was built about."""
+
+    def __init__(self, costs, penalties, predictions, polished):
+        super().__init__(costs, penalties, predictions)
+        self.polished, self.asked, self.built_about = polished, [], []
+
+    def polish(self, candidate, evaluation):
+        i = int(candidate.trajectory.x[0, 0])
+        self.asked.append(i)
+        j = self.polished.get(i)
+        return None if j is None else dataclasses.replace(candidate, trajectory=self._z(j))
+
+    def solve_subproblem(self, z, evaluation, eta, lambda_, solver):
+        self.built_about.append(int(z.x[0, 0]))
+        return super().solve_subproblem(z, evaluation, eta, lambda_, solver)
+
+
+def _polishing(penalty_1: float, penalty_polished: float) -> PolishingProblem:
+    """Guess 0; candidate 1 (cost -2, accepted) with ``penalty_1``; its polished version 3
+    (cost -2) with ``penalty_polished``; candidate 2 anything."""
+    return PolishingProblem(
+        costs=[0.0, -2.0, -2.0, -2.0], penalties=[1.0, penalty_1, 0.0, penalty_polished],
+        predictions=[None, -2.0, -2.0, None], polished={1: 3},
+    )  # fmt: skip
+
+
+def test_an_accepted_step_in_the_tail_is_polished_and_the_next_subproblem_built_about_it():
+    problem = _polishing(penalty_1=5e-3, penalty_polished=0.0)
+    solution = solve_scvx(problem, ScriptedProblem._z(0), SCvxParameters(iter_max=2))
+    assert problem.asked == [1]
+    assert problem.built_about == [0, 3]
+    first = solution.history[0]  # the accepted step's record holds the polished iterate
+    assert first.accepted and first.penalty == 0.0 and first.J == -2.0
+
+
+def test_a_polish_that_raises_j_is_discarded():
+    problem = _polishing(penalty_1=5e-3, penalty_polished=8e-3)
+    solve_scvx(problem, ScriptedProblem._z(0), SCvxParameters(iter_max=2))
+    assert problem.asked == [1] and problem.built_about == [0, 1]
+
+
+@pytest.mark.parametrize(
+    "params",
+    [SCvxParameters(iter_max=2, polish=False), SCvxParameters(iter_max=2, polish_penalty=1e-3)],
+)
+def test_no_polish_when_off_or_above_the_tail(params):
+    problem = _polishing(penalty_1=5e-3, penalty_polished=0.0)
+    solve_scvx(problem, ScriptedProblem._z(0), params)
+    assert problem.asked == [] and problem.built_about == [0, 1]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -218,28 +218,60 @@ class PDGProblem:
         """
         if not self.config.least_change_correction or candidate.trajectory is None:
             return None
-        disc = candidate_evaluation.linearization
-        assert isinstance(disc, FOHDiscretization)
-        z = candidate.trajectory
-        correction = LeastChangeCorrection(
-            self.instance, disc, z, self.config.fix_roll, self.config.tight_tol
-        )
         J_bar = evaluation.cost + lambda_ * evaluation.penalty
         wanted = self.config.scvx.rho_1 * (J_bar - candidate.linear_cost)
         box = self.trust_region(eta)[1] * (1.0 + 1e-9)
-        defects = disc.defects(z.x)
-        values = con.constraint_values(self.instance, z.x, z.u)
-        for _ in range(LEAST_CHANGE_STEPS):
-            z = correction.step(z, defects, values)
-            if z is None:
-                return None
-            defects = self.flow_defects(z)
-            values = con.constraint_values(self.instance, z.x, z.u)
+        steps = self._chord_steps(candidate.trajectory, candidate_evaluation.linearization)
+        for correction, z, defects, values in steps:
             J = final_mass_cost(z) + lambda_ * penalty(defects, values)
             kept = correction.keeps_convex_rows(z, values)
             if J_bar - J >= wanted and kept and self.step_norm(z, z_bar) <= box:
                 return replace(candidate, trajectory=z, status=LEAST_CHANGE, solver_time=0.0)
         return None
+
+    def polish(self, candidate: Candidate, evaluation: Evaluation) -> Candidate | None:
+        """An accepted candidate moved onto the nonlinear flow without a conic solve.
+
+        Chord steps of :class:`~.correction.LeastChangeCorrection` about the candidate (the
+        boundary conditions and the rows tight at the candidate held), at most
+        ``LEAST_CHANGE_STEPS``, until its largest defect is below a tenth of ``defect_tol``.
+        ``None`` when the first step fails or breaks a convex row (a later one that does so
+        ends the steps). SCvx keeps the result only when it lowers J
+        (:func:`scpformer.scp.scvx.solve_scvx`, ``polish``).
+        """
+        if candidate.trajectory is None:
+            return None
+        polished = None
+        steps = self._chord_steps(candidate.trajectory, evaluation.linearization)
+        for correction, z, defects, values in steps:
+            if not correction.keeps_convex_rows(z, values):
+                break
+            polished = z
+            if np.abs(defects).max() <= 0.1 * self.config.scvx.defect_tol:
+                break
+        return (
+            None if polished is None else replace(candidate, trajectory=polished, solver_time=0.0)
+        )
+
+    def _chord_steps(
+        self, z: Trajectory, disc: object
+    ) -> Iterator[tuple[LeastChangeCorrection, Trajectory, np.ndarray, np.ndarray]]:
+        """The chord steps of :class:`~.correction.LeastChangeCorrection` about ``z`` (whose
+        linearization is ``disc``): ``(correction, z_k, flow defects, row values)`` for each
+        of at most ``LEAST_CHANGE_STEPS``, ending early when the linear algebra fails."""
+        assert isinstance(disc, FOHDiscretization)
+        correction = LeastChangeCorrection(
+            self.instance, disc, z, self.config.fix_roll, self.config.tight_tol
+        )
+        defects = disc.defects(z.x)
+        values = con.constraint_values(self.instance, z.x, z.u)
+        for _ in range(LEAST_CHANGE_STEPS):
+            z = correction.step(z, defects, values)
+            if z is None:
+                return
+            defects = self.flow_defects(z)
+            values = con.constraint_values(self.instance, z.x, z.u)
+            yield correction, z, defects, values
 
     def _solve(self, eta: float, lambda_: float, solver: str) -> Candidate:
         """One conic solve with the trust region of radius ``eta`` (soft or hard, see config)."""
