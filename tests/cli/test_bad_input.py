@@ -146,6 +146,18 @@ FLAG_CASES = {
         [*GENERATE, "--range-da-m", "nan", "1"],
         "ranges.da_m must be finite",
     ),
+    "rendezvous-horizon-absurd": (
+        ["solve", "rendezvous", "--scenario-horizon-range-orbits", "1", "1e6"],
+        "scenario.horizon_range_orbits must be at most 200 orbits",
+    ),
+    "robust-horizon-absurd": (
+        ["solve", "robust-rendezvous", "--scenario-horizon-orbits", "1e6"],
+        "scenario.horizon_orbits must be at most 200 orbits",
+    ),
+    "generate-range-horizon-absurd": (
+        [*GENERATE, "--range-horizon-orbits", "1", "1e6"],
+        "ranges.horizon_orbits must be at most 200 orbits",
+    ),
     "rendezvous-art-rtg-huge": (
         ["solve", "rendezvous", "--warmstart", "art", "--rtg=-1e300"],
         "art warm start produced non-finite states",

@@ -42,6 +42,7 @@ from scpformer.problems.rendezvous.problem import (
     verify_solution,
 )
 from scpformer.problems.rendezvous.scenario import (
+    MAX_HORIZON_ORBITS,
     RendezvousScenario,
     RendezvousSolverConfig,
     SCPParameters,
@@ -105,6 +106,25 @@ def test_bad_input_raises_a_value_error_naming_the_field(make, message):
     with pytest.raises(ValueError) as err:
         make()
     assert message in str(err.value)
+
+
+def test_horizons_beyond_max_horizon_orbits_are_refused_naming_the_bound():
+    from scpformer.problems.robust_rendezvous.scenario import RobustScenario
+
+    edge = (1.0, MAX_HORIZON_ORBITS)
+    assert RendezvousScenario(horizon_range_orbits=edge).horizon_range_orbits == edge
+    assert SampleRanges(horizon_orbits=edge).horizon_orbits == edge
+    assert RobustScenario(horizon_orbits=MAX_HORIZON_ORBITS).horizon_orbits == MAX_HORIZON_ORBITS
+    cases = {
+        "scenario.horizon_range_orbits": lambda h: RendezvousScenario(horizon_range_orbits=(1, h)),
+        "ranges.horizon_orbits": lambda h: SampleRanges(horizon_orbits=(1.0, h)),
+        "scenario.horizon_orbits": lambda h: RobustScenario(horizon_orbits=h),
+        "scenario.t_safety_orbits": lambda h: RobustScenario(t_safety_orbits=h),
+    }
+    for name, make in cases.items():
+        for horizon in (MAX_HORIZON_ORBITS + 1.0, 1e6):
+            with pytest.raises(ValueError, match=rf"{name} must be at most 200 orbits"):
+                make(horizon)
 
 
 @pytest.mark.parametrize(

@@ -19,7 +19,11 @@ from typing import Any
 import numpy as np
 
 from scpformer.dynamics.roe import psi_matrix
-from scpformer.problems.rendezvous.scenario import RendezvousScenario, TargetOrbit
+from scpformer.problems.rendezvous.scenario import (
+    RendezvousScenario,
+    TargetOrbit,
+    check_orbits,
+)
 from scpformer.validation import check_finite, check_interval, known_fields, read_json
 
 #: Default initial relative orbit: a de = 80 m and a di = 140 m, both at 90 deg (e/i vector
@@ -133,6 +137,7 @@ class SampleRanges:
     and ``a di = r_n,koz + m_i`` and nearly parallel phases ``phi, theta = 90 +- 5 deg``
     (e/i-vector separation, D'Amico 2010): the radial and normal oscillations are out of phase,
     so the relative orbit encircles the keep-out zone in the R-N plane (passive safety).
+    Horizons lie in ``(0, MAX_HORIZON_ORBITS]`` (200 orbits).
     """
 
     horizon_orbits: tuple[float, float] = (1.0, 3.0)  # OCP horizon [orbits]
@@ -149,6 +154,7 @@ class SampleRanges:
             object.__setattr__(self, f.name, interval)
         if self.horizon_orbits[0] <= 0.0:
             raise ValueError(f"ranges.horizon_orbits must be positive, got {self.horizon_orbits}")
+        check_orbits("ranges.horizon_orbits", self.horizon_orbits[1])
 
 
 def sample_roe0(

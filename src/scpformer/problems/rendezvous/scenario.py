@@ -43,6 +43,24 @@ from scpformer.validation import (
 STOP_TESTS = ("step", "radius")
 UNIT_AXIS_TOL = 1e-6
 MIN_SIN_INCLINATION = 1e-6
+#: Longest OCP horizon (and free-drift arc) accepted [target orbits]: 200 orbits, about 13 days
+#: in the ISS orbit. The ART paper samples horizons of 1 to 3 orbits (Table 1) and the robust
+#: ART paper uses 1.29 orbits plus a 1-orbit drift; 200 leaves a wide margin for studies of
+#: long horizons while refusing absurd values (1e6 orbits), whose replay and time grids would
+#: run for minutes or exhaust memory instead of failing.
+MAX_HORIZON_ORBITS = 200.0
+
+
+def check_orbits(name: str, value: Any) -> float:
+    """``value`` as a float after checking ``0 < value <= MAX_HORIZON_ORBITS`` (a duration in
+    target orbits); ``ValueError`` naming ``name`` and the bound otherwise."""
+    orbits = check_positive(name, value)
+    if orbits > MAX_HORIZON_ORBITS:
+        raise ValueError(
+            f"{name} must be at most {MAX_HORIZON_ORBITS:g} orbits (MAX_HORIZON_ORBITS), "
+            f"got {orbits:g}"
+        )
+    return orbits
 
 
 def _vector(name: str, value: Any, size: int) -> tuple[float, ...]:
@@ -108,7 +126,10 @@ class TargetOrbit:
 
 @dataclass(frozen=True, kw_only=True)
 class RendezvousScenario:
-    """OCP constants of the ISS rendezvous (Table 1, OCP column) and the horizon domain."""
+    """OCP constants of the ISS rendezvous (Table 1, OCP column) and the horizon domain.
+
+    ``horizon_range_orbits`` may not reach beyond :data:`MAX_HORIZON_ORBITS` (200 orbits).
+    """
 
     n_nodes: int = 100  # N, number of impulses (N + 1 nodes t_0..t_N)
     w_iss_m: float = 108.0  # ISS width w_iss [m]
@@ -182,6 +203,7 @@ class RendezvousScenario:
             raise ValueError(
                 f"scenario.horizon_range_orbits must satisfy 0 < low <= high, got ({lo}, {hi})"
             )
+        check_orbits("scenario.horizon_range_orbits", hi)
         object.__setattr__(self, "horizon_range_orbits", (lo, hi))
         object.__setattr__(self, "j2", check_bool("scenario.j2", self.j2))
         if self.koz_metric(self.waypoint_m) < 1.0:

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.dynamics.uncertainty import UncertaintyModel
-from scpformer.problems.rendezvous.scenario import TargetOrbit
+from scpformer.problems.rendezvous.scenario import TargetOrbit, check_orbits
 from scpformer.scp.scvx_star import SCvxStarParameters
 from scpformer.validation import check_bool, check_finite, check_positive, known_fields
 
@@ -78,7 +78,11 @@ def _axes(name: str, value: Any) -> tuple[float, float, float]:
 
 @dataclass(frozen=True, kw_only=True)
 class RobustScenario:
-    """OCP column of robust Table 1 (all but the target orbit and the boundary states)."""
+    """OCP column of robust Table 1 (all but the target orbit and the boundary states).
+
+    ``horizon_orbits`` and ``t_safety_orbits`` are each at most
+    :data:`~scpformer.problems.rendezvous.scenario.MAX_HORIZON_ORBITS` (200 orbits).
+    """
 
     n_nodes: int = 100  # N_time: number of impulses (N + 1 nodes)
     horizon_orbits: float = 1.29  # horizon [target orbits]
@@ -97,10 +101,12 @@ class RobustScenario:
         if switch > self.n_nodes:
             raise ValueError(f"scenario.n_ae_to_koz must be <= n_nodes, got {switch}")
         object.__setattr__(self, "n_ae_to_koz", switch)
-        for name in ("horizon_orbits", "waypoint_distance_m"):
-            object.__setattr__(self, name, check_positive(f"scenario.{name}", getattr(self, name)))
+        distance = check_positive("scenario.waypoint_distance_m", self.waypoint_distance_m)
+        object.__setattr__(self, "waypoint_distance_m", distance)
+        horizon = check_orbits("scenario.horizon_orbits", self.horizon_orbits)
+        object.__setattr__(self, "horizon_orbits", horizon)
         # a free drift of no duration leaves no arc to sample (and no passive safety to impose)
-        t_safe = check_positive("scenario.t_safety_orbits", self.t_safety_orbits)
+        t_safe = check_orbits("scenario.t_safety_orbits", self.t_safety_orbits)
         object.__setattr__(self, "t_safety_orbits", t_safe)
         for name in ("ae_semi_axes_m", "koz_semi_axes_m"):
             object.__setattr__(self, name, _axes(f"scenario.{name}", getattr(self, name)))
