@@ -62,6 +62,42 @@ def test_bad_input_is_a_one_line_error(argv, message, capsys):
     assert message in err and err.count("\n") == 1
 
 
+@pytest.mark.parametrize(
+    ("values", "expected"),
+    [
+        (["+T", "-T"], ("+T", "-T")),
+        (["-R"], ("-R",)),
+        (["-T", "+R", "-R", "+T"], ("-T", "+R", "-R", "+T")),
+    ],
+)
+def test_generate_range_waypoints_reads_signed_waypoints(values, expected):
+    from scpformer.cli.data import FAMILY_ARGUMENTS
+    from scpformer.cli.main import build_parser
+
+    argv = ["generate", "robust-rendezvous", "--range-waypoints", *values, "--n", "1"]
+    args = build_parser().parse_args([*argv, "--out", "unused"])
+    family = FAMILY_ARGUMENTS["robust-rendezvous"].build(args)
+    assert family.config.ranges.waypoints == expected
+
+
+@pytest.mark.parametrize(
+    ("values", "message"),
+    [
+        (["+T", "X"], "ranges.waypoints must be one of +T, -T, +R, -R, got 'X'"),
+        (["-N"], "ranges.waypoints must be one of +T, -T, +R, -R, got '-N'"),
+        (["T"], "ranges.waypoints must be one of +T, -T, +R, -R, got 'T'"),
+        ([], "argument --range-waypoints: expected at least one argument"),
+    ],
+)
+def test_generate_bad_range_waypoints_is_a_one_line_error(tmp_path, capsys, values, message):
+    out = tmp_path / "data"
+    argv = ["generate", "robust-rendezvous", "--range-waypoints", *values, "--n", "1"]
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not out.exists()
+
+
 def test_bad_instance_file_names_the_field(tmp_path, capsys):
     path = tmp_path / "i.json"
     path.write_text(json.dumps({"uncertainty": {"process_noise": {"Q_roe": [[0.0] * 6] * 6}}}))

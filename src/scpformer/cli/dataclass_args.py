@@ -1,6 +1,7 @@
 """Command-line flags generated from frozen configuration dataclasses.
 
-Each scalar or fixed-length tuple field becomes ``--prefix-field-name``; its help text is the
+Each scalar or tuple field becomes ``--prefix-field-name`` (a ``tuple[float, float]`` takes
+two numbers, a ``tuple[str, ...]`` one or more words); its help text is the
 end-of-line comment of the field in the source (the paper symbol and units), so that ``--help``
 is the documentation and every default of the papers' tables can be overridden.
 """
@@ -81,11 +82,13 @@ def add_dataclass_arguments(
         help_text = f"{comments.get(f.name, '')} (default: {default})"
         origin = typing.get_origin(hint)
         if origin is tuple:
+            args = typing.get_args(hint)
+            variable = len(args) == 2 and args[1] is Ellipsis  # tuple[str, ...]: one or more
             group.add_argument(
                 _flag(prefix, f.name),
                 dest=dest,
-                type=float,
-                nargs=len(default),
+                type=args[0] if variable else float,
+                nargs="+" if variable else len(default),
                 metavar=f.name.upper(),
                 help=help_text,
             )

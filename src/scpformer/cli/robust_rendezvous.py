@@ -48,7 +48,12 @@ from scpformer.scp.solution import Solution, Status
 # shared flags
 # ======================================================================================
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
-    """Flags for every solver setting and scenario constant (robust Tables 1-2 defaults)."""
+    """Flags for every solver setting and scenario constant (robust Tables 1-2 defaults).
+
+    The waypoints ``-T`` and ``-R`` are values (``--waypoint -T``, ``--range-waypoints +T -T``),
+    not options: ``parser`` reads them as it reads negative numbers.
+    """
+    parser._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+|[A-Z])$")
     add_dataclass_arguments(parser, RobustSolverConfig, title="formulation")
     add_dataclass_arguments(parser, SCvxStarParameters, prefix="scvx", title="SCvx* (Table 1)")
     add_dataclass_arguments(parser, RobustVerification, prefix="verify", title="verification")
@@ -89,8 +94,6 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
         "passive safety, deterministic or chance-constrained) and SCvx*; optionally verify "
         "the chance constraint by Monte Carlo through a two-body + J2 propagator.",
     )
-    # "-T" and "-R" are values, not options: let argparse read them like negative numbers.
-    parser._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+|[TR])$")
     parser.add_argument("--mode", choices=MODES, default="chance", help="(default: chance)")
     parser.add_argument(
         "--waypoint", help=f"pre-docking state: {', '.join(WAYPOINTS)} (default: instance's)"

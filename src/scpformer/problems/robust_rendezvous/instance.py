@@ -170,14 +170,15 @@ class RobustSampleRanges:
     dr_r_m: tuple[float, float] = (-1400.0, 1400.0)  # delta r_r offset from nominal [m]
     dr_t_m: tuple[float, float] = (-3000.0, 3000.0)  # delta r_t offset from nominal [m]
     dv_t_m_s: tuple[float, float] = (-1.0, 1.0)  # delta v_t offset from nominal [m/s]
-    waypoints: tuple[str, ...] = WAYPOINTS  # pre-docking states drawn uniformly
+    waypoints: tuple[str, ...] = WAYPOINTS  # pre-docking states drawn uniformly: +T, -T, +R, -R
 
     def __post_init__(self) -> None:
         for name in ("dr_r_m", "dr_t_m", "dv_t_m_s"):
             object.__setattr__(self, name, check_interval(f"ranges.{name}", getattr(self, name)))
         if not self.waypoints:
             raise ValueError("ranges.waypoints must not be empty")
-        object.__setattr__(self, "waypoints", tuple(check_waypoint(w) for w in self.waypoints))
+        waypoints = tuple(check_waypoint(w, "ranges.waypoints") for w in self.waypoints)
+        object.__setattr__(self, "waypoints", waypoints)
 
 
 def sample_instances(

@@ -49,10 +49,11 @@ def robust_target() -> TargetOrbit:
                        M_deg=68.23)  # fmt: skip
 
 
-def check_waypoint(waypoint: Any) -> str:
-    """Return ``waypoint`` if it names one of the four pre-docking states, else raise."""
+def check_waypoint(waypoint: Any, name: str = "waypoint") -> str:
+    """Return ``waypoint`` if it names one of the four pre-docking states, else raise
+    ``ValueError`` naming ``name``."""
     if waypoint not in WAYPOINTS:
-        raise ValueError(f"waypoint must be one of {', '.join(WAYPOINTS)}, got {waypoint!r}")
+        raise ValueError(f"{name} must be one of {', '.join(WAYPOINTS)}, got {waypoint!r}")
     return str(waypoint)
 
 
