@@ -92,6 +92,30 @@ def test_a_corrupt_results_json_is_an_error_naming_the_file(tmp_path, text, mess
     assert str(folder / "results.json") in str(info.value)
 
 
+@pytest.mark.parametrize("text", ['{"rows": [', "", "\udcff".encode("utf-8", "surrogateescape")])
+def test_an_unreadable_results_json_without_report_md_is_an_error_not_not_run(
+    tmp_path, capsys, text
+):
+    folder = fake_experiment(tmp_path, "art-warmstart", "Figs. 4-6", [("q", "1", "2", "")])
+    (folder / "report.md").unlink()  # e.g. a run stopped between the two files
+    path = folder / "results.json"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    out = tmp_path / "R.md"
+    out.write_text("the page written before")
+    assert main(["report", "--results", str(tmp_path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{path}: not readable JSON (" in err[0], err
+    assert out.read_text() == "the page written before"
+
+
+def test_a_readable_results_json_without_report_md_is_listed_as_not_run(tmp_path):
+    folder = fake_experiment(tmp_path, "art-warmstart", "Figs. 4-6", [("q", "1", "2", "")])
+    (folder / "report.md").unlink()
+    assert collect(tmp_path) == []
+    text = write_summary(tmp_path, tmp_path / "R.md").read_text()
+    assert "`scpformer experiment run art-warmstart`" in text.split("## Not run yet")[1]
+
+
 def test_a_missing_results_folder_is_an_error_naming_it(tmp_path):
     with pytest.raises(ResultsError, match=r"--results .*nowhere: no such folder"):
         collect(tmp_path / "nowhere")

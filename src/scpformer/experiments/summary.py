@@ -74,12 +74,19 @@ def read_results(folder: Path) -> ExperimentResults:
 
 
 def collect(results_dir: Path) -> list[ExperimentResults]:
-    """The results of every ``RESULTS_DIR/*/`` holding a ``report.md``, sorted by name."""
+    """The results of every ``RESULTS_DIR/*/`` holding a ``report.md``, sorted by name.
+
+    A ``results.json`` without its ``report.md`` (a run stopped between writing the two) is
+    not summarized, but it is read all the same: when it is unreadable, the
+    :class:`ResultsError` names it, rather than the experiment being listed as not run.
+    """
     results_dir = Path(results_dir)
     if not results_dir.is_dir():
         raise ResultsError(f"--results {results_dir}: no such folder")
-    folders = sorted(p.parent for p in results_dir.glob(f"*/{REPORT_NAME}"))
-    return [read_results(folder) for folder in folders]
+    names = (REPORT_NAME, RESULTS_JSON_NAME)
+    folders = sorted({p.parent for name in names for p in results_dir.glob(f"*/{name}")})
+    results = [read_results(folder) for folder in folders]
+    return [r for r in results if (r.folder / REPORT_NAME).exists()]
 
 
 def render(results: Sequence[ExperimentResults], out: Path, not_run: Sequence[str] = ()) -> str:
