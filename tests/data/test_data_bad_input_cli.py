@@ -151,6 +151,19 @@ def test_info_reports_a_missing_or_damaged_shard_as_incomplete(toy, capsys, dama
 
 
 # -- configuration digest ------------------------------------------------------------------
+@pytest.mark.parametrize("family", ["bogus", "", 5, None])
+def test_info_of_a_dataset_of_an_unknown_family_names_it_and_the_known_ones(toy, capsys, family):
+    path = toy / "manifest.json"
+    data = json.loads(path.read_text())
+    data["family"] = family
+    path.write_text(json.dumps(data))
+    before = snapshot(toy)
+    line = one_line_error(capsys, ["dataset", "info", str(toy)], 2, str(path))
+    assert f"unknown dataset family {family!r} (known: pdg6dof, rendezvous," in line
+    assert "toy" in line.split("known: ")[1]  # registered families count as known
+    assert snapshot(toy) == before
+
+
 def config(out, **kwargs):
     return GenerateConfig(**(dict(n=5, out=out, shard_size=2, workers=1) | kwargs))
 

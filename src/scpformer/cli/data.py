@@ -27,11 +27,18 @@ from scpformer.data.family import (
     WORKER_CRASHED,
     DatasetFamily,
     build_family,
+    check_family_name,
     family_names,
     get_family_spec,
 )
 from scpformer.data.generate import GenerateConfig, GenerationReport, Progress, generate
-from scpformer.data.storage import Manifest, read_manifest, shard_damage, verify_dataset
+from scpformer.data.storage import (
+    MANIFEST_NAME,
+    Manifest,
+    read_manifest,
+    shard_damage,
+    verify_dataset,
+)
 from scpformer.files import check_output_folder
 
 
@@ -407,7 +414,9 @@ def _add_split_parser(commands: argparse._SubParsersAction) -> None:
 
 def run_info(args: argparse.Namespace) -> int:
     """Handler of ``dataset info DIR [--table2]``."""
-    lines = info_lines(args.dir, read_manifest(args.dir))
+    manifest = read_manifest(args.dir)
+    check_family_name(manifest.family, f"{Path(args.dir) / MANIFEST_NAME}: ")
+    lines = info_lines(args.dir, manifest)
     if args.table2:
         from scpformer.data.pdg6dof_family import dataset_table2_lines
 

@@ -184,6 +184,20 @@ def family_names() -> list[str]:
     return list(dict.fromkeys([*BUILTIN_MODULES, *_REGISTRY]))
 
 
+def check_family_name(name: Any, where: str = "") -> str:
+    """``name`` if it names a known family (:func:`family_names`), without importing it.
+
+    Raises
+    ------
+    DatasetError
+        ``{where}unknown dataset family NAME (known: ...)`` for any other value.
+    """
+    known = family_names()
+    if not isinstance(name, str) or name not in known:
+        raise DatasetError(f"{where}unknown dataset family {name!r} (known: {', '.join(known)})")
+    return name
+
+
 def get_family_spec(name: str) -> FamilySpec:
     """The spec of family ``name``, importing its module on first use.
 
@@ -194,10 +208,7 @@ def get_family_spec(name: str) -> FamilySpec:
     """
     if name in _REGISTRY:
         return _REGISTRY[name]
-    module_name = BUILTIN_MODULES.get(name)
-    if module_name is None:
-        known = ", ".join(family_names())
-        raise DatasetError(f"unknown dataset family {name!r} (known: {known})")
+    module_name = BUILTIN_MODULES[check_family_name(name)]
     try:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as err:
