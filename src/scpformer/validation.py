@@ -20,6 +20,20 @@ class ArgumentTypeError(TypeError, ValueError):
     """A value of the wrong type; a ``TypeError`` that old ``except ValueError`` still catches."""
 
 
+def shown(value: Any) -> str:
+    """``repr(value)`` with numpy scalars and arrays (also inside lists and tuples) written as
+    plain Python values: ``-1.0`` and ``[1.0, nan]``, not ``np.float64(-1.0)`` or ``array(...)``,
+    so that an error message reads the same whichever type the number came in."""
+    if isinstance(value, np.generic | np.ndarray):
+        return repr(value.tolist())
+    if isinstance(value, list | tuple) and type(value) in (list, tuple):
+        items = [shown(v) for v in value]
+        if isinstance(value, list):
+            return f"[{', '.join(items)}]"
+        return f"({items[0]},)" if len(items) == 1 else f"({', '.join(items)})"
+    return repr(value)
+
+
 def check_type(name: str, value: Any, cls: type | tuple[type, ...]) -> Any:
     """Return ``value`` after checking it is an instance of ``cls``.
 
@@ -31,7 +45,7 @@ def check_type(name: str, value: Any, cls: type | tuple[type, ...]) -> Any:
     if not isinstance(value, cls):
         names = " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
         raise ArgumentTypeError(
-            f"{name} must be a {names}, got {type(value).__name__} {value!r:.60}"
+            f"{name} must be a {names}, got {type(value).__name__} {shown(value):.60}"
         )
     return value
 
@@ -45,7 +59,7 @@ def check_bool(name: str, value: Any) -> bool:
         Naming ``name`` when ``value`` is not ``True``/``False`` (numpy bools included).
     """
     if not isinstance(value, bool | np.bool_):
-        raise ArgumentTypeError(f"{name} must be true or false, got {value!r}")
+        raise ArgumentTypeError(f"{name} must be true or false, got {shown(value)}")
     return bool(value)
 
 
@@ -72,7 +86,7 @@ def check_finite(
         raw = np.asarray(None)
     if raw.dtype.kind not in _REAL_KINDS:
         what = "real, not complex" if raw.dtype.kind == "c" else "numeric"
-        raise ArgumentTypeError(f"{name} must be {what}, got {value!r:.80}")
+        raise ArgumentTypeError(f"{name} must be {what}, got {shown(value):.80}")
     array = raw.astype(float)
     if shape is not None and array.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
@@ -87,7 +101,7 @@ def _offending(value: Any, bad: np.ndarray) -> str:
     """``got VALUE`` for a few numbers; for a larger array, how many entries are bad and where
     the first one is (the whole repr of a trajectory would bury the message)."""
     if bad.size <= 8:
-        return f"got {value!r}"
+        return f"got {shown(value)}"
     first = tuple(int(i) for i in np.argwhere(bad)[0])
     return f"but {int(bad.sum())} of its {bad.size} entries are not (the first at index {first})"
 

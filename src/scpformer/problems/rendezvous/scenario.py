@@ -38,6 +38,7 @@ from scpformer.validation import (
     check_in_range,
     check_positive,
     known_fields,
+    shown,
 )
 
 STOP_TESTS = ("step", "radius")
@@ -159,12 +160,12 @@ class RendezvousScenario:
 
     def __post_init__(self) -> None:
         if isinstance(self.n_nodes, bool) or not isinstance(self.n_nodes, int | np.integer):
-            raise ValueError(f"scenario.n_nodes must be an integer, got {self.n_nodes!r}")
+            raise ValueError(f"scenario.n_nodes must be an integer, got {shown(self.n_nodes)}")
         if isinstance(self.waypoint_offset, bool) or not isinstance(
             self.waypoint_offset, int | np.integer
         ):
             raise ValueError(
-                f"scenario.waypoint_offset must be an integer, got {self.waypoint_offset!r}"
+                f"scenario.waypoint_offset must be an integer, got {shown(self.waypoint_offset)}"
             )
         object.__setattr__(self, "n_nodes", int(self.n_nodes))
         object.__setattr__(self, "waypoint_offset", int(self.waypoint_offset))
@@ -288,7 +289,7 @@ class SCPParameters:
 
     def __post_init__(self) -> None:
         if isinstance(self.K, bool) or not isinstance(self.K, int | np.integer) or self.K < 1:
-            raise ValueError(f"scp.K must be a positive integer, got {self.K!r}")
+            raise ValueError(f"scp.K must be a positive integer, got {shown(self.K)}")
         object.__setattr__(self, "K", int(self.K))
         zeta_1 = check_positive("scp.zeta_1", self.zeta_1)
         zeta_K = check_positive("scp.zeta_K", self.zeta_K)
@@ -349,7 +350,7 @@ class VerificationTolerances:
         ):
             raise ValueError(
                 "verification.samples_per_interval must be a positive integer, got "
-                f"{self.samples_per_interval!r}"
+                f"{shown(self.samples_per_interval)}"
             )
         consistent = check_bool(
             "verification.consistent_initial_state", self.consistent_initial_state

@@ -30,7 +30,7 @@ import numpy as np
 from scpformer.dynamics.uncertainty import UncertaintyModel
 from scpformer.problems.rendezvous.scenario import TargetOrbit, check_orbits
 from scpformer.scp.scvx_star import SCvxStarParameters
-from scpformer.validation import check_bool, check_finite, check_positive, known_fields
+from scpformer.validation import check_bool, check_finite, check_positive, known_fields, shown
 
 WAYPOINTS = ("+T", "-T", "+R", "-R")
 MODES = ("deterministic", "chance")
@@ -66,7 +66,7 @@ def check_mode(mode: Any) -> str:
 
 def _int_field(name: str, value: Any, low: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+        raise ValueError(f"{name} must be an integer >= {low}, got {shown(value)}")
     return int(value)
 
 
