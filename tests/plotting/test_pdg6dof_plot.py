@@ -118,15 +118,17 @@ def test_the_history_plot_marks_rejected_steps_and_least_change_corrections():
     rows = [
         {"iteration": k, "cost": -k, "penalty": 1.0 / k, "trust_radius": 1.0,
          "virtual_control_norm": 1e-9, "accepted": k != 2,
-         "solver_status": "least_change" if k == 3 else "optimal"}
-        for k in range(1, 5)
+         "solver_status": "least_change" if k == 3 else "optimal", "polished": k == 5}
+        for k in range(1, 6)
     ]  # fmt: skip
     fig = plot_history(rows, restart_after=2)
     cost_axis = fig.get_axes()[0]
     labels = [text.get_text() for text in cost_axis.get_legend().get_texts()]
-    assert labels == ["accepted", "rejected", "least-change correction", "restart"]
+    assert labels == [
+        "accepted", "rejected", "least-change correction", "accepted, then polished", "restart"
+    ]  # fmt: skip
     marked = {line.get_label(): list(line.get_xdata()) for line in cost_axis.get_lines()}
     assert marked["restart"] == [2.5, 2.5]  # between the runs' iterations 2 and 3
     assert marked["rejected"] == [2] and marked["least-change correction"] == [3]
-    assert marked["accepted"] == [1, 4]
-    assert "4 iterations, 3 conic solves" in fig._suptitle.get_text()
+    assert marked["accepted"] == [1, 4] and marked["accepted, then polished"] == [5]
+    assert "5 iterations, 4 conic solves" in fig._suptitle.get_text()

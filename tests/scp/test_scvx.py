@@ -208,13 +208,14 @@ def test_an_accepted_step_in_the_tail_is_polished_and_the_next_subproblem_built_
     assert problem.asked == [1]
     assert problem.built_about == [0, 3]
     first = solution.history[0]  # the accepted step's record holds the polished iterate
-    assert first.accepted and first.penalty == 0.0 and first.J == -2.0
+    assert first.accepted and first.penalty == 0.0 and first.J == -2.0 and first.polished
 
 
 def test_a_polish_that_raises_j_is_discarded():
     problem = _polishing(penalty_1=5e-3, penalty_polished=8e-3)
-    solve_scvx(problem, ScriptedProblem._z(0), SCvxParameters(iter_max=2))
+    solution = solve_scvx(problem, ScriptedProblem._z(0), SCvxParameters(iter_max=2))
     assert problem.asked == [1] and problem.built_about == [0, 1]
+    assert not solution.history[0].polished and solution.history[0].penalty == 5e-3
 
 
 @pytest.mark.parametrize(

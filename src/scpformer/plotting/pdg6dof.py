@@ -354,14 +354,17 @@ def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
 
 
 def _history_markers(
-    ax, it: np.ndarray, vals: np.ndarray, rejected: np.ndarray, corrected: np.ndarray
-) -> None:
+    ax, it: np.ndarray, vals: np.ndarray, rejected: np.ndarray, corrected: np.ndarray,
+    polished: np.ndarray,
+) -> None:  # fmt: skip
     """Markers of :func:`plot_history`: filled circles for accepted conic solves, hollow for
-    rejected candidates, diamonds for least-change corrections (labelled when present)."""
+    rejected candidates, diamonds for least-change corrections, squares for accepted steps
+    that were then polished (labelled when present)."""
     kinds = (
-        (~rejected & ~corrected, "o", _TRAJ_COLOR, "accepted"),
+        (~rejected & ~corrected & ~polished, "o", _TRAJ_COLOR, "accepted"),
         (rejected, "o", "white", "rejected"),
         (corrected & ~rejected, "D", _TRAJ_COLOR, "least-change correction"),
+        (polished & ~rejected & ~corrected, "s", _TRAJ_COLOR, "accepted, then polished"),
     )
     for mask, marker, face, label in kinds:
         if mask.any():
@@ -398,7 +401,9 @@ def plot_history(
         ``trust_radius`` and ``virtual_control_norm``; ``None`` values are skipped. Optional
         keys (those of :meth:`~scpformer.scp.solution.IterationRecord.summary`): rows with
         ``accepted`` false are drawn as hollow markers (a rejected candidate), rows with
-        ``solver_status == "least_change"`` as diamonds (a correction without a conic solve).
+        ``solver_status == "least_change"`` as diamonds (a correction without a conic solve),
+        rows with ``polished`` true as squares (an accepted step, then polished onto the
+        nonlinear flow: its cost and penalty are the polished iterate's).
     path : path-like, optional
         If given, the figure is saved there in the format its suffix names (dpi 120).
     restart_after : int, optional
@@ -437,10 +442,11 @@ def plot_history(
     )
     rejected = np.array([row.get("accepted", True) is False for row in rows])
     corrected = np.array([row.get("solver_status") == "least_change" for row in rows])
+    polished = np.array([row.get("polished") is True for row in rows])
     for ax, (key, title, ylabel, log) in zip(axes.flat, panels, strict=True):
         vals = _column(rows, key)
         ax.plot(it, vals, color=_TRAJ_COLOR, linewidth=1.4)
-        _history_markers(ax, it, vals, rejected, corrected)
+        _history_markers(ax, it, vals, rejected, corrected, polished)
         if restart_after is not None:
             ax.axvline(restart_after + 0.5, color="0.4", linestyle="--", linewidth=1.0,
                        label="restart")  # fmt: skip
@@ -453,7 +459,7 @@ def plot_history(
     for ax in axes[-1]:
         ax.set_xlabel("iteration")
         ax.xaxis.get_major_locator().set_params(integer=True)
-    if rejected.any() or corrected.any() or restart_after is not None:
+    if rejected.any() or corrected.any() or polished.any() or restart_after is not None:
         axes.flat[0].legend(loc="best", fontsize=8)
     solves = len(rows) - int(corrected.sum())
     fig.suptitle(f"SCvx convergence ({len(rows)} iterations, {solves} conic solves)", fontsize=13)

@@ -60,8 +60,8 @@ candidate of that tail -- its penalty at most ``polish_penalty``, its defects no
 its virtual control negligible -- moved onto the nonlinear flow without a conic solve (the
 6-DoF family: chord steps of its least-change correction), and the polished iterate replaces
 the candidate when its ``J`` is lower. It adds no record to the history: the accepted step's
-record then holds the polished iterate's cost, penalty, J and tight flags (its L, ratio and
-step norm stay those of the conic solve). Above the tail the
+record then holds the polished iterate's cost, penalty, J and tight flags, and ``polished``
+(its L, ratio and step norm stay those of the conic solve). Above the tail the
 correction is large and mostly breaks a convex row that was not tight (thrust or gimbal; 82 of
 97 attempts on the bench's 20 nominal instances, seed 0, at no threshold), so it is not tried
 there: with ``polish_penalty = 1e-2``, 14 of 16 attempts succeed, and the conic solver's share
@@ -322,7 +322,12 @@ def solve_scvx(
         if polished[0] is not cand:
             cand, ev, J = polished
             history[-1] = dataclasses.replace(
-                history[-1], cost=ev.cost, penalty=ev.penalty, J=J, tight_flags=ev.tight_flags
+                history[-1],
+                cost=ev.cost,
+                penalty=ev.penalty,
+                J=J,
+                tight_flags=ev.tight_flags,
+                polished=True,
             )
         z_bar, ev_bar, J_bar = cand.trajectory, ev, J
         bar_negligible = _negligible(params, cand, ev) and ev.penalty <= params.feas_tol

@@ -60,6 +60,7 @@ class IterationRecord:
     time_solver: float  # s inside the conic solver
     time_total: float  # s for the whole iteration
     solver_status: str = ""
+    polished: bool = False  # accepted, then polished: cost, penalty, J, flags are the polished
 
     def summary(self) -> dict[str, Any]:
         """The scalar fields (no flag vector), for tables and plots."""
