@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scpformer.validation import check_bool, check_finite, check_positive, check_type, shown
+from scpformer.validation import (
+    check_bool,
+    check_finite,
+    check_positive,
+    check_type,
+    shown,
+    shown_as,
+)
 
 NAN, INF = np.float64(np.nan), np.float64(np.inf)
 
@@ -57,3 +64,10 @@ def test_configuration_errors_from_numpy_inputs_print_plain_numbers():
 def test_shown_keeps_other_values_as_repr():
     assert shown("+T") == "'+T'" and shown(None) == "None" and shown((1, "a")) == "(1, 'a')"
     assert shown(np.str_("+T")) == "'+T'" and shown(np.bool_(True)) == "True"
+
+
+def test_shown_as_names_the_type_of_a_value_the_check_does_not_take():
+    assert shown_as(np.int64(0), int) == "int64 0" and shown_as(np.float32(2), int | float) == (
+        "float32 2.0"
+    )
+    assert shown_as(np.float64(-1), float) == "-1.0" and shown_as(True, int) == "True"

@@ -34,6 +34,14 @@ def shown(value: Any) -> str:
     return repr(value)
 
 
+def shown_as(value: Any, cls: type | tuple[type, ...]) -> str:
+    """:func:`shown`, led by the type's name when ``value`` is not a ``cls``: a check that takes
+    Python ints only then reports ``np.int64(5)`` as ``int64 5``, not as a bare (valid) ``5``."""
+    if isinstance(value, cls):
+        return shown(value)
+    return f"{type(value).__name__} {shown(value)}"
+
+
 def check_type(name: str, value: Any, cls: type | tuple[type, ...]) -> Any:
     """Return ``value`` after checking it is an instance of ``cls``.
 

@@ -9,7 +9,7 @@ from scpformer.cli.main import main
 from scpformer.models import build_model, preset
 from scpformer.train import export as export_module
 from scpformer.train.checkpoint import CheckpointError, save_checkpoint
-from scpformer.train.export import SequenceForward, export_run, run_networks
+from scpformer.train.export import SequenceForward, check_opset, export_run, run_networks
 
 TINY = {"n_layer": 1, "n_embd": 12, "context": 10}
 
@@ -115,3 +115,20 @@ def test_a_kind_without_an_export_entry_is_an_error_naming_it(tmp_path):
     )  # fmt: skip
     with pytest.raises(CheckpointError, match="no ONNX export for model kind 'mlp'"):
         export_run(tmp_path, tmp_path / "a.onnx")
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda tmp: check_opset(np.int64(5)), "opset must be an integer from 17 to"),
+        (lambda tmp: check_opset(np.int64(18)), "got int64 18"),
+        (
+            lambda tmp: export_run(tmp / "run", tmp / "a.onnx", tolerance=np.float64(-1.0)),
+            "tolerance must be positive, got -1.0",
+        ),
+    ],
+)
+def test_numpy_arguments_are_printed_as_plain_numbers(tmp_path, call, message):
+    with pytest.raises(ValueError) as err:
+        call(tmp_path)
+    assert message in str(err.value) and "np." not in str(err.value)

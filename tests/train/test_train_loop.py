@@ -3,6 +3,7 @@
 import csv
 import math
 
+import numpy as np
 import pytest
 import torch
 from train_standins import TinyConfig, TinyModel
@@ -103,3 +104,21 @@ def test_presets_and_model_defaults_resolve_with_overrides_last():
         TrainConfig(batch_size=0)
     with pytest.raises(ValueError, match="schedule must be one of"):
         TrainConfig(schedule="linear")
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("batch_size", np.int64(0), "batch_size must be a positive integer, got int64 0"),
+        ("epochs", np.int64(3), "epochs must be a positive integer, got int64 3"),
+        ("lr", np.float64(-1.0), "lr must be a positive finite number, got -1.0"),
+        ("grad_clip", np.float64(-1.0), "grad_clip must be nonnegative, got -1.0"),
+        ("warmup_steps", np.int64(-1), "warmup_steps must be nonnegative, got -1"),
+        ("min_lr_ratio", np.float64(2.0), "min_lr_ratio must be in [0, 1], got 2.0"),
+        ("validation_fraction", np.float64(1.0), "validation_fraction must be in (0, 1), got 1.0"),
+    ],
+)
+def test_numpy_config_values_are_printed_as_plain_numbers(field, value, message):
+    with pytest.raises(ValueError) as err:
+        TrainConfig(**{field: value})
+    assert message in str(err.value) and "np." not in str(err.value)

@@ -239,6 +239,20 @@ def test_bad_data_and_arguments_are_refused(fake_pdg, toy_rdv, tmp_path):
         load_tscvx_predictor(tmp_path / "nothing")
 
 
+@pytest.mark.parametrize(
+    ("argument", "message"),
+    [
+        ({"folds": np.int64(0)}, "folds must be a positive integer, got int64 0"),
+        ({"thrust_weight": np.float64(-1.0)}, "thrust_weight must be a positive number, got -1.0"),
+        ({"threads": np.int64(2)}, "threads must be a positive integer, got int64 2"),
+    ],
+)
+def test_numpy_arguments_are_printed_as_plain_numbers(tmp_path, argument, message):
+    with pytest.raises(ValueError) as err:
+        train(tmp_path / "data", tmp_path / "run", **argument)
+    assert message in str(err.value) and "np." not in str(err.value)
+
+
 def test_command_line_trains_and_reports(fake_pdg, tmp_path, capsys):
     run = tmp_path / "cli"
     args = ["train", "tscvx", "--data", str(fake_pdg), "--out", str(run), "--epochs", "1",

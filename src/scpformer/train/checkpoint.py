@@ -39,6 +39,7 @@ from torch import nn
 from scpformer import __version__
 from scpformer.data.storage import MANIFEST_NAME, file_sha256
 from scpformer.train.models_api import resolve
+from scpformer.validation import shown
 
 CHECKPOINT_NAME = "checkpoint.pt"
 FORMAT = "scpformer.checkpoint"
@@ -216,7 +217,7 @@ def read_checkpoint(
     for name, value in wanted.items():
         if value is not None and payload.get(name) != value:
             raise CheckpointError(
-                f"{path} holds a model with {name} {payload.get(name)!r}, not {value!r}"
+                f"{path} holds a model with {name} {payload.get(name)!r}, not {shown(value)}"
             )
     return payload
 

@@ -16,6 +16,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from scpformer.validation import shown, shown_as
+
 SCHEDULES = ("constant", "cosine")
 DEVICES = ("auto", "cpu", "cuda")
 
@@ -43,21 +45,21 @@ class TrainConfig:
         for name in positive:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+                raise ValueError(f"{name} must be a positive integer, got {shown_as(value, int)}")
         if not 0.0 < self.lr < math.inf:
-            raise ValueError(f"lr must be a positive finite number, got {self.lr!r}")
+            raise ValueError(f"lr must be a positive finite number, got {shown(self.lr)}")
         for name in ("weight_decay", "grad_clip"):
             if not getattr(self, name) >= 0.0:
-                raise ValueError(f"{name} must be nonnegative, got {getattr(self, name)!r}")
+                raise ValueError(f"{name} must be nonnegative, got {shown(getattr(self, name))}")
         if self.warmup_steps < 0:
-            raise ValueError(f"warmup_steps must be nonnegative, got {self.warmup_steps!r}")
+            raise ValueError(f"warmup_steps must be nonnegative, got {shown(self.warmup_steps)}")
         if self.schedule not in SCHEDULES:
             raise ValueError(f"schedule must be one of {SCHEDULES}, got {self.schedule!r}")
         if not 0.0 <= self.min_lr_ratio <= 1.0:
-            raise ValueError(f"min_lr_ratio must be in [0, 1], got {self.min_lr_ratio!r}")
+            raise ValueError(f"min_lr_ratio must be in [0, 1], got {shown(self.min_lr_ratio)}")
         if not 0.0 < self.validation_fraction < 1.0:
             raise ValueError(
-                f"validation_fraction must be in (0, 1), got {self.validation_fraction!r}"
+                f"validation_fraction must be in (0, 1), got {shown(self.validation_fraction)}"
             )
         if self.device not in DEVICES:
             raise ValueError(f"device must be one of {DEVICES}, got {self.device!r}")

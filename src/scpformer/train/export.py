@@ -45,6 +45,7 @@ from scpformer.train.checkpoint import (
     load_checkpoint,
     read_checkpoint,
 )
+from scpformer.validation import shown, shown_as
 
 DEFAULT_TOLERANCE = 1e-4  # max |onnxruntime - PyTorch| accepted (outputs are normalized, O(1))
 DEFAULT_OPSET = 17  # ONNX opset (LayerNormalization is in the standard domain from 17)
@@ -209,7 +210,9 @@ def check_opset(opset: int) -> int:
 
     highest = int(getattr(_constants, "ONNX_TORCHSCRIPT_EXPORTER_MAX_OPSET", 20))
     if isinstance(opset, bool) or not isinstance(opset, int) or not 17 <= opset <= highest:
-        raise ValueError(f"opset must be an integer from 17 to {highest}, got {opset!r}")
+        raise ValueError(
+            f"opset must be an integer from 17 to {highest}, got {shown_as(opset, int)}"
+        )
     return opset
 
 
@@ -232,7 +235,7 @@ def export_run(
     """
     onnx_file = Path(onnx_file)
     if not tolerance > 0.0:
-        raise ValueError(f"tolerance must be positive, got {tolerance!r}")
+        raise ValueError(f"tolerance must be positive, got {shown(tolerance)}")
     check_opset(opset)
     check_output(onnx_file)
     networks = run_networks(run)

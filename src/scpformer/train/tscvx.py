@@ -89,6 +89,7 @@ from scpformer.train.tscvx_metrics import (
     tight_metrics,
     write_metrics_files,
 )
+from scpformer.validation import shown_as
 
 NETWORKS = {"tight": TIGHT_KIND, "solution": SOLUTION_KIND}  # run sub-folder -> model kind
 CV_NAME = "cv.json"
@@ -378,16 +379,18 @@ def train_tscvx(
         raise ValueError(f"networks must be a non-empty subset of {tuple(NETWORKS)}")
     folds = TSCVX_FOLDS[preset_name] if folds is None else folds
     if isinstance(folds, bool) or not isinstance(folds, int) or folds < 1:
-        raise ValueError(f"folds must be a positive integer, got {folds!r}")
+        raise ValueError(f"folds must be a positive integer, got {shown_as(folds, int)}")
     if thrust_weight is None:
         thrust_weight = THRUST_WEIGHT[preset_name]
     if not (isinstance(thrust_weight, int | float) and 0.0 < thrust_weight < math.inf):
-        raise ValueError(f"thrust_weight must be a positive number, got {thrust_weight!r}")
+        raise ValueError(
+            f"thrust_weight must be a positive number, got {shown_as(thrust_weight, int | float)}"
+        )
     if report_split not in ("validation", "test"):
         raise ValueError(f"report_split must be validation or test, got {report_split!r}")
     if threads is not None:
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
-            raise ValueError(f"threads must be a positive integer, got {threads!r}")
+            raise ValueError(f"threads must be a positive integer, got {shown_as(threads, int)}")
         torch.set_num_threads(threads)
     out, data = Path(out), Path(data)
     overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
