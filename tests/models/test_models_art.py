@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
@@ -176,6 +177,22 @@ def test_target_must_match_the_configuration():
 def test_bad_configurations_are_errors_naming_the_field(changes, message):
     with pytest.raises(ValueError, match=message):
         dataclasses.replace(TINY, **changes)
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: dataclasses.replace(TINY, dropout=np.float64(1.0)), "in [0, 1), got 1.0"),
+        (lambda: dataclasses.replace(TINY, attn_dropout=np.float64(1.0)), "in [0, 1), got 1.0"),
+        (lambda: dataclasses.replace(TINY, attn_dropout=np.float32(0.5)), "got float32 0.5"),
+        (lambda: tiny_model().start(np.int64(0)), "batch_size must be a positive int, got int64 0"),
+        (lambda: tiny_model().start(1, max_steps=np.int64(2)), "in [1, 12], got int64 2"),
+    ],
+)
+def test_numpy_values_are_printed_as_plain_numbers(make, message):
+    with pytest.raises(ValueError) as err:
+        make()
+    assert message in str(err.value) and "np." not in str(err.value)
 
 
 def test_bad_batches_are_errors_naming_the_key():

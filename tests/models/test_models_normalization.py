@@ -75,6 +75,9 @@ def test_dict_round_trip_and_bad_input(normalization):
         normalization.encode("theta", np.zeros(3))
     with pytest.raises(ValueError, match="step must be an int"):
         normalization.encode("state", np.zeros(6), step=10_000)
+    with pytest.raises(ValueError, match="step must be an int") as err:
+        normalization.encode("state", np.zeros(6), step=np.int64(-1))
+    assert "'state', got -1" in str(err.value) and "np." not in str(err.value)
     with pytest.raises(ValueError, match="rtg_scale must be a positive number"):
         ArtNormalization.from_dict({**normalization.to_dict(), "rtg_scale": 0.0})
 

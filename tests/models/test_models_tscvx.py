@@ -103,6 +103,25 @@ def test_bad_sizes_are_refused_by_name(changes, word):
         TightConfig(**changes)
 
 
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: TightConfig(dropout=np.float64(1.0)), "dropout must be in [0, 1), got 1.0"),
+        (lambda: SolutionConfig(dropout=np.float32(0.5)), "got float32 0.5"),
+        (
+            lambda: TscvxPredictor(
+                tiny(TIGHT_KIND), tiny(SOLUTION_KIND), normalization(), threshold=np.float64(1.0)
+            ),
+            "threshold must be in (0, 1), got 1.0",
+        ),
+    ],
+)
+def test_numpy_values_are_printed_as_plain_numbers(make, message):
+    with pytest.raises(ValueError) as err:
+        make()
+    assert message in str(err.value) and "np." not in str(err.value)
+
+
 def test_unknown_kinds_and_fields_are_refused():
     with pytest.raises(ValueError, match="kind"):
         preset("art", "small")

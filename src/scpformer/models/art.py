@@ -47,6 +47,7 @@ from scpformer.models.sequence import (
     init_weights,
     residual_std,
 )
+from scpformer.validation import shown_as
 
 # Table 4's optimization settings, read by the trainer (scpformer.train); not model sizes.
 TRAIN_DEFAULTS: dict[str, Any] = {
@@ -84,7 +85,9 @@ class ArtConfig:
             raise TypeError(f"bias must be a bool, got {type(self.bias).__name__}")
         attn = self.attn_dropout
         if attn is not None and (not isinstance(attn, int | float) or not 0.0 <= attn < 1.0):
-            raise ValueError(f"attn_dropout must be None or in [0, 1), got {attn!r}")
+            raise ValueError(
+                f"attn_dropout must be None or in [0, 1), got {shown_as(attn, int | float)}"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready fields (``ArtConfig(**config.to_dict())`` rebuilds it)."""

@@ -32,6 +32,7 @@ import torch
 
 from scpformer.data.splits import STD_FLOOR
 from scpformer.data.torch_views import ArtSequenceDataset
+from scpformer.validation import shown
 
 KEYS = ("state", "action", "rtg", "ctg", "target")
 _ARRAYS = ("state_mean", "state_std", "action_mean", "action_std", "target_mean", "target_std")
@@ -113,7 +114,9 @@ class ArtNormalization:
         rows = mean.shape[0]
         if step is not None:
             if not isinstance(step, int | np.integer) or not 0 <= step < rows:
-                raise ValueError(f"step must be an int in [0, {rows}) for {key!r}, got {step!r}")
+                raise ValueError(
+                    f"step must be an int in [0, {rows}) for {key!r}, got {shown(step)}"
+                )
             return mean[step], std[step]
         if np.ndim(value) < 2 or value.shape[-2] > rows:
             raise ValueError(

@@ -31,6 +31,8 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional
 
+from scpformer.validation import shown_as
+
 ACTIVATIONS = ("relu", "gelu")
 
 
@@ -56,7 +58,7 @@ def check_sizes(config: object, **extra: tuple[int, int]) -> None:
             raise ValueError(f"{name} must be at least {low}, got {value}")
     dropout = config.dropout
     if not isinstance(dropout, int | float) or not 0.0 <= dropout < 1.0:
-        raise ValueError(f"dropout must be in [0, 1), got {dropout!r}")
+        raise ValueError(f"dropout must be in [0, 1), got {shown_as(dropout, int | float)}")
 
 
 def _inference(method: Callable) -> Callable:
@@ -362,9 +364,11 @@ class TokenSequenceModel(nn.Module):
         context = self.codec.context
         max_steps = context if max_steps is None else max_steps
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
-            raise ValueError(f"batch_size must be a positive int, got {batch_size!r}")
+            raise ValueError(f"batch_size must be a positive int, got {shown_as(batch_size, int)}")
         if isinstance(max_steps, bool) or not isinstance(max_steps, int):
-            raise ValueError(f"max_steps must be an int in [1, {context}], got {max_steps!r}")
+            raise ValueError(
+                f"max_steps must be an int in [1, {context}], got {shown_as(max_steps, int)}"
+            )
         if not 1 <= max_steps <= context:
             raise ValueError(f"max_steps must be in [1, {context}], got {max_steps}")
         if bf16 and int8:

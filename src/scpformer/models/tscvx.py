@@ -54,6 +54,7 @@ from torch import Tensor, nn
 from scpformer.data.splits import Splits
 from scpformer.models.normalization import _floored, _per_step_floor
 from scpformer.problems.pdg6dof import symmetry as sym
+from scpformer.validation import shown, shown_as
 
 N_THETA = 16  # parameters of theta (THETA_NAMES)
 N_CONSTRAINT_NAMES = 7  # rows per node (CONSTRAINT_NAMES)
@@ -91,7 +92,9 @@ class EncoderSizes:
                 f"d_model ({self.d_model}) must be divisible by n_head ({self.n_head})"
             )
         if not isinstance(self.dropout, int | float) or not 0.0 <= self.dropout < 1.0:
-            raise ValueError(f"dropout must be in [0, 1), got {self.dropout!r}")
+            raise ValueError(
+                f"dropout must be in [0, 1), got {shown_as(self.dropout, int | float)}"
+            )
         if self.tokens not in TOKENIZATIONS:
             raise ValueError(f"tokens must be one of {TOKENIZATIONS}, got {self.tokens!r}")
 
@@ -492,7 +495,7 @@ class TscvxPredictor:
         trace: bool = True,
     ) -> None:
         if not 0.0 < threshold < 1.0:
-            raise ValueError(f"threshold must be in (0, 1), got {threshold!r}")
+            raise ValueError(f"threshold must be in (0, 1), got {shown(threshold)}")
         n = {tight.config.n_nodes, solution.config.n_nodes, normalization.n_nodes}
         if len(n) != 1:
             raise ValueError(f"the networks and the normalization disagree on N: {sorted(n)}")
