@@ -69,18 +69,18 @@ of the run stays at 71.5% (66.9% without the threshold). Measured in the README 
 accepted steps").
 
 Defaults that differ from Table 1, measured on the 6-DoF problem (README, "A soft trust
-region"): ``lambda_ = 2`` instead of 500, and ``iter_max = 100`` instead of 20 (a safeguard:
-a converged 6-DoF run needs a median of 9 conic solves, p95 11, on the bench's nominal
-instances of seed 0 (session 25); harder instances of Table 2's ranges need more). The L1
-penalty of Eq. 16 is exact once lambda exceeds the largest multiplier of the linearized
-dynamics; with the cost ``-m_N`` the final mass row's multiplier is 1 (measured at a
-converged nominal solution: the largest |y| is 1.00003), so 2 keeps a factor of two of
-margin and the virtual control still vanishes at convergence. A larger weight charges the O(step^2) defects of every step far above what they
-cost the Lagrangian, so the ratio test rejects good steps and the cost creeps: on the bench's
-20 nominal instances (seed 0, the same code run twice) lambda = 10 needed a median of 51.5
-solves (p95 73) and stopped a median of 0.18% (max 0.46%) of the propellant above the
-reference optimum, lambda = 2 31 solves (p95 40) and 0.12% (max 0.26%); at 500 the cost
-creeps for hundreds of iterations. Algorithm 1 with Table 1 is ``lambda_=500, iter_max=20,
+region"): ``lambda_ = 2`` instead of 500, and ``iter_max = 100`` instead of 20 (a safeguard: a
+converged 6-DoF run needs a median of 9 conic solves, p95 11, on the bench's nominal instances
+of seed 0 (session 25); harder instances of Table 2's ranges need more). The L1 penalty of Eq.
+16 is exact once lambda exceeds the largest multiplier of the linearized dynamics; with the
+cost ``-m_N`` the final mass row's multiplier is 1 (measured at a converged nominal solution:
+the largest |y| is 1.00003), so 2 keeps a factor of two of margin and the virtual control still
+vanishes at convergence. A larger weight charges the O(step^2) defects of every step far above
+what they cost the Lagrangian, so the ratio test rejects good steps and the cost creeps: on the
+bench's 20 nominal instances (seed 0, the same code run twice) lambda = 10 needed a median of
+51.5 solves (p95 73) and stopped a median of 0.18% (max 0.46%) of the propellant above the
+reference optimum, lambda = 2 31 solves (p95 40) and 0.12% (max 0.26%); at 500 the cost creeps
+for hundreds of iterations. Algorithm 1 with Table 1 is ``lambda_=500, iter_max=20,
 second_order_correction=False, polish=False, stopping="table1"`` with a hard trust region.
 """
 
