@@ -71,3 +71,4 @@ def test_shown_as_names_the_type_of_a_value_the_check_does_not_take():
         "float32 2.0"
     )
     assert shown_as(np.float64(-1), float) == "-1.0" and shown_as(True, int) == "True"
+    assert shown_as("x", int) == "'x'" and shown_as(2.5, int) == "2.5"

@@ -35,11 +35,12 @@ def shown(value: Any) -> str:
 
 
 def shown_as(value: Any, cls: type | tuple[type, ...]) -> str:
-    """:func:`shown`, led by the type's name when ``value`` is not a ``cls``: a check that takes
-    Python ints only then reports ``np.int64(5)`` as ``int64 5``, not as a bare (valid) ``5``."""
-    if isinstance(value, cls):
-        return shown(value)
-    return f"{type(value).__name__} {shown(value)}"
+    """:func:`shown`, led by the type's name when ``value`` is a numpy value that is not a
+    ``cls``: a check that takes Python ints only then reports ``np.int64(5)`` as ``int64 5``,
+    not as a bare (valid-looking) ``5``. Other values read as :func:`shown` writes them."""
+    if isinstance(value, np.generic | np.ndarray) and not isinstance(value, cls):
+        return f"{type(value).__name__} {shown(value)}"
+    return shown(value)
 
 
 def check_type(name: str, value: Any, cls: type | tuple[type, ...]) -> Any:

@@ -178,3 +178,17 @@ def test_sharded_samples_read_items_lazily_across_shards(tmp_path):
     assert list(samples.column("status")) == ["ok", "ok", "ok", "failed"] * 2
     with pytest.raises(IndexError):
         samples.read("x", 8)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("start", np.int64(-1), "shard s.h5: start must be an integer >= 0, got int64 -1"),
+        ("count", np.float64(2.5), "shard s.h5: count must be an integer >= 0, got float64 2.5"),
+    ],
+)
+def test_numpy_shard_counts_are_printed_as_plain_numbers(field, value, message):
+    fields = dict(file="s.h5", start=0, stop=4, count=4, sha256="", content_sha256="", bytes=1)
+    with pytest.raises(ValueError) as err:
+        storage.ShardInfo(**(fields | {field: value}))
+    assert message in str(err.value) and "np." not in str(err.value)

@@ -38,6 +38,7 @@ from scpformer.problems.pdg6dof.constraints import constraint_values, tight_flag
 from scpformer.problems.pdg6dof.problem import verify_trajectory
 from scpformer.problems.pdg6dof.symmetry import yaw_quaternion, yaw_states, yaw_theta
 from scpformer.scp.solution import Trajectory
+from scpformer.validation import shown_as
 
 ROTATION_ANGLES_DEG: tuple[float, ...] = tuple(45.0 * k for k in range(8))
 CHECK_FAILED = "augmentation_check_failed"
@@ -228,7 +229,7 @@ def _source_manifest(source: Path, first: int | None = None) -> Manifest:
 def _first_instances(source: Path, src: Manifest, first: int) -> Manifest:
     """``src`` restricted to base instances ``0 .. first - 1``, which must all be stored."""
     if isinstance(first, bool) or not isinstance(first, int) or not 0 < first <= src.n:
-        raise ValueError(f"first must be an integer in [1, {src.n}], got {first!r}")
+        raise ValueError(f"first must be an integer in [1, {src.n}], got {shown_as(first, int)}")
     prefix: list[storage.ShardInfo] = []  # the stored shards that run without gap from 0
     for shard in sorted(src.shards, key=lambda s: s.start):
         if shard.start != (prefix[-1].stop if prefix else 0) or shard.start >= first:

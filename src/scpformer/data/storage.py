@@ -41,6 +41,7 @@ import numpy as np
 from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full
 from scpformer.data.family import Field
 from scpformer.files import interrupts_deferred, write_bytes_atomic
+from scpformer.validation import shown_as
 
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
@@ -88,7 +89,7 @@ class ShardInfo:
 def _require_count(what: str, value: Any, least: int = 0) -> None:
     """Raise ``ValueError`` unless ``value`` is an int (not a bool) of at least ``least``."""
     if isinstance(value, bool) or not isinstance(value, int) or value < least:
-        raise ValueError(f"{what} must be an integer >= {least}, got {value!r}")
+        raise ValueError(f"{what} must be an integer >= {least}, got {shown_as(value, int)}")
 
 
 @dataclass(frozen=True, kw_only=True)
