@@ -6,6 +6,7 @@ import pytest
 from scpformer.data.executors import instance_rng
 from scpformer.experiments.runner import (
     ResultsCSV,
+    RunOptions,
     check_settings,
     column,
     join_series,
@@ -74,3 +75,17 @@ def test_a_larger_n_extends_the_selection_of_a_smaller_one(tiny_data):
     test = load_splits(tiny_data).indices["test"]
     np.testing.assert_array_equal(large[:2], small)
     assert sorted(large) == sorted(test)  # n beyond the split: the whole test split
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("n", np.int64(0), "n must be a positive integer, got 0"),
+        ("workers", np.int64(0), "workers must be a positive integer, got 0"),
+        ("time_limit", np.float64(-1.0), "time_limit must be positive, got -1.0"),
+    ],
+)
+def test_numpy_options_are_printed_as_plain_numbers(tmp_path, field, value, message):
+    with pytest.raises(ValueError) as err:
+        RunOptions(out=tmp_path, **{field: value})
+    assert message in str(err.value) and "np." not in str(err.value)

@@ -35,6 +35,7 @@ from scpformer.data.executors import Executor, LocalPool, RayPool
 from scpformer.data.family import SampleResult
 from scpformer.data.splits import load_splits
 from scpformer.data.storage import ShardedSamples, file_sha256, read_manifest
+from scpformer.validation import shown
 
 RESULTS_NAME = "results.csv"
 CONFIG_NAME = "config.json"
@@ -61,11 +62,11 @@ class RunOptions:
         if self.data is not None:
             object.__setattr__(self, "data", Path(self.data))
         if self.n is not None and (isinstance(self.n, bool) or int(self.n) < 1):
-            raise ValueError(f"n must be a positive integer, got {self.n!r}")
+            raise ValueError(f"n must be a positive integer, got {shown(self.n)}")
         if self.workers is not None and int(self.workers) < 1:
-            raise ValueError(f"workers must be a positive integer, got {self.workers!r}")
+            raise ValueError(f"workers must be a positive integer, got {shown(self.workers)}")
         if not (math.isfinite(self.time_limit) and self.time_limit > 0):
-            raise ValueError(f"time_limit must be positive, got {self.time_limit!r}")
+            raise ValueError(f"time_limit must be positive, got {shown(self.time_limit)}")
 
 
 # ======================================================================================
