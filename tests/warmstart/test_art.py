@@ -203,6 +203,21 @@ def test_acceptance_check_rejects_bad_bounds():
         AcceptanceCheck(e_c=(0.0, float("nan")))
 
 
+@pytest.mark.parametrize(
+    ("bounds", "message"),
+    [
+        ({"e_r_percent": np.array([3.5, -1.5])}, "with low <= high, got [3.5, -1.5]"),
+        ({"e_c": (np.float64(0.0), np.float64(np.nan))}, "got (0.0, nan)"),
+    ],
+)
+def test_acceptance_bounds_print_numpy_numbers_plainly(bounds, message):
+    with pytest.raises(ValueError) as err:
+        AcceptanceCheck(**bounds)
+    assert (
+        message in str(err.value) and "np." not in str(err.value) and "array" not in str(err.value)
+    )
+
+
 def test_bad_arguments_are_clear_errors(rendezvous, robust, norm):
     _, (cvx, _) = rendezvous
     model = replay_model(norm, cvx.trajectory.u[None])

@@ -41,6 +41,7 @@ from typing import Any, Literal
 import numpy as np
 
 from scpformer.scp.solution import Trajectory
+from scpformer.validation import shown
 from scpformer.warmstart.base import WarmStart, WarmStartRecord, WarmStartResult, trajectory_cost
 from scpformer.warmstart.families import ART_FRAMES, Batch, art_family
 
@@ -73,7 +74,7 @@ class AcceptanceCheck:
             bounds = tuple(float(v) for v in getattr(self, name))
             if len(bounds) != 2 or not all(map(math.isfinite, bounds)) or bounds[0] > bounds[1]:
                 raise ValueError(f"{name} must be finite (low, high) with low <= high, got "
-                                 f"{getattr(self, name)!r}")  # fmt: skip
+                                 f"{shown(getattr(self, name))}")  # fmt: skip
             object.__setattr__(self, name, bounds)
 
     def evaluate(
