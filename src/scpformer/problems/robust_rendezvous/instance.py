@@ -34,7 +34,7 @@ from scpformer.problems.robust_rendezvous.scenario import (
     check_waypoint,
     robust_target,
 )
-from scpformer.validation import check_finite, check_interval, known_fields, read_json
+from scpformer.validation import check_finite, check_interval, known_fields, read_json, shown
 
 #: Nominal initial RTN state of Table 1: (-4 km, -17.5 km, 0) and (0, 6.849 m/s, 0).
 X0_RTN_TABLE1 = (-4000.0, -17500.0, 0.0, 0.0, 6.849, 0.0)
@@ -193,7 +193,7 @@ def sample_instances(
 ) -> list[RobustInstance]:
     """Draw ``n`` instances uniformly over ``ranges`` (default: Table 1) from ``rng`` or a seed."""
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 0:
-        raise ValueError(f"n must be a nonnegative integer, got {n!r}")
+        raise ValueError(f"n must be a nonnegative integer, got {shown(n)}")
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     ranges = ranges or RobustSampleRanges()
     common = {
