@@ -209,6 +209,10 @@ def test_orbital_elements_from_degrees_converts_angles_and_is_frozen():
         (dict(i=4.0), r"\bi\b"),
         (dict(raan=np.nan), "raan"),
         (dict(M=np.inf), r"\bM\b"),
+        (
+            dict(a=np.array([7e6, 8e6])),
+            r"a: expected a real number, got \[7000000\.0, 8000000\.0\]",
+        ),
     ],
 )
 def test_orbital_elements_reject_non_physical_values_naming_the_field(kwargs, field):

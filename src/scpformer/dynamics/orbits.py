@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from scpformer.dynamics.quaternion import cross
+from scpformer.validation import shown
 
 __all__ = [
     "J2",
@@ -610,7 +611,7 @@ class OrbitalElements:
             try:
                 value = float(value)
             except (TypeError, ValueError) as exc:
-                raise ValueError(f"{field}: expected a real number, got {value!r}") from exc
+                raise ValueError(f"{field}: expected a real number, got {shown(value)}") from exc
             object.__setattr__(self, field, value)
         validate_oe(np.array([getattr(self, f) for f in _FIELDS]), "OrbitalElements")
 
