@@ -44,6 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
+# run as a script, this folder is on the import path: the EmbersArc benchmark's draws
+from pdg6dof_embersarc import draw_initial_state, solve_arguments
+
 from scpformer.cli.main import build_parser
 from scpformer.cli.pdg6dof import config_from_args, instance_from_args
 from scpformer.dynamics import powered_descent as pd
@@ -52,9 +55,6 @@ from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import PDGSolverConfig, propagate
 from scpformer.scp.solution import Trajectory
-
-sys.path.insert(0, str(Path(__file__).parent))
-from pdg6dof_embersarc import draw_initial_state, solve_arguments
 
 START_TIMES = (0.9, 1.5, 2.3, 3.5)  # initial final-time guesses, U_T (about 6-24 s)
 SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
