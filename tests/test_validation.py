@@ -47,12 +47,15 @@ def test_configuration_errors_from_numpy_inputs_print_plain_numbers():
         (lambda: SCvxParameters(lambda_=NAN), "lambda_ must be finite, got nan"),
         (
             lambda: RendezvousScenario(n_nodes=np.float64(50.5)),
-            "n_nodes must be an integer, got 50.5",
+            "n_nodes must be an integer, got float64 50.5",
         ),
-        (lambda: SCPParameters(K=np.float64(2.5)), "scp.K must be a positive integer, got 2.5"),
+        (
+            lambda: SCPParameters(K=np.float64(2.5)),
+            "scp.K must be an integer >= 1, got float64 2.5",
+        ),
         (
             lambda: RobustScenario(n_safety=np.float64(0.5)),
-            "n_safety must be an integer >= 1, got 0.5",
+            "n_safety must be an integer >= 1, got float64 0.5",
         ),
     ]
     for make, message in cases:

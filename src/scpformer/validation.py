@@ -72,6 +72,56 @@ def check_bool(name: str, value: Any) -> bool:
     return bool(value)
 
 
+def check_int(name: str, value: Any, least: int | None = None, most: int | None = None) -> int:
+    """Return ``value`` as a Python int after checking it is an integer within the bounds.
+
+    Parameters
+    ----------
+    name
+        The field or argument named by the error message.
+    value
+        A Python int or a numpy integer scalar (``np.int64(3)`` is taken as ``3``). Bools
+        (also ``np.bool_``), floats (also ``3.0``), strings, ``None`` and arrays are refused.
+    least, most
+        Inclusive bounds; ``None`` leaves that side open.
+
+    Returns
+    -------
+    int
+        ``value`` as a plain Python int.
+
+    Raises
+    ------
+    ArgumentTypeError
+        When ``value`` is not an integer; a ``TypeError`` that ``except ValueError`` catches.
+    ValueError
+        When ``value`` lies outside ``[least, most]``.
+
+    All messages read alike: ``"epochs must be an integer >= 1, got 0"``, ``"... got float
+    3.0"``, ``"... got bool True"``; a value of the wrong type is led by its type's name.
+    """
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer):
+        # a string's or None's repr shows its type; a number's is led by the type's name
+        typed = value is not None and not isinstance(value, str)
+        shown_value = f"{type(value).__name__} {shown(value)}" if typed else shown(value)
+        raise ArgumentTypeError(f"{name} must be {_integer(least, most)}, got {shown_value:.60}")
+    number = int(value)
+    if (least is not None and number < least) or (most is not None and number > most):
+        raise ValueError(f"{name} must be {_integer(least, most)}, got {number}")
+    return number
+
+
+def _integer(least: int | None, most: int | None) -> str:
+    """``"an integer"`` with the bounds of :func:`check_int` in words."""
+    if least is not None and most is not None:
+        return f"an integer from {least} to {most}"
+    if least is not None:
+        return f"an integer >= {least}"
+    if most is not None:
+        return f"an integer <= {most}"
+    return "an integer"
+
+
 def check_finite(
     name: str,
     value: Any,

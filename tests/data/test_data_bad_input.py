@@ -114,10 +114,10 @@ def test_a_manifest_with_a_wrongly_typed_number_names_it(toy_folder, edit, messa
 @pytest.mark.parametrize(
     "kwargs, message",
     [
-        ({"n": 0}, "n must be a positive integer"),
-        ({"shard_size": 0}, "shard_size must be a positive integer"),
-        ({"workers": 0}, "workers must be a positive integer"),
-        ({"seed": -1}, "seed must be a nonnegative integer"),
+        ({"n": 0}, "n must be an integer >= 1"),
+        ({"shard_size": 0}, "shard_size must be an integer >= 1"),
+        ({"workers": 0}, "workers must be an integer >= 1"),
+        ({"seed": -1}, "seed must be an integer >= 0"),
         ({"time_limit": 0.0}, "time_limit must be a positive number"),
         ({"start_method": "thread"}, "start_method must be one of"),
     ],

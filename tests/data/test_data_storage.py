@@ -183,7 +183,7 @@ def test_sharded_samples_read_items_lazily_across_shards(tmp_path):
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [
-        ("start", np.int64(-1), "shard s.h5: start must be an integer >= 0, got int64 -1"),
+        ("start", np.int64(-1), "shard s.h5: start must be an integer >= 0, got -1"),
         ("count", np.float64(2.5), "shard s.h5: count must be an integer >= 0, got float64 2.5"),
     ],
 )

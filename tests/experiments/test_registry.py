@@ -56,5 +56,5 @@ def test_bad_paths_are_one_line_errors(tmp_path, capsys, argv, message):
 
 
 def test_run_options_reject_a_nonpositive_n(tmp_path):
-    with pytest.raises(ValueError, match="n must be a positive integer"):
+    with pytest.raises(ValueError, match="n must be an integer >= 1"):
         RunOptions(out=tmp_path, n=0)

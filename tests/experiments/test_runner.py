@@ -80,8 +80,8 @@ def test_a_larger_n_extends_the_selection_of_a_smaller_one(tiny_data):
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [
-        ("n", np.int64(0), "n must be a positive integer, got 0"),
-        ("workers", np.int64(0), "workers must be a positive integer, got 0"),
+        ("n", np.int64(0), "n must be an integer >= 1, got 0"),
+        ("workers", np.int64(0), "workers must be an integer >= 1, got 0"),
         ("time_limit", np.float64(-1.0), "time_limit must be positive, got -1.0"),
     ],
 )

@@ -168,7 +168,7 @@ def test_target_must_match_the_configuration():
     ("changes", "message"),
     [
         ({"n_embd": 10, "n_head": 3}, "divisible by n_head"),
-        ({"n_layer": 0}, "n_layer must be at least 1"),
+        ({"n_layer": 0}, "n_layer must be an integer >= 1"),
         ({"dropout": 1.0}, "dropout"),
         ({"activation": "tanh"}, "activation"),
         ({"target_dim": -1}, "target_dim"),
@@ -185,8 +185,8 @@ def test_bad_configurations_are_errors_naming_the_field(changes, message):
         (lambda: dataclasses.replace(TINY, dropout=np.float64(1.0)), "in [0, 1), got 1.0"),
         (lambda: dataclasses.replace(TINY, attn_dropout=np.float64(1.0)), "in [0, 1), got 1.0"),
         (lambda: dataclasses.replace(TINY, attn_dropout=np.float32(0.5)), "got float32 0.5"),
-        (lambda: tiny_model().start(np.int64(0)), "batch_size must be a positive int, got int64 0"),
-        (lambda: tiny_model().start(1, max_steps=np.int64(2)), "in [1, 12], got int64 2"),
+        (lambda: tiny_model().start(np.int64(0)), "batch_size must be an integer >= 1, got 0"),
+        (lambda: tiny_model().start(1, max_steps=np.float64(2)), "1 to 12, got float64 2.0"),
     ],
 )
 def test_numpy_values_are_printed_as_plain_numbers(make, message):

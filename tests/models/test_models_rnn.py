@@ -40,7 +40,7 @@ def test_a_gradient_step_reduces_the_rnn_loss(cell):
 def test_unknown_cells_and_sizes_are_errors():
     with pytest.raises(ValueError, match="cell must be one of"):
         RnnConfig(cell="rnn")
-    with pytest.raises(ValueError, match="n_embd must be at least 1"):
+    with pytest.raises(ValueError, match="n_embd must be an integer >= 1"):
         RnnConfig(n_embd=0)
     with pytest.raises(TypeError, match="RnnConfig"):
         SequenceRNN(object())

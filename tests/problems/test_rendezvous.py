@@ -98,7 +98,7 @@ def test_scenario_defaults_are_table_1():
         (lambda: RendezvousScenario(n_nodes=11), "scenario.n_nodes must be >="),
         (lambda: SCPParameters(zeta_K=300.0), "scp.zeta_K (300.0) must not exceed"),
         (lambda: SCPParameters(solver="mosek"), "scp.solver must be one of"),
-        (lambda: SCPParameters(K=0), "scp.K must be a positive integer"),
+        (lambda: SCPParameters(K=0), "scp.K must be an integer >= 1"),
         (lambda: VerificationTolerances(keep_out=-1.0), "verification.keep_out must be positive"),
     ],
 )

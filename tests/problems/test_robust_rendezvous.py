@@ -117,7 +117,7 @@ def test_waypoints_are_750_m_on_r_bar_and_v_bar_at_rest(waypoint, expected):
         (lambda: RobustInstance.from_dict({"uncertainty": {"delta": 2.0}}), "delta"),
         (lambda: solve(INSTANCE, mode="robust"), "mode"),
         (lambda: sample_instances(0, -1), "n"),
-        (lambda: sample_instances(0, np.int64(-1)), "n must be a nonnegative integer, got -1$"),
+        (lambda: sample_instances(0, np.int64(-1)), "n must be an integer >= 0, got -1$"),
     ],
 )
 def test_bad_input_raises_naming_the_field(build, field):

@@ -100,7 +100,7 @@ def test_presets_and_model_defaults_resolve_with_overrides_last():
     assert train_config("small", model_defaults=table4).lr == TRAIN_PRESETS["small"].lr
     with pytest.raises(ValueError, match="preset must be one of"):
         train_config("huge")
-    with pytest.raises(ValueError, match="batch_size must be a positive integer"):
+    with pytest.raises(ValueError, match="batch_size must be an integer >= 1"):
         TrainConfig(batch_size=0)
     with pytest.raises(ValueError, match="schedule must be one of"):
         TrainConfig(schedule="linear")
@@ -109,8 +109,8 @@ def test_presets_and_model_defaults_resolve_with_overrides_last():
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [
-        ("batch_size", np.int64(0), "batch_size must be a positive integer, got int64 0"),
-        ("epochs", np.int64(3), "epochs must be a positive integer, got int64 3"),
+        ("batch_size", np.int64(0), "batch_size must be an integer >= 1, got 0"),
+        ("epochs", np.float64(3.0), "epochs must be an integer >= 1, got float64 3.0"),
         ("lr", np.float64(-1.0), "lr must be a positive finite number, got -1.0"),
         ("grad_clip", np.float64(-1.0), "grad_clip must be nonnegative, got -1.0"),
         ("warmup_steps", np.int64(-1), "warmup_steps must be nonnegative, got -1"),

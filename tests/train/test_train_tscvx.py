@@ -242,9 +242,9 @@ def test_bad_data_and_arguments_are_refused(fake_pdg, toy_rdv, tmp_path):
 @pytest.mark.parametrize(
     ("argument", "message"),
     [
-        ({"folds": np.int64(0)}, "folds must be a positive integer, got int64 0"),
+        ({"folds": np.int64(0)}, "folds must be an integer >= 1, got 0"),
         ({"thrust_weight": np.float64(-1.0)}, "thrust_weight must be a positive number, got -1.0"),
-        ({"threads": np.int64(2)}, "threads must be a positive integer, got int64 2"),
+        ({"threads": np.float64(2.0)}, "threads must be an integer >= 1, got float64 2.0"),
     ],
 )
 def test_numpy_arguments_are_printed_as_plain_numbers(tmp_path, argument, message):

@@ -38,7 +38,7 @@ from scpformer.problems.pdg6dof.constraints import constraint_values, tight_flag
 from scpformer.problems.pdg6dof.problem import verify_trajectory
 from scpformer.problems.pdg6dof.symmetry import yaw_quaternion, yaw_states, yaw_theta
 from scpformer.scp.solution import Trajectory
-from scpformer.validation import shown_as
+from scpformer.validation import check_int
 
 ROTATION_ANGLES_DEG: tuple[float, ...] = tuple(45.0 * k for k in range(8))
 CHECK_FAILED = "augmentation_check_failed"
@@ -173,8 +173,7 @@ def augment_dataset(
     transform = transform or RotationAugmentation()
     source, out = Path(source), Path(out)
     src = _source_manifest(source, first)
-    if workers < 1:
-        raise ValueError(f"workers must be a positive integer, got {workers}")
+    workers = check_int("workers", workers, least=1)
     if out.exists() and not out.is_dir():
         raise DatasetError(f"--out {out} is a file, not a folder")
     for info in src.shards:  # every source shard passes its checksum before any is read
@@ -228,8 +227,7 @@ def _source_manifest(source: Path, first: int | None = None) -> Manifest:
 
 def _first_instances(source: Path, src: Manifest, first: int) -> Manifest:
     """``src`` restricted to base instances ``0 .. first - 1``, which must all be stored."""
-    if isinstance(first, bool) or not isinstance(first, int) or not 0 < first <= src.n:
-        raise ValueError(f"first must be an integer in [1, {src.n}], got {shown_as(first, int)}")
+    first = check_int("first", first, least=1, most=src.n)
     prefix: list[storage.ShardInfo] = []  # the stored shards that run without gap from 0
     for shard in sorted(src.shards, key=lambda s: s.start):
         if shard.start != (prefix[-1].stop if prefix else 0) or shard.start >= first:

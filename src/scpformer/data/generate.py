@@ -35,6 +35,7 @@ from scpformer.data.executors import Executor, LocalPool, RayPool, TaskResult
 from scpformer.data.family import DatasetFamily, Field, full_schema
 from scpformer.data.splits import SPLITS_NAME
 from scpformer.data.storage import Manifest, ShardInfo
+from scpformer.validation import check_int
 
 START_METHODS = ("forkserver", "spawn", "fork")
 
@@ -58,18 +59,15 @@ class GenerateConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "out", Path(self.out))
         for name in ("n", "shard_size"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value}")
+            object.__setattr__(self, name, check_int(name, getattr(self, name), least=1))
         if self.n > MAX_INSTANCES:
             raise ValueError(
                 f"n must be at most {MAX_INSTANCES:,} (the plan of shards is held in memory), "
                 f"got {self.n:,}"
             )
-        if int(self.seed) != self.seed or self.seed < 0:
-            raise ValueError(f"seed must be a nonnegative integer, got {self.seed}")
-        if self.workers is not None and (int(self.workers) != self.workers or self.workers < 1):
-            raise ValueError(f"workers must be a positive integer, got {self.workers}")
+        object.__setattr__(self, "seed", check_int("seed", self.seed, least=0))
+        if self.workers is not None:
+            object.__setattr__(self, "workers", check_int("workers", self.workers, least=1))
         if not (math.isfinite(self.time_limit) and self.time_limit > 0.0):
             raise ValueError(
                 f"time_limit must be a positive number of seconds, got {self.time_limit}"

@@ -41,7 +41,7 @@ import numpy as np
 from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full
 from scpformer.data.family import Field
 from scpformer.files import interrupts_deferred, write_bytes_atomic
-from scpformer.validation import shown_as
+from scpformer.validation import check_int
 
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
@@ -78,18 +78,13 @@ class ShardInfo:
         if not self.file.endswith(".h5") or self.file.startswith("."):
             raise ValueError(f"shard file {self.file!r} is not a shard (*.h5)")
         for name in ("start", "stop", "count", "bytes"):
-            _require_count(f"shard {self.file}: {name}", getattr(self, name))
+            value = check_int(f"shard {self.file}: {name}", getattr(self, name), least=0)
+            object.__setattr__(self, name, value)
         if self.stop < self.start:
             raise ValueError(f"shard {self.file}: stop {self.stop} before start {self.start}")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
-
-
-def _require_count(what: str, value: Any, least: int = 0) -> None:
-    """Raise ``ValueError`` unless ``value`` is an int (not a bool) of at least ``least``."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < least:
-        raise ValueError(f"{what} must be an integer >= {least}, got {shown_as(value, int)}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -115,10 +110,8 @@ class Manifest:
     format_version: int = FORMAT_VERSION
 
     def __post_init__(self) -> None:
-        _require_count("n", self.n)
-        _require_count("shard_size", self.shard_size, least=1)
-        _require_count("seed", self.seed)
-        _require_count("format_version", self.format_version, least=1)
+        for name, least in (("n", 0), ("shard_size", 1), ("seed", 0), ("format_version", 1)):
+            object.__setattr__(self, name, check_int(name, getattr(self, name), least=least))
         if self.format_version > FORMAT_VERSION:
             raise ValueError(
                 f"format_version {self.format_version} is newer than this scpformer reads "

@@ -35,7 +35,7 @@ from scpformer.data.executors import Executor, LocalPool, RayPool
 from scpformer.data.family import SampleResult
 from scpformer.data.splits import load_splits
 from scpformer.data.storage import ShardedSamples, file_sha256, read_manifest
-from scpformer.validation import shown
+from scpformer.validation import check_int, shown
 
 RESULTS_NAME = "results.csv"
 CONFIG_NAME = "config.json"
@@ -61,10 +61,9 @@ class RunOptions:
         object.__setattr__(self, "models", tuple(Path(m) for m in self.models))
         if self.data is not None:
             object.__setattr__(self, "data", Path(self.data))
-        if self.n is not None and (isinstance(self.n, bool) or int(self.n) < 1):
-            raise ValueError(f"n must be a positive integer, got {shown(self.n)}")
-        if self.workers is not None and int(self.workers) < 1:
-            raise ValueError(f"workers must be a positive integer, got {shown(self.workers)}")
+        for name in ("n", "workers"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, check_int(name, getattr(self, name), least=1))
         if not (math.isfinite(self.time_limit) and self.time_limit > 0):
             raise ValueError(f"time_limit must be positive, got {shown(self.time_limit)}")
 

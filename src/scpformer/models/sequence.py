@@ -31,7 +31,7 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional
 
-from scpformer.validation import shown_as
+from scpformer.validation import check_int, shown_as
 
 ACTIVATIONS = ("relu", "gelu")
 
@@ -40,7 +40,10 @@ def check_sizes(config: object, **extra: tuple[int, int]) -> None:
     """Raise ``ValueError`` naming the field when a size of ``config`` is out of range.
 
     Checks ``n_layer, n_embd, context, state_dim, action_dim`` (>= 1), ``target_dim`` (>= 0),
-    ``dropout`` in [0, 1), and every ``extra`` field ``name=(value, minimum)``.
+    ``dropout`` in [0, 1), and every ``extra`` field ``name=(value, minimum)``. Each checked
+    size is stored back on the (frozen) ``config`` as a Python int, so that a numpy integer
+    leaves ``to_dict`` JSON-ready. A size that is not an integer raises
+    :class:`~scpformer.validation.ArgumentTypeError` (a ``TypeError``).
     """
     limits = {
         "n_layer": 1,
@@ -52,10 +55,7 @@ def check_sizes(config: object, **extra: tuple[int, int]) -> None:
     }
     checks = {name: (getattr(config, name), low) for name, low in limits.items()}
     for name, (value, low) in {**checks, **extra}.items():
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-        if value < low:
-            raise ValueError(f"{name} must be at least {low}, got {value}")
+        object.__setattr__(config, name, check_int(name, value, least=low))
     dropout = config.dropout
     if not isinstance(dropout, int | float) or not 0.0 <= dropout < 1.0:
         raise ValueError(f"dropout must be in [0, 1), got {shown_as(dropout, int | float)}")
@@ -363,14 +363,8 @@ class TokenSequenceModel(nn.Module):
         """
         context = self.codec.context
         max_steps = context if max_steps is None else max_steps
-        if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
-            raise ValueError(f"batch_size must be a positive int, got {shown_as(batch_size, int)}")
-        if isinstance(max_steps, bool) or not isinstance(max_steps, int):
-            raise ValueError(
-                f"max_steps must be an int in [1, {context}], got {shown_as(max_steps, int)}"
-            )
-        if not 1 <= max_steps <= context:
-            raise ValueError(f"max_steps must be in [1, {context}], got {max_steps}")
+        batch_size = check_int("batch_size", batch_size, least=1)
+        max_steps = check_int("max_steps", max_steps, least=1, most=context)
         if bf16 and int8:
             raise ValueError("bf16 and int8 exclude each other: choose one weight format")
         self._check_target(target, batch_size)

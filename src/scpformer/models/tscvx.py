@@ -54,7 +54,7 @@ from torch import Tensor, nn
 from scpformer.data.splits import Splits
 from scpformer.models.normalization import _floored, _per_step_floor
 from scpformer.problems.pdg6dof import symmetry as sym
-from scpformer.validation import shown, shown_as
+from scpformer.validation import check_int, shown, shown_as
 
 N_THETA = 16  # parameters of theta (THETA_NAMES)
 N_CONSTRAINT_NAMES = 7  # rows per node (CONSTRAINT_NAMES)
@@ -82,11 +82,7 @@ class EncoderSizes:
 
     def __post_init__(self) -> None:
         for name in ("d_model", "n_head", "n_layer", "d_ff", "n_nodes"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-            if value < 1:
-                raise ValueError(f"{name} must be at least 1, got {value}")
+            object.__setattr__(self, name, check_int(name, getattr(self, name), least=1))
         if self.d_model % self.n_head:
             raise ValueError(
                 f"d_model ({self.d_model}) must be divisible by n_head ({self.n_head})"
@@ -111,10 +107,7 @@ class TightConfig(EncoderSizes):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if isinstance(self.iter_max, bool) or not isinstance(self.iter_max, int):
-            raise TypeError(f"iter_max must be an int, got {type(self.iter_max).__name__}")
-        if self.iter_max < 2:
-            raise ValueError(f"iter_max must be at least 2, got {self.iter_max}")
+        object.__setattr__(self, "iter_max", check_int("iter_max", self.iter_max, least=2))
 
     @property
     def n_rows(self) -> int:

@@ -105,7 +105,7 @@ from scpformer.scp.solution import (
     Verification,
     verified_status,
 )
-from scpformer.validation import check_in_range, check_positive
+from scpformer.validation import check_in_range, check_int, check_positive
 
 STOPPING_TESTS = ("stationary", "table1")
 
@@ -141,10 +141,8 @@ class SCvxParameters:
     solver: str = "clarabel"  # conic solver: clarabel, ecos or qoco
 
     def __post_init__(self) -> None:
-        if int(self.iter_max) != self.iter_max or self.iter_max < 1:
-            raise ValueError(f"iter_max must be a positive integer, got {self.iter_max}")
-        if int(self.stall_window) != self.stall_window or self.stall_window < 0:
-            raise ValueError(f"stall_window must be a nonnegative integer, got {self.stall_window}")
+        check_int("iter_max", self.iter_max, least=1)
+        check_int("stall_window", self.stall_window, least=0)
         check_in_range("stall_decrease", self.stall_decrease, 0.0, 1.0)
         check_positive("stall_penalty", self.stall_penalty)
         check_positive("polish_penalty", self.polish_penalty)

@@ -88,7 +88,7 @@ from scpformer.scp.solution import (
     Verification,
     verified_status,
 )
-from scpformer.validation import check_bool, check_finite, check_positive
+from scpformer.validation import check_bool, check_finite, check_int, check_positive
 
 __all__ = [
     "AugmentedLagrangianProblem",
@@ -139,8 +139,7 @@ class SCvxStarParameters:
     solver: str = "clarabel"  # conic solver, one of scpformer.scp.conic.SOLVERS
 
     def __post_init__(self) -> None:
-        if int(self.iter_max) != self.iter_max or self.iter_max < 1:
-            raise ValueError(f"iter_max must be a positive integer, got {self.iter_max}")
+        check_int("iter_max", self.iter_max, least=1)
         for name in ("eps_opt", "eps_feas", "r_min", "r_max", "r_init", "w_init", "w_max"):
             check_positive(name, getattr(self, name))
         for name in ("alpha_1", "alpha_2", "beta"):

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from scpformer.validation import shown, shown_as
+from scpformer.validation import check_int, shown
 
 SCHEDULES = ("constant", "cosine")
 DEVICES = ("auto", "cpu", "cuda")
@@ -43,9 +43,7 @@ class TrainConfig:
     def __post_init__(self) -> None:
         positive = ("epochs", "batch_size", "accumulation")
         for name in positive:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {shown_as(value, int)}")
+            object.__setattr__(self, name, check_int(name, getattr(self, name), least=1))
         if not 0.0 < self.lr < math.inf:
             raise ValueError(f"lr must be a positive finite number, got {shown(self.lr)}")
         for name in ("weight_decay", "grad_clip"):

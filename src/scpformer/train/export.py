@@ -45,7 +45,7 @@ from scpformer.train.checkpoint import (
     load_checkpoint,
     read_checkpoint,
 )
-from scpformer.validation import shown, shown_as
+from scpformer.validation import check_int, shown
 
 DEFAULT_TOLERANCE = 1e-4  # max |onnxruntime - PyTorch| accepted (outputs are normalized, O(1))
 DEFAULT_OPSET = 17  # ONNX opset (LayerNormalization is in the standard domain from 17)
@@ -204,16 +204,12 @@ def check_output(onnx_file: Path) -> None:
 
 
 def check_opset(opset: int) -> int:
-    """``opset`` if the TorchScript exporter writes it and it has LayerNormalization (17 on),
-    else ``ValueError`` naming the range."""
+    """``opset`` as an int if the TorchScript exporter writes it and it has LayerNormalization
+    (17 on), else ``ValueError`` naming the range."""
     from torch.onnx import _constants  # the exporter's own limit (private; 20 in torch 2.13)
 
     highest = int(getattr(_constants, "ONNX_TORCHSCRIPT_EXPORTER_MAX_OPSET", 20))
-    if isinstance(opset, bool) or not isinstance(opset, int) or not 17 <= opset <= highest:
-        raise ValueError(
-            f"opset must be an integer from 17 to {highest}, got {shown_as(opset, int)}"
-        )
-    return opset
+    return check_int("opset", opset, least=17, most=highest)
 
 
 def export_run(
@@ -236,7 +232,7 @@ def export_run(
     onnx_file = Path(onnx_file)
     if not tolerance > 0.0:
         raise ValueError(f"tolerance must be positive, got {shown(tolerance)}")
-    check_opset(opset)
+    opset = check_opset(opset)
     check_output(onnx_file)
     networks = run_networks(run)
     checkpoints = [(name, load_for_export(path)) for name, path in networks]

@@ -89,7 +89,7 @@ from scpformer.train.tscvx_metrics import (
     tight_metrics,
     write_metrics_files,
 )
-from scpformer.validation import shown_as
+from scpformer.validation import check_int, shown_as
 
 NETWORKS = {"tight": TIGHT_KIND, "solution": SOLUTION_KIND}  # run sub-folder -> model kind
 CV_NAME = "cv.json"
@@ -378,8 +378,7 @@ def train_tscvx(
     if unknown or not networks:
         raise ValueError(f"networks must be a non-empty subset of {tuple(NETWORKS)}")
     folds = TSCVX_FOLDS[preset_name] if folds is None else folds
-    if isinstance(folds, bool) or not isinstance(folds, int) or folds < 1:
-        raise ValueError(f"folds must be a positive integer, got {shown_as(folds, int)}")
+    folds = check_int("folds", folds, least=1)
     if thrust_weight is None:
         thrust_weight = THRUST_WEIGHT[preset_name]
     if not (isinstance(thrust_weight, int | float) and 0.0 < thrust_weight < math.inf):
@@ -389,8 +388,7 @@ def train_tscvx(
     if report_split not in ("validation", "test"):
         raise ValueError(f"report_split must be validation or test, got {report_split!r}")
     if threads is not None:
-        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
-            raise ValueError(f"threads must be a positive integer, got {shown_as(threads, int)}")
+        threads = check_int("threads", threads, least=1)
         torch.set_num_threads(threads)
     out, data = Path(out), Path(data)
     overrides = {k: v for k, v in (overrides or {}).items() if v is not None}

@@ -46,7 +46,7 @@ from scpformer.problems.pdg6dof.reduced import ConicLayout, ReducedSubproblem, c
 from scpformer.problems.pdg6dof.subproblem import PDGSubproblem, SubproblemSolution
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Trajectory
-from scpformer.validation import check_positive
+from scpformer.validation import check_int, check_positive
 
 
 class TscvxPredictor(Protocol):
@@ -116,9 +116,7 @@ class TscvxParameters:
         if not 0.0 <= self.shrink_floor <= 1.0:
             raise ValueError(f"shrink_floor must be in [0, 1], got {self.shrink_floor}")
         for name in ("max_repairs", "stall_rejections"):
-            value = getattr(self, name)
-            if int(value) != value or value < 0:
-                raise ValueError(f"{name} must be a nonnegative integer, got {value}")
+            check_int(name, getattr(self, name), least=0)
 
 
 def eq22_update(

@@ -36,9 +36,9 @@ from scpformer.validation import (
     check_bool,
     check_finite,
     check_in_range,
+    check_int,
     check_positive,
     known_fields,
-    shown,
 )
 
 STOP_TESTS = ("step", "radius")
@@ -159,16 +159,9 @@ class RendezvousScenario:
     # (benchmarks/rendezvous_vs_public_art.py checks that its scenario matches ours).
 
     def __post_init__(self) -> None:
-        if isinstance(self.n_nodes, bool) or not isinstance(self.n_nodes, int | np.integer):
-            raise ValueError(f"scenario.n_nodes must be an integer, got {shown(self.n_nodes)}")
-        if isinstance(self.waypoint_offset, bool) or not isinstance(
-            self.waypoint_offset, int | np.integer
-        ):
-            raise ValueError(
-                f"scenario.waypoint_offset must be an integer, got {shown(self.waypoint_offset)}"
-            )
-        object.__setattr__(self, "n_nodes", int(self.n_nodes))
-        object.__setattr__(self, "waypoint_offset", int(self.waypoint_offset))
+        object.__setattr__(self, "n_nodes", check_int("scenario.n_nodes", self.n_nodes))
+        offset = check_int("scenario.waypoint_offset", self.waypoint_offset)
+        object.__setattr__(self, "waypoint_offset", offset)
         if self.waypoint_offset < 2:
             raise ValueError(f"scenario.waypoint_offset must be >= 2, got {self.waypoint_offset}")
         if self.n_nodes < self.waypoint_offset + 2:
@@ -288,9 +281,7 @@ class SCPParameters:
     solver: str = "clarabel"  # conic solver: clarabel, ecos or qoco
 
     def __post_init__(self) -> None:
-        if isinstance(self.K, bool) or not isinstance(self.K, int | np.integer) or self.K < 1:
-            raise ValueError(f"scp.K must be a positive integer, got {shown(self.K)}")
-        object.__setattr__(self, "K", int(self.K))
+        object.__setattr__(self, "K", check_int("scp.K", self.K, least=1))
         zeta_1 = check_positive("scp.zeta_1", self.zeta_1)
         zeta_K = check_positive("scp.zeta_K", self.zeta_K)
         if zeta_K > zeta_1:
@@ -343,15 +334,8 @@ class VerificationTolerances:
             object.__setattr__(
                 self, f.name, check_positive(f"verification.{f.name}", getattr(self, f.name))
             )
-        if (
-            isinstance(self.samples_per_interval, bool)
-            or not isinstance(self.samples_per_interval, int | np.integer)
-            or self.samples_per_interval < 1
-        ):
-            raise ValueError(
-                "verification.samples_per_interval must be a positive integer, got "
-                f"{shown(self.samples_per_interval)}"
-            )
+        samples = check_int("verification.samples_per_interval", self.samples_per_interval, least=1)
+        object.__setattr__(self, "samples_per_interval", samples)
         consistent = check_bool(
             "verification.consistent_initial_state", self.consistent_initial_state
         )

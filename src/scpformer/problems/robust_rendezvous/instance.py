@@ -34,7 +34,7 @@ from scpformer.problems.robust_rendezvous.scenario import (
     check_waypoint,
     robust_target,
 )
-from scpformer.validation import check_finite, check_interval, known_fields, read_json, shown
+from scpformer.validation import check_finite, check_int, check_interval, known_fields, read_json
 
 #: Nominal initial RTN state of Table 1: (-4 km, -17.5 km, 0) and (0, 6.849 m/s, 0).
 X0_RTN_TABLE1 = (-4000.0, -17500.0, 0.0, 0.0, 6.849, 0.0)
@@ -192,8 +192,7 @@ def sample_instances(
     uncertainty: UncertaintyModel | None = None,
 ) -> list[RobustInstance]:
     """Draw ``n`` instances uniformly over ``ranges`` (default: Table 1) from ``rng`` or a seed."""
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 0:
-        raise ValueError(f"n must be a nonnegative integer, got {shown(n)}")
+    n = check_int("n", n, least=0)
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     ranges = ranges or RobustSampleRanges()
     common = {
@@ -202,7 +201,7 @@ def sample_instances(
         "uncertainty": uncertainty or UncertaintyModel(),
     }
     out = []
-    for _ in range(int(n)):
+    for _ in range(n):
         x0 = np.asarray(nominal_x0_rtn, dtype=float).copy()
         x0[0] += rng.uniform(*ranges.dr_r_m)
         x0[1] += rng.uniform(*ranges.dr_t_m)

@@ -53,7 +53,7 @@ from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.plan_dynamics import linearize_dynamics
 from scpformer.problems.robust_rendezvous.problem import replay
 from scpformer.problems.robust_rendezvous.safety import drift_geometry, linear_model
-from scpformer.validation import check_positive, shown
+from scpformer.validation import check_int, check_positive
 
 PROPAGATORS = ("linear", "truth")
 _CHUNK_FLOATS = 20_000_000  # largest (nodes, samples, instants, 6) block held at once
@@ -70,13 +70,8 @@ class MonteCarloConfig:
     seed: int = 0  # seed of the numpy Generator
 
     def __post_init__(self) -> None:
-        for name in ("n_samples", "seed"):
-            value = getattr(self, name)
-            low = 0 if name == "seed" else 1
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
-                raise ValueError(
-                    f"monte_carlo.{name} must be an integer >= {low}, got {shown(value)}"
-                )
+        check_int("monte_carlo.n_samples", self.n_samples, least=1)
+        check_int("monte_carlo.seed", self.seed, least=0)
         if self.propagator not in PROPAGATORS:
             raise ValueError(
                 f"monte_carlo.propagator must be one of {PROPAGATORS}, got {self.propagator!r}"

@@ -30,7 +30,7 @@ import numpy as np
 from scpformer.dynamics.uncertainty import UncertaintyModel
 from scpformer.problems.rendezvous.scenario import TargetOrbit, check_orbits
 from scpformer.scp.scvx_star import SCvxStarParameters
-from scpformer.validation import check_bool, check_finite, check_positive, known_fields, shown
+from scpformer.validation import check_bool, check_finite, check_int, check_positive, known_fields
 
 WAYPOINTS = ("+T", "-T", "+R", "-R")
 MODES = ("deterministic", "chance")
@@ -64,12 +64,6 @@ def check_mode(mode: Any) -> str:
     return str(mode)
 
 
-def _int_field(name: str, value: Any, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {shown(value)}")
-    return int(value)
-
-
 def _axes(name: str, value: Any) -> tuple[float, float, float]:
     axes = check_finite(name, value, shape=(3,))
     if np.any(axes <= 0.0):
@@ -96,9 +90,9 @@ class RobustScenario:
     j2: bool = True  # J2 state transition matrix (Koenig 2017); False: Keplerian
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "n_nodes", _int_field("scenario.n_nodes", self.n_nodes, 2))
-        object.__setattr__(self, "n_safety", _int_field("scenario.n_safety", self.n_safety, 1))
-        switch = _int_field("scenario.n_ae_to_koz", self.n_ae_to_koz, 0)
+        object.__setattr__(self, "n_nodes", check_int("scenario.n_nodes", self.n_nodes, least=2))
+        object.__setattr__(self, "n_safety", check_int("scenario.n_safety", self.n_safety, least=1))
+        switch = check_int("scenario.n_ae_to_koz", self.n_ae_to_koz, least=0)
         if switch > self.n_nodes:
             raise ValueError(f"scenario.n_ae_to_koz must be <= n_nodes, got {switch}")
         object.__setattr__(self, "n_ae_to_koz", switch)
@@ -203,11 +197,13 @@ class RobustSolverConfig:
         object.__setattr__(
             self, "u_trust_scale", check_positive("u_trust_scale", self.u_trust_scale)
         )
-        object.__setattr__(self, "n_linearized", _int_field("n_linearized", self.n_linearized, 1))
+        object.__setattr__(
+            self, "n_linearized", check_int("n_linearized", self.n_linearized, least=1)
+        )
         object.__setattr__(
             self,
             "three_stage_iter_max",
-            _int_field("three_stage_iter_max", self.three_stage_iter_max, 1),
+            check_int("three_stage_iter_max", self.three_stage_iter_max, least=1),
         )
         object.__setattr__(
             self, "margin_gradient", check_bool("margin_gradient", self.margin_gradient)
