@@ -5,8 +5,13 @@ import pytest
 
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.problems.pdg6dof.problem import SOFT_BOX_FACTOR, PDGProblem, PDGSolverConfig
-from scpformer.problems.pdg6dof.reduced import ReducedSubproblem
+from scpformer.problems.pdg6dof.problem import (
+    SOFT_BOX_FACTOR,
+    PDGProblem,
+    PDGSolverConfig,
+    solve,
+)
+from scpformer.problems.pdg6dof.reduced import VIRTUAL_NEEDED, ReducedSubproblem
 from scpformer.problems.pdg6dof.subproblem import MASS_QUADRATURE
 from scpformer.scp.solution import Trajectory
 
@@ -109,3 +114,55 @@ def test_leaving_rows_out_gives_fewer_rows_cones_and_columns(linearized):
     assert small.cones == mass_row_cones < full.cones
     assert small.rows < full.rows - 6 * N - 700  # rows, cones and the safeguard box
     assert small.columns == full.columns - 4 * N  # the four norms' epigraph variables
+
+
+@pytest.fixture(scope="module")
+def at_optimum():
+    """The subproblem about a converged solution (its virtual control vanishes), radius 5."""
+    instance = PDGInstance()
+    problem = PDGProblem(instance, PDGSolverConfig())
+    z = solve(instance).trajectory
+    evaluation = problem.evaluate(z)
+    eta = 5.0
+    weight, box = problem.trust_region(eta)
+    sub = problem.subproblem
+
+    def linearized(lambda_: float) -> ReducedSubproblem:
+        sub.set_instance(instance)
+        sub.set_linearization(evaluation.linearization, z.x, z.u, float(z.p[0]))
+        sub.set_trust_region(eta, lambda_, box, weight)
+        return reduced
+
+    reduced = ReducedSubproblem(sub)
+    return linearized
+
+
+@pytest.mark.slow
+def test_without_nu_the_solve_matches_the_one_with_nu_on_half_the_columns(at_optimum):
+    reduced = at_optimum(2.0)
+    keep = np.ones(7 * N, dtype=bool)
+    with_nu = reduced.solve(keep, 2.0)
+    full_size = reduced.last_size
+    without = reduced.solve(keep, 2.0, keep_box=False, keep_virtual=False)
+    small = reduced.last_size
+    assert with_nu.status == without.status == "optimal"
+    assert np.abs(with_nu.nu).sum() < 1e-6  # nu = 0 is the optimum: the two must agree
+    np.testing.assert_allclose(without.x, with_nu.x, atol=1e-4)
+    np.testing.assert_allclose(without.u, with_nu.u, atol=1e-4)
+    assert without.linear_cost == pytest.approx(with_nu.linear_cost, abs=1e-6)
+    assert not without.nu.any()
+    n_nu = 14 * (N - 1)
+    assert small.columns == full_size.columns - 2 * n_nu  # nu and its |nu| epigraph
+    assert small.rows < full_size.rows - 2 * n_nu  # the epigraph rows (and the box)
+
+
+@pytest.mark.slow
+def test_without_nu_a_penalty_below_the_multipliers_asks_for_nu(at_optimum):
+    # The dynamics multipliers are about 1 (the final-mass row's); with lambda = 0.3 the
+    # penalty is not exact and the optimum with nu uses it, so the solve without nu must
+    # not pass for it.
+    reduced = at_optimum(0.3)
+    keep = np.ones(7 * N, dtype=bool)
+    assert np.abs(reduced.solve(keep, 0.3).nu).sum() > 1.0
+    without = reduced.solve(keep, 0.3, keep_box=False, keep_virtual=False)
+    assert without.status == VIRTUAL_NEEDED and without.x is None

@@ -8,6 +8,7 @@ from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import PDGSolverConfig, solve
 from scpformer.problems.pdg6dof.tscvx import (
     TscvxParameters,
+    TscvxProblem,
     consistent_guess,
     eq22_update,
 )
@@ -173,3 +174,40 @@ def test_a_noisy_prediction_is_kept_although_its_j_exceeds_the_straight_lines(co
     straight = _penalized_cost(PDGInstance(), PDGSolverConfig(), straight_line_trajectory(
         PDGInstance(), N))  # fmt: skip
     assert record.details["J_prediction"] > straight
+
+
+@pytest.mark.slow
+def test_solves_without_nu_take_the_steps_of_the_solves_with_nu(cold):
+    # After a solve that needed no virtual control the next ones leave nu out; the optimum
+    # has nu = 0 anyway (lambda = 2 is above the multipliers), so no step may change.
+    guess = OraclePredictor(cold).predict_solution(None)
+    predictor = OraclePredictor(cold, guess=(guess[0], guess[1] * 1.05, guess[2] * 0.97))
+    config = PDGSolverConfig(scvx=SCvxParameters(iter_max=4))
+    runs = [
+        solve(PDGInstance(), config, guess=TscvxWarmStart(predictor, TscvxParameters(
+            drop_virtual=drop, cold_fallback=False)))
+        for drop in (False, True)
+    ]  # fmt: skip
+    costs = [[r.cost for r in run.history] for run in runs]
+    np.testing.assert_allclose(costs[1], costs[0], atol=1e-6)
+    logs = [run.extras["tscvx"] for run in runs]
+    assert not any(logs[0]["without_virtual"])
+    assert any(logs[1]["without_virtual"]) and logs[1]["virtual_retries"] == 0
+
+
+@pytest.mark.slow
+def test_a_solve_without_nu_that_needs_nu_is_repeated_with_it(cold):
+    # lambda = 0.3 is below the dynamics multipliers (about 1): the optimum uses nu, so the
+    # attempt without it must be refused and the step be the one of the solve with nu.
+    config = PDGSolverConfig(scvx=SCvxParameters(lambda_=0.3))
+    z = cold.trajectory
+    flags = np.ones(7 * N, dtype=bool)
+    steps = []
+    for drop in (False, True):
+        problem = TscvxProblem(PDGInstance(), config, lambda k: flags, TscvxParameters(
+            drop_virtual=drop))  # fmt: skip
+        problem._virtual_free = True  # as after a solve that needed no virtual control
+        steps.append(problem.solve_subproblem(z, problem.evaluate(z), 5.0, 0.3, "clarabel"))
+        assert problem.log.virtual_retries == int(drop)
+    assert steps[1].virtual_norm > 1.0
+    np.testing.assert_allclose(steps[1].trajectory.x, steps[0].trajectory.x, atol=1e-6)

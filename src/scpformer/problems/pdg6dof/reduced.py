@@ -24,6 +24,16 @@ nonnegative row each and, together, the cone of the thrust norm they share (kept
 is kept). Equalities, the virtual-control rows, the final-time bounds and the trust region
 are always kept; with ``drop_box`` the safeguard box of the soft trust region is left out
 too (the caller checks the solution against it, see :meth:`ReducedSubproblem.solve`).
+
+With ``keep_virtual=False`` the virtual control ``nu`` is fixed at zero: its columns, the
+nonnegative rows of its ``|nu|`` epigraph and the epigraph's columns are left out (a third of
+the rows and half of the columns at N = 50). The result is the optimum of the subproblem with
+``nu`` exactly when that optimum has ``nu = 0``: Eq. 16's L1 penalty is exact for the
+subproblem (Nocedal & Wright, Thm. 17.3) once every multiplier ``y`` of a dynamics row is
+below its weight, ``|A_nu^T y| <= lambda`` column by column, which
+:meth:`ReducedSubproblem.solve` checks on Clarabel's dual solution. A subproblem whose
+linearized dynamics cannot be met without ``nu`` is infeasible and is reported so; either way
+the caller solves again with ``nu``.
 """
 
 from __future__ import annotations
@@ -54,6 +64,7 @@ from scpformer.scp.conic import (
 
 ALWAYS = -1  # owner of a conic row kept in every reduced problem
 BOX = -2  # owner of a row of the safeguard trust-region box
+VIRTUAL_NEEDED = "virtual_needed"  # status: the optimum without nu is not the one with nu
 
 
 @dataclass(frozen=True)
@@ -71,6 +82,9 @@ class ConicLayout:
     owner_a: np.ndarray  # (m,) int
     owner_b: np.ndarray  # (m,) int
     variables: VariableSlices  # name -> (column offset, shape), PDGSubproblem.named_variables
+    virtual_rows: np.ndarray  # (m,) bool: the nonnegative rows of the |nu| epigraph
+    virtual_columns: np.ndarray  # (n,) bool: nu and its epigraph variables
+    nu_columns: np.ndarray  # (n,) bool: nu alone
 
     @property
     def n_rows(self) -> int:
@@ -113,17 +127,46 @@ def conic_layout(sub: PDGSubproblem) -> ConicLayout:
             a = b = np.full(rows, BOX if constraint.id in box_ids else ALWAYS)
         owner_a.append(a)
         owner_b.append(b)
+    variables = sub.primal_slices("clarabel")
+    virtual_rows, virtual_columns, nu_columns = _virtual_parts(data["A"], int(dims.zero), variables)
     layout = ConicLayout(
         n_zero=int(dims.zero),
         n_nonneg=int(dims.nonneg),
         soc_sizes=np.asarray(dims.soc, dtype=int),
         owner_a=np.concatenate(owner_a).astype(int),
         owner_b=np.concatenate(owner_b).astype(int),
-        variables=sub.primal_slices("clarabel"),
+        variables=variables,
+        virtual_rows=virtual_rows,
+        virtual_columns=virtual_columns,
+        nu_columns=nu_columns,
     )
     if layout.n_rows != data["A"].shape[0]:
         raise RuntimeError(f"conic layout maps {layout.n_rows} rows, A has {data['A'].shape[0]}")
     return layout
+
+
+def _virtual_parts(
+    A: sp.spmatrix, n_zero: int, variables: VariableSlices
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of the ``|nu|`` epigraph, the columns of ``nu`` and its epigraph, and those
+    of ``nu`` alone (see the module docstring): the inequality rows with two entries, one in
+    ``nu`` (``t -+ nu >= 0``; the mass rows of Eq. 4a, inequalities that also hold ``nu``,
+    stay), and the columns that only those rows touch."""
+    A = sp.csr_array(A)
+    offset, shape = variables["nu"]
+    nu_columns = np.zeros(A.shape[1], dtype=bool)
+    nu_columns[offset : offset + int(np.prod(shape))] = True
+    touches_nu = np.diff(sp.csr_array(A[:, nu_columns]).indptr) > 0
+    two_entries = np.diff(A.indptr) == 2
+    virtual_rows = touches_nu & two_entries & (np.arange(A.shape[0]) >= n_zero)
+    in_virtual = np.zeros(A.shape[1], dtype=bool)
+    in_virtual[A[virtual_rows].indices] = True
+    elsewhere = np.zeros(A.shape[1], dtype=bool)
+    elsewhere[A[~virtual_rows].indices] = True
+    epigraph = in_virtual & ~nu_columns & ~elsewhere
+    if epigraph.sum() != nu_columns.sum() or virtual_rows.sum() != 2 * nu_columns.sum():
+        raise RuntimeError("the |nu| epigraph is not the one the reduced solve expects")
+    return virtual_rows, nu_columns | epigraph, nu_columns
 
 
 def _rows_per_node(constraint: cp.Constraint, dims: object) -> int:
@@ -181,21 +224,31 @@ class ReducedSubproblem:
         data, _, _ = self.sub.problem.get_problem_data(SOLVERS["clarabel"], solver_opts={})
         return data
 
-    def solve(self, keep: np.ndarray, lambda_: float, keep_box: bool = True) -> SubproblemSolution:
+    def solve(
+        self, keep: np.ndarray, lambda_: float, keep_box: bool = True, keep_virtual: bool = True
+    ) -> SubproblemSolution:
         """Solve with the ``(name, node)`` rows of ``keep`` (R,) and every other row.
 
         ``keep_box = False`` leaves out the safeguard box of the trust region (only sound
         with a soft trust region; the caller re-solves with it if the step leaves the box).
-        ``solve_time`` is the Clarabel call alone (setup or update, and solve); ``wall_time``
-        includes the parameter map, the slicing and the unpacking.
+        ``keep_virtual = False`` fixes ``nu`` at zero (module docstring); a solution whose
+        dynamics multipliers exceed the penalty weight is returned with status
+        :data:`VIRTUAL_NEEDED`, an infeasible one with Clarabel's status: the caller solves
+        again with ``nu``. ``solve_time`` is the Clarabel call alone (setup or update, and
+        solve); ``wall_time`` includes the parameter map, the slicing and the unpacking.
         """
         start = time.perf_counter()
         data = self.conic_data()
         rows = self.layout.kept_rows(keep, keep_box)
+        if not keep_virtual:
+            rows &= ~self.layout.virtual_rows
         A = sp.csr_array(data["A"])[rows]
         c = np.asarray(data["c"], dtype=float)
         P = sp.csc_array(data["P"]) if "P" in data else sp.csc_array((c.size, c.size))  # LP/SOCP
         cols = _used_columns(A, P, c)
+        if not keep_virtual:
+            cols &= ~self.layout.virtual_columns
+            nu_block = sp.csc_array(A[:, self.layout.nu_columns])
         A = sp.csc_array(A[:, cols])
         P = sp.triu(P[cols][:, cols]).tocsc()
         t0 = time.perf_counter()
@@ -215,6 +268,9 @@ class ReducedSubproblem:
             iterations=int(result.iterations),
         )
         status = clarabel_status(result)
+        if status in SOLVED and not keep_virtual:
+            multipliers = np.abs(nu_block.T @ np.asarray(result.z))
+            status = status if multipliers.max(initial=0.0) <= lambda_ else VIRTUAL_NEEDED
         if status not in SOLVED:
             return failed_solution(status, time.perf_counter() - start, solve_time)
         full = np.zeros(cols.size)
