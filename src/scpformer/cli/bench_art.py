@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from scpformer.cli.argtypes import count
 from scpformer.cli.commands import command_help
 
 MODES = ("cached", "cached, 2 calls", "cached, bf16", "cached, int8", "no cache")
@@ -61,7 +62,7 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--steps", type=int, default=100, help="time steps N (100)")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs per mode (5)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (1)")
-    parser.add_argument("--seed", type=int, default=0, help="instance and weight seed (0)")
+    parser.add_argument("--seed", type=count, default=0, help="instance and weight seed (0)")
     parser.add_argument(
         "--target", action="store_true", help="random weights with the target token (robust ART)"
     )

@@ -50,7 +50,7 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--warmup", type=count, default=20, help="untimed calls first (20)")
     parser.add_argument("--batch", type=at_least_one, default=64, help="throughput batch (64)")
     parser.add_argument("--threads", type=at_least_one, default=1, help="torch threads (1)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of theta and weights (0)")
+    parser.add_argument("--seed", type=count, default=0, help="seed of theta and weights (0)")
     parser.set_defaults(handler=run_bench)
 
 

@@ -9,8 +9,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from scpformer.cli.argtypes import count
 from scpformer.cli.commands import command_help
 from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
+from scpformer.files import check_output_folder
 from scpformer.train.config import TRAIN_PRESETS, TrainConfig
 
 SEQUENCE_MODELS = ("art", "gru", "lstm")
@@ -71,6 +73,7 @@ def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
 def run_train(args: argparse.Namespace) -> int:
     from scpformer.train.art import train_sequence_model
 
+    check_output_folder(args.out, "--out")
     result = train_sequence_model(
         args.kind,
         data=args.data,
@@ -188,6 +191,7 @@ def run_train_tscvx(args: argparse.Namespace) -> int:
 
     if args.solution_epochs is not None and args.solution_epochs < 1:
         raise ValueError(f"--solution-epochs must be positive, got {args.solution_epochs}")
+    check_output_folder(args.out, "--out")
     result = train_tscvx(
         data=args.data,
         out=args.out,
@@ -252,7 +256,7 @@ def add_lookup_parsers(models: argparse._SubParsersAction) -> None:
             help=f"training points in the table, drawn at random; 0: all (paper: 100 for "
             f"interpolation; default: {preset.max_points})",
         )
-        group.add_argument("--seed", type=int, default=preset.seed, help="seed of the draw")
+        group.add_argument("--seed", type=count, default=preset.seed, help="seed of the draw")
         group.add_argument(
             "--threshold",
             type=float,
@@ -267,6 +271,7 @@ def run_train_lookup(args: argparse.Namespace) -> int:
 
     from scpformer.models.lookup import LOOKUP_PRESETS, train_lookup
 
+    check_output_folder(args.out, "--out")
     config = dataclasses.replace(
         LOOKUP_PRESETS[args.kind],
         n_components=args.n_components,

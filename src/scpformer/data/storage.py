@@ -390,13 +390,25 @@ def read_manifest(folder: Path) -> Manifest:
         When ``folder`` holds no manifest or an unreadable one.
     """
     path = Path(folder) / MANIFEST_NAME
+    if not Path(folder).exists():
+        raise DatasetError(f"no dataset in {folder} (no such folder)")
+    if not Path(folder).is_dir():
+        raise DatasetError(f"no dataset in {folder} (a file, not a dataset folder)")
     if not path.is_file():
         hint = ""
-        if Path(folder).is_dir() and any(Path(folder).glob(SHARD_GLOB)):
+        if any(Path(folder).glob(SHARD_GLOB)):
             hint = f"; its shards remain: rebuild it with `scpformer dataset repair {folder}`"
         raise DatasetError(f"no dataset in {folder} ({MANIFEST_NAME} not found{hint})")
     try:
-        return Manifest.from_dict(json.loads(path.read_text()))
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise DatasetError(f"{path} is corrupt: {err}") from None
+    if not isinstance(data, dict):
+        raise DatasetError(
+            f"{path} is corrupt: it holds a JSON {type(data).__name__}, not an object"
+        )
+    try:
+        return Manifest.from_dict(data)
     except KeyError as err:
         raise DatasetError(f"{path} is corrupt: it has no field {err}") from None
     except (json.JSONDecodeError, TypeError, ValueError) as err:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from scpformer.experiments.runner import RunOptions
+from scpformer.experiments.runner import RunOptions, check_out_folder
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -149,6 +149,7 @@ def get_experiment(name: str) -> Experiment:
 def run_experiment(name: str, options: RunOptions, command: str = "") -> Path:
     """Run experiment ``name``; returns the path of its ``report.md``."""
     experiment = get_experiment(name)
+    check_out_folder(options.out)
     run: Any = experiment.runner()
     if options.n is None:
         options = replace(options, n=experiment.default_n)

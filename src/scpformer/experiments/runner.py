@@ -35,6 +35,7 @@ from scpformer.data.executors import Executor, LocalPool, RayPool
 from scpformer.data.family import SampleResult
 from scpformer.data.splits import load_splits
 from scpformer.data.storage import ShardedSamples, file_sha256, read_manifest
+from scpformer.files import check_output_folder
 from scpformer.validation import check_int, shown
 
 RESULTS_NAME = "results.csv"
@@ -176,6 +177,19 @@ def theta_tasks(folder: Path, positions: Sequence[int]) -> list[InstanceTask]:
 # ======================================================================================
 # resumable per-instance results
 # ======================================================================================
+def check_out_folder(out: Path) -> None:
+    """Refuse an ``--out`` that is a file, cannot be written, or holds files of something else
+    than an experiment run (no ``config.json``): the run would overwrite them."""
+    check_output_folder(out, "--out")
+    if out.is_dir() and not (out / CONFIG_NAME).exists():
+        others = sorted(p.name for p in out.iterdir())
+        if others:
+            raise ValueError(
+                f"--out {out} is not empty and holds no experiment run ({CONFIG_NAME} missing; "
+                f"found {', '.join(others[:3])}); choose an empty or new --out folder"
+            )
+
+
 def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
     """Record ``settings`` in ``OUT/config.json``; refuse a folder made with other settings.
 

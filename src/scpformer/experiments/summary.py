@@ -81,6 +81,8 @@ def collect(results_dir: Path) -> list[ExperimentResults]:
     :class:`ResultsError` names it, rather than the experiment being listed as not run.
     """
     results_dir = Path(results_dir)
+    if results_dir.exists() and not results_dir.is_dir():
+        raise ResultsError(f"--results {results_dir} is a file, not a folder")
     if not results_dir.is_dir():
         raise ResultsError(f"--results {results_dir}: no such folder")
     names = (REPORT_NAME, RESULTS_JSON_NAME)
@@ -133,7 +135,9 @@ def write_summary(results_dir: Path, out: Path) -> Path:
     """Gather ``RESULTS_DIR/*/results.json`` into ``out`` (written atomically)."""
     from scpformer.data.storage import atomic_write_text
     from scpformer.experiments import EXPERIMENTS
+    from scpformer.files import check_output_file
 
+    check_output_file(out, "--out")
     results = collect(results_dir)
     done = {r.experiment for r in results}
     not_run = [

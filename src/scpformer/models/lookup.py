@@ -452,7 +452,17 @@ def _first_line(err: BaseException) -> str:
 def train_lookup(
     kind: str, *, data: Path | str, out: Path | str, config: LookupConfig | None = None
 ) -> LookupPredictor:
-    """``scpformer train kdtree|interp``: fit on ``data``'s training split, save to ``out``."""
+    """``scpformer train kdtree|interp``: fit on ``data``'s training split, save to ``out``.
+
+    Raises ``ValueError`` before fitting when ``out`` already holds a lookup table: it is not
+    replaced unasked.
+    """
+    taken = [name for name in (LOOKUP_JSON, LOOKUP_NPZ) if (Path(out) / name).exists()]
+    if taken:
+        raise ValueError(
+            f"--out {out} already holds a lookup table ({', '.join(taken)}); give another "
+            "--out, or delete it"
+        )
     predictor = fit_lookup(kind, data, config)
     save_lookup(predictor, out)
     return predictor

@@ -49,7 +49,7 @@ from scpformer.train.checkpoint import (
 )
 from scpformer.train.config import TrainConfig, train_config
 from scpformer.train.loop import FitState, TensorData, fit, seed_everything
-from scpformer.train.metrics import plot_losses, write_metrics
+from scpformer.train.metrics import LOSS_PLOT_NAME, METRICS_NAME, plot_losses, write_metrics
 from scpformer.train.models_api import resolve
 
 CONFIG_NAME = "config.json"
@@ -279,10 +279,43 @@ def _previous_run(out: Path, kind: str, frame: str | None, resume: bool) -> dict
     if not exists:
         if resume:
             refuse_resume_without_checkpoint(out)
+        else:
+            _refuse_overwrite(out, kind)
         return None
     payload = read_checkpoint(out, kind=kind, frame=frame)
     payload["extra"] = from_plain(payload["extra"])
     return payload
+
+
+def _refuse_overwrite(out: Path, kind: str) -> None:
+    """Raise ``ValueError`` when a new run in ``out`` would overwrite files it did not write.
+
+    A run writes its files beside its checkpoint, except the ``config.json`` of a start that
+    stopped before its first epoch ended: that one (of a ``kind`` run) is the run's to rewrite.
+    """
+    names = (CONFIG_NAME, BEST_NAME, METRICS_NAME, LOSS_PLOT_NAME)
+    taken = [name for name in names if (out / name).exists()]
+    if taken == [CONFIG_NAME] and _describes_a_run(out / CONFIG_NAME, kind):
+        return
+    if taken:
+        raise ValueError(
+            f"--out {out} holds {', '.join(taken)} but no {CHECKPOINT_NAME}: a new run would "
+            f"overwrite {'it' if len(taken) == 1 else 'them'} (give another --out, or delete "
+            f"{'it' if len(taken) == 1 else 'them'})"
+        )
+
+
+def _describes_a_run(path: Path, kind: str) -> bool:
+    """Whether ``path`` is the ``config.json`` written at the start of a ``kind`` run."""
+    try:
+        description = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return False
+    return (
+        isinstance(description, dict)
+        and description.get("kind") == kind
+        and all(key in description for key in ("manifest_digest", "package_version", "train"))
+    )
 
 
 def _resumed_settings(

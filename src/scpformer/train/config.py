@@ -16,7 +16,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from scpformer.validation import check_int, shown
+import numpy as np
+
+from scpformer.validation import check_finite, check_int, shown
 
 SCHEDULES = ("constant", "cosine")
 DEVICES = ("auto", "cpu", "cuda")
@@ -46,9 +48,14 @@ class TrainConfig:
             object.__setattr__(self, name, check_int(name, getattr(self, name), least=1))
         if not 0.0 < self.lr < math.inf:
             raise ValueError(f"lr must be a positive finite number, got {shown(self.lr)}")
-        for name in ("weight_decay", "grad_clip"):
-            if not getattr(self, name) >= 0.0:
-                raise ValueError(f"{name} must be nonnegative, got {shown(getattr(self, name))}")
+        if self.lr > 1.0:  # 1e300 would overflow torch's float32 schedule
+            raise ValueError(f"lr must be at most 1, got {shown(self.lr)}")
+        if not 0.0 <= self.weight_decay < math.inf:
+            raise ValueError(
+                f"weight_decay must be a nonnegative finite number, got {shown(self.weight_decay)}"
+            )
+        if not self.grad_clip >= 0.0:
+            raise ValueError(f"grad_clip must be nonnegative, got {shown(self.grad_clip)}")
         if self.warmup_steps < 0:
             raise ValueError(f"warmup_steps must be nonnegative, got {shown(self.warmup_steps)}")
         if self.schedule not in SCHEDULES:
@@ -61,7 +68,10 @@ class TrainConfig:
             )
         if self.device not in DEVICES:
             raise ValueError(f"device must be one of {DEVICES}, got {self.device!r}")
-        object.__setattr__(self, "betas", tuple(float(b) for b in self.betas))
+        betas = check_finite("betas", self.betas, shape=(2,))
+        if not np.all((betas >= 0.0) & (betas < 1.0)):  # AdamW's moment decay rates
+            raise ValueError(f"betas must lie in [0, 1), got {shown(tuple(self.betas))}")
+        object.__setattr__(self, "betas", tuple(float(b) for b in betas))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self) | {"betas": list(self.betas)}

@@ -197,6 +197,8 @@ def check_output(onnx_file: Path) -> None:
         raise ValueError(f"--onnx {onnx_file}: the file name must end in .onnx")
     if onnx_file.is_dir():
         raise ValueError(f"--onnx {onnx_file}: is a folder")
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"--onnx {onnx_file}: {folder} is a file, not a folder")
     if not folder.is_dir():
         raise ValueError(f"--onnx {onnx_file}: folder {folder} does not exist")
     if not os.access(folder, os.W_OK):
