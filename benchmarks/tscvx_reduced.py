@@ -3,8 +3,10 @@
 On ``--n`` nominal instances (``SampleRanges.nominal()``, ``--seed``) solved cold, the
 subproblem is linearized about the converged trajectory (trust radius 1, the soft region)
 and solved with several row sets, each with and without the safeguard box of the soft trust
-region: every row, the rows tight at the optimum plus those within the default margin (what
-T-SCvx keeps near the end), the tight rows alone, and none. Each set is solved ``--repeats``
+region, and without the box and the virtual control ``nu`` (what T-SCvx solves after a solve
+that needed no ``nu``, ``TscvxParameters.drop_virtual``): every row, the rows tight at the
+optimum plus those within the default margin (what T-SCvx keeps near the end), the tight rows
+alone, and none. Each set is solved ``--repeats``
 times per instance; the table gives the conic problem's size, Clarabel's interior-point
 iterations and its median time (setup + solve) over all instances and repeats, beside
 cvxpy's own full solve (in-place updated solver object).
@@ -26,8 +28,8 @@ from scpformer.problems.pdg6dof.tscvx import TscvxParameters, near_active_rows, 
 from scpformer.scp.conic import solve_timed
 
 
-def row_sets(problem: PDGProblem, z, n_nodes: int) -> dict[str, tuple[np.ndarray, bool]]:
-    """Name -> (flag mask, keep the safeguard box)."""
+def row_sets(problem: PDGProblem, z, n_nodes: int) -> dict[str, tuple[np.ndarray, bool, bool]]:
+    """Name -> (flag mask, keep the safeguard box, keep the virtual control)."""
     values = con.constraint_values(problem.instance, z.x, z.u)
     tight = con.tight_flags(values, problem.config.tight_tol)
     margin = TscvxParameters().margin
@@ -35,10 +37,11 @@ def row_sets(problem: PDGProblem, z, n_nodes: int) -> dict[str, tuple[np.ndarray
     every = np.ones(7 * n_nodes, dtype=bool)
     masks = {"all rows": every, "tight + margin": tight | near, "tight": tight,
              "none": np.zeros_like(every)}  # fmt: skip
+    variants = ((" + box", True, True), ("", False, True), (", no nu", False, False))
     return {
-        f"{name}{suffix}": (mask, box)
+        f"{name}{suffix}": (mask, box, virtual)
         for name, mask in masks.items()
-        for suffix, box in ((" + box", True), ("", False))
+        for suffix, box, virtual in variants
     }
 
 
@@ -66,8 +69,8 @@ def main() -> int:
             call = solve_timed(sub.problem, "clarabel", reuse=True)
             assert call.solved, call.status
             times.setdefault("cvxpy full (reuse)", []).append(call.solver_time)
-            for name, (keep, box) in row_sets(problem, z, config.n_nodes).items():
-                sol = reduced.solve(keep, config.scvx.lambda_, keep_box=box)
+            for name, (keep, box, virtual) in row_sets(problem, z, config.n_nodes).items():
+                sol = reduced.solve(keep, config.scvx.lambda_, box, virtual)
                 assert sol.status == "optimal", (name, sol.status)
                 times.setdefault(name, []).append(sol.solve_time)
                 s = reduced.last_size
