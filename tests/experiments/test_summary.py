@@ -127,3 +127,14 @@ def test_every_committed_result_folder_has_readable_results_json():
     assert {r.experiment for r in results} >= {"art-warmstart", "art-forecast-scp"}
     for result in results:
         assert result.rows and result.command.startswith("scpformer experiment run")
+
+
+def test_a_results_folder_without_experiments_leaves_the_page_as_it_is(tmp_path, capsys):
+    empty = tmp_path / "results"
+    (empty / "notes").mkdir(parents=True)  # a folder, but no experiment in it
+    out = tmp_path / "RESULTS.md"
+    out.write_text("the page written before")
+    assert main(["report", "--results", str(empty), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds no experiment folders" in err[0], err
+    assert out.read_text() == "the page written before"

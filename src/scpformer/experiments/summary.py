@@ -132,13 +132,24 @@ def render(results: Sequence[ExperimentResults], out: Path, not_run: Sequence[st
 
 
 def write_summary(results_dir: Path, out: Path) -> Path:
-    """Gather ``RESULTS_DIR/*/results.json`` into ``out`` (written atomically)."""
+    """Gather ``RESULTS_DIR/*/results.json`` into ``out`` (written atomically).
+
+    A results folder without any experiment folder (a mistyped ``--results``) is a
+    :class:`ResultsError`: its page would list every experiment as not run and replace the
+    page at ``out``.
+    """
     from scpformer.data.storage import atomic_write_text
     from scpformer.experiments import EXPERIMENTS
     from scpformer.files import check_output_file
 
     check_output_file(out, "--out")
     results = collect(results_dir)
+    names = (REPORT_NAME, RESULTS_JSON_NAME)
+    if not results and not any(any(Path(results_dir).glob(f"*/{n}")) for n in names):
+        raise ResultsError(  # a page of "not run yet" would only replace the one there
+            f"--results {results_dir} holds no experiment folders (none has {REPORT_NAME} or "
+            f"{RESULTS_JSON_NAME}); {out} is left as it is"
+        )
     done = {r.experiment for r in results}
     not_run = [
         f"{e.reproduces} (`scpformer experiment run {name}`): {e.summary}"
