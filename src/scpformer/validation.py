@@ -7,7 +7,7 @@ instance file or command-line value fails fast with one clear line (DESIGN.md, i
 from __future__ import annotations
 
 import json
-from dataclasses import fields
+from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any
 
@@ -207,17 +207,27 @@ def check_trajectory(name: str, value: Any, like: Any) -> Any:
     return value
 
 
-def known_fields(cls: type, data: Any, what: str) -> dict[str, Any]:
-    """``data`` as a dict after checking it is a mapping of ``cls``'s dataclass fields only.
+def known_fields(cls: type, data: Any, what: str, complete: bool = False) -> dict[str, Any]:
+    """``data`` as a dict after checking it is a mapping of ``cls``'s dataclass fields only
+    (and, with ``complete``, that it holds every field without a default).
 
-    Raises ``ValueError`` naming ``what`` and every unknown key.
+    Raises ``ValueError`` naming ``what`` and every unknown (or missing) key.
     """
     if not isinstance(data, dict):
         raise ValueError(f"{what} must be a JSON object, got {type(data).__name__}")
     unknown = sorted(set(data) - {f.name for f in fields(cls)})
     if unknown:
         raise ValueError(f"unknown {what} field(s): {', '.join(unknown)}")
+    if complete:
+        missing = [f.name for f in fields(cls) if f.name not in data and _required(f)]
+        if missing:
+            raise ValueError(f"{what} lacks field(s): {', '.join(missing)}")
     return dict(data)
+
+
+def _required(f: Any) -> bool:
+    """A dataclass field without a default value or factory."""
+    return f.default is MISSING and f.default_factory is MISSING
 
 
 def read_json(path: str | Path, what: str = "instance") -> Any:

@@ -72,8 +72,28 @@ def test_a_corrupt_manifest_is_a_clear_error(toy_folder):
 
 def test_a_manifest_missing_a_field_names_the_field(toy_folder):
     (toy_folder / storage.MANIFEST_NAME).write_text('{"format_version": 1}')
-    with pytest.raises(DatasetError, match=r"manifest.json is corrupt: it has no field '\w+'"):
+    with pytest.raises(DatasetError, match=r"manifest\.json is corrupt: manifest lacks") as info:
         storage.read_manifest(toy_folder)
+    assert "family, seed, n, shard_size" in str(info.value)  # every missing one, in order
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda m: m.update(schema=None), "field 'schema' must be a list, got NoneType"),
+        (lambda m: m.update(shards=[1]), "field 'shards', entry 0: shard must be a JSON object"),
+        (lambda m: m["shards"][0].pop("sha256"), "field 'shards', entry 0: shard lacks field"),
+        (lambda m: m.update(extra=1), "unknown manifest field(s): extra"),
+        (lambda m: m.update(success_statuses=[5]), "'success_statuses', entry 0: status must"),
+        (lambda m: m.update(grown_from=[2.5]), "'grown_from', entry 0: value must be an integer"),
+        (lambda m: m["schema"][0].pop("dtype"), "'schema', entry 0: schema entry lacks field"),
+    ],
+)
+def test_a_manifest_field_of_the_wrong_kind_is_named(toy_folder, edit, message):
+    _tampered(toy_folder, edit)
+    with pytest.raises(DatasetError, match=r"manifest\.json is corrupt: ") as info:
+        storage.read_manifest(toy_folder)
+    assert message in str(info.value)
 
 
 def _tampered(folder, edit):
@@ -90,7 +110,7 @@ def test_a_manifest_naming_a_shard_outside_the_folder_is_corrupt_and_nothing_is_
     victim = toy_folder.parent / "victim.h5"
     victim.write_text("not yours")
     _tampered(toy_folder, lambda data: data["shards"][0].update(file=name))
-    with pytest.raises(DatasetError, match=r"manifest.json is corrupt: shard file"):
+    with pytest.raises(DatasetError, match=r"manifest.json is corrupt: .*shard file"):
         generate(ToyFamily(), config(toy_folder))
     assert victim.read_text() == "not yours"
 

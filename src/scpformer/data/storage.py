@@ -41,7 +41,7 @@ import numpy as np
 from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full
 from scpformer.data.family import Field
 from scpformer.files import interrupts_deferred, write_bytes_atomic
-from scpformer.validation import check_int
+from scpformer.validation import check_int, check_type, known_fields
 
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
@@ -220,16 +220,30 @@ class Manifest:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Manifest:
-        data = dict(data)
-        data.pop("counts", None)
-        data.pop("complete", None)
-        data["schema"] = tuple(Field.from_dict(f) for f in data["schema"])
-        data["shards"] = tuple(ShardInfo(**s) for s in data.get("shards", ()))
-        data["runs"] = tuple(data.get("runs", ()))
-        data["grown_from"] = tuple(data.get("grown_from", ()))
-        data["success_statuses"] = tuple(data["success_statuses"])
-        if data.get("plan") is not None:
-            data["plan"] = tuple(tuple(r) for r in data["plan"])
+        """The manifest of :meth:`to_dict`'s JSON; ``ValueError`` naming the field at fault."""
+        derived = ("counts", "complete")  # written for readers, recomputed from the shards
+        data = {k: v for k, v in dict(data).items() if k not in derived}
+        data = known_fields(cls, data, "manifest", complete=True)
+
+        def shard(entry: Any) -> ShardInfo:
+            return ShardInfo(**known_fields(ShardInfo, entry, "shard", complete=True))
+
+        def schema_field(entry: Any) -> Field:
+            return Field.from_dict(known_fields(Field, entry, "schema entry", complete=True))
+
+        def count(entry: Any) -> int:
+            return check_int("value", entry, least=0)
+
+        for name, item in (
+            ("schema", schema_field),
+            ("shards", shard),
+            ("runs", lambda r: check_type("run record", r, dict)),
+            ("grown_from", count),
+            ("success_statuses", lambda r: check_type("status", r, str)),
+            ("plan", lambda r: _list_field("range", r, count)),
+        ):
+            if name in data and not (name == "plan" and data[name] is None):
+                data[name] = _list_field(name, data[name], item)
         return cls(**data)
 
     def field(self, name: str) -> Field:
@@ -238,6 +252,20 @@ class Manifest:
             if f.name == name:
                 return f
         raise DatasetError(f"the {self.family} dataset has no field {name!r}")
+
+
+def _list_field(name: str, value: Any, item: Any) -> tuple:
+    """``value`` (a JSON list) with ``item`` applied to each entry; ``ValueError`` naming
+    ``name`` and the entry's position when it is not a list or an entry does not convert."""
+    if not isinstance(value, list | tuple):
+        raise ValueError(f"field {name!r} must be a list, got {type(value).__name__}")
+    out = []
+    for i, entry in enumerate(value):
+        try:
+            out.append(item(entry))
+        except (TypeError, ValueError, KeyError) as err:
+            raise ValueError(f"field {name!r}, entry {i}: {_short(err)}") from None
+    return tuple(out)
 
 
 def describe_mismatch(old: Manifest, new: Manifest) -> str | None:
