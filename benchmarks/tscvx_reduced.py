@@ -3,8 +3,8 @@
 On ``--n`` nominal instances (``SampleRanges.nominal()``, ``--seed``) solved cold, the
 subproblem is linearized about the converged trajectory (trust radius 1, the soft region)
 and solved with several row sets, each with and without the safeguard box of the soft trust
-region, and without the box and the virtual control ``nu`` (what T-SCvx solves after a solve
-that needed no ``nu``, ``TscvxParameters.drop_virtual``): every row, the rows tight at the
+region, and without the box and the virtual control ``nu`` (what T-SCvx solves unless its
+last solve needed ``nu``, ``TscvxParameters.drop_virtual``): every row, the rows tight at the
 optimum plus those within the default margin (what T-SCvx keeps near the end), the tight rows
 alone, and none. Each set is solved ``--repeats``
 times per instance; the table gives the conic problem's size, Clarabel's interior-point

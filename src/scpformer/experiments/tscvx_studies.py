@@ -92,9 +92,9 @@ TSCVX_DIFFERENCES: tuple[str, ...] = (
     "thrust_max, gimbal); the paper's classifier outputs 12 N flags.",
     "Conic solver: Clarabel on the compiled conic data, the reduced subproblem sliced from it "
     "(no cvxpy canonicalization per iteration); the paper uses cvxpy with ECOS/MOSEK.",
-    "Virtual control: after a T-SCvx solve that needed none, the next reduced solves leave "
-    "nu and the safeguard box out and check that the dynamics multipliers stay below lambda "
-    "(else they are repeated with nu); cold SCvx always keeps nu, as Algorithm 1.",
+    "Virtual control: T-SCvx's reduced solves leave nu and the safeguard box out unless the "
+    "last solve needed nu, and check that the dynamics multipliers stay below lambda (else "
+    "they are repeated with nu); cold SCvx always keeps nu, as Algorithm 1.",
 )
 
 
