@@ -439,7 +439,7 @@ def read_manifest(folder: Path) -> Manifest:
         return Manifest.from_dict(data)
     except KeyError as err:
         raise DatasetError(f"{path} is corrupt: it has no field {err}") from None
-    except (json.JSONDecodeError, TypeError, ValueError) as err:
+    except (TypeError, ValueError) as err:  # the JSON itself was read above
         raise DatasetError(f"{path} is corrupt: {err}") from None
 
 

@@ -85,10 +85,14 @@ def collect(results_dir: Path) -> list[ExperimentResults]:
         raise ResultsError(f"--results {results_dir} is a file, not a folder")
     if not results_dir.is_dir():
         raise ResultsError(f"--results {results_dir}: no such folder")
-    names = (REPORT_NAME, RESULTS_JSON_NAME)
-    folders = sorted({p.parent for name in names for p in results_dir.glob(f"*/{name}")})
-    results = [read_results(folder) for folder in folders]
+    results = [read_results(folder) for folder in experiment_folders(results_dir)]
     return [r for r in results if (r.folder / REPORT_NAME).exists()]
+
+
+def experiment_folders(results_dir: Path) -> list[Path]:
+    """The folders ``RESULTS_DIR/*/`` holding a ``report.md`` or a ``results.json``, sorted."""
+    names = (REPORT_NAME, RESULTS_JSON_NAME)
+    return sorted({p.parent for name in names for p in Path(results_dir).glob(f"*/{name}")})
 
 
 def render(results: Sequence[ExperimentResults], out: Path, not_run: Sequence[str] = ()) -> str:
@@ -144,8 +148,7 @@ def write_summary(results_dir: Path, out: Path) -> Path:
 
     check_output_file(out, "--out")
     results = collect(results_dir)
-    names = (REPORT_NAME, RESULTS_JSON_NAME)
-    if not results and not any(any(Path(results_dir).glob(f"*/{n}")) for n in names):
+    if not results and not experiment_folders(results_dir):
         raise ResultsError(  # a page of "not run yet" would only replace the one there
             f"--results {results_dir} holds no experiment folders (none has {REPORT_NAME} or "
             f"{RESULTS_JSON_NAME}); {out} is left as it is"
