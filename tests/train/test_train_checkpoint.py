@@ -1,5 +1,7 @@
 """Checkpoints: a round trip restores everything; every mismatch or damage is a one-line error."""
 
+import fractions
+
 import numpy as np
 import pytest
 import torch
@@ -130,23 +132,24 @@ def test_a_truncated_checkpoint_is_refused(tmp_path, normalization):
     _save(tmp_path, normalization)
     path = tmp_path / "checkpoint.pt"
     data = path.read_bytes()
-    for cut in (len(data) // 2, 100, 0):
+    for cut, cause in ((len(data) // 2, "truncated"), (100, "truncated"), (0, "empty")):
         path.write_bytes(data[:cut])
         with pytest.raises(CheckpointError, match="not a readable scpformer checkpoint") as err:
             _load(tmp_path)
+        assert cause in str(err.value)
         assert "\n" not in str(err.value)
 
 
 def test_files_that_are_not_checkpoints_are_refused(tmp_path):
     text = tmp_path / "notes.pt"
     text.write_text("hello\n")
-    with pytest.raises(CheckpointError, match="not a readable"):
+    with pytest.raises(CheckpointError, match="text starting 'hello'"):
         _load(text)
     binary = tmp_path / "binary.pt"
     binary.write_bytes(b"\x00\x01garbage")
     with pytest.raises(CheckpointError, match="not a readable") as err:
         _load(binary)
-    assert "Unsupported operand" in str(err.value)  # the cause, not torch's advice
+    assert "another binary format" in str(err.value)  # the cause, not the unpickler's opcodes
     assert "weights_only" not in str(err.value)
     tensor = tmp_path / "tensor.pt"
     torch.save({"weights": torch.zeros(3)}, tensor)
@@ -154,6 +157,16 @@ def test_files_that_are_not_checkpoints_are_refused(tmp_path):
         _load(tensor)
     with pytest.raises(CheckpointError, match="no checkpoint at"):
         _load(tmp_path / "missing")
+
+
+def test_an_archive_that_holds_no_weights_names_the_unpickler_cause(tmp_path):
+    path = tmp_path / "checkpoint.pt"
+    torch.save({"format": "scpformer", "value": fractions.Fraction(1, 3)}, path)
+    with pytest.raises(CheckpointError, match="does not load as weights only") as err:
+        _load(path)
+    assert "fractions.Fraction" in str(err.value)  # the unpickler's cause, not its advice
+    assert "Please use" not in str(err.value)
+    assert "\n" not in str(err.value)
 
 
 def test_a_checkpoint_of_another_format_version_is_refused(tmp_path, normalization):

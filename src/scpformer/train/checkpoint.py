@@ -27,6 +27,7 @@ dtype (:func:`to_plain`) and come back as arrays (:func:`from_plain`).
 from __future__ import annotations
 
 import os
+import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -171,12 +172,37 @@ def _write_payload(path: Path, payload: dict[str, Any]) -> Path:
     return path
 
 
-def _load_failure_reason(err: Exception) -> str:
-    """One line on why ``torch.load`` failed: the unpickler's own words when it gives them.
+def _not_an_archive(path: Path) -> str | None:
+    """Why ``path`` cannot be a checkpoint before unpickling it, or None.
 
-    A file that is not a zip archive makes the weights-only unpickler raise a long message
-    whose first lines advise ``weights_only=False``; the cause ("Unsupported operand 95")
-    sits after ``WeightsUnpickler error:``, so that part is kept.
+    ``torch.save`` writes a zip archive; a file that is not one (empty, cut short before the
+    archive's central directory, text, or another binary format) is named as such instead of
+    by the unpickler's opcode numbers.
+    """
+    if zipfile.is_zipfile(path):
+        return None
+    head = path.read_bytes()[:32]
+    if not head:
+        return "the file is empty"
+    if head.startswith(b"PK"):
+        return "a zip archive cut short (truncated)"
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError:
+        text = "\0"
+    if not all(c.isprintable() or c.isspace() for c in text):
+        return "not the zip archive that torch.save writes (another binary format)"
+    first = text.strip().splitlines()[0] if text.strip() else "blank"
+    return f"not the zip archive that torch.save writes (text starting {first[:24]!r})"
+
+
+def _load_failure_reason(err: Exception) -> str:
+    """One line on why ``torch.load`` failed on a zip archive: the unpickler's own words.
+
+    The weights-only unpickler raises a long message whose first lines advise
+    ``weights_only=False``; the cause (e.g. "Unsupported global: GLOBAL fractions.Fraction was
+    not an allowed global") sits after ``WeightsUnpickler error:`` and before its advice, so
+    that part is kept.
     """
     text = str(err).strip()
     if not text:
@@ -184,7 +210,7 @@ def _load_failure_reason(err: Exception) -> str:
     marker = "WeightsUnpickler error:"
     if marker in text:
         text = text.split(marker, 1)[1].strip()
-    return text.splitlines()[0][:160]
+    return text.splitlines()[0].split(". Please use", 1)[0][:160]
 
 
 def read_checkpoint(
@@ -199,12 +225,16 @@ def read_checkpoint(
     path = checkpoint_path(path)
     if not path.is_file():
         raise CheckpointError(f"no checkpoint at {path}")
+    reason = _not_an_archive(path)
+    if reason is not None:
+        raise CheckpointError(f"{path} is not a readable scpformer checkpoint: {reason}")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # any failure to unpickle means unreadable
         reason = _load_failure_reason(err)
         raise CheckpointError(
-            f"{path} is not a readable scpformer checkpoint (truncated or another format: {reason})"
+            f"{path} is not a readable scpformer checkpoint: a torch archive that does not load "
+            f"as weights only ({reason})"
         ) from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise CheckpointError(f"{path} is not an scpformer checkpoint")
