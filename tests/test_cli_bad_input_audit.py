@@ -155,3 +155,20 @@ def test_a_manifest_that_is_not_a_json_object_is_called_corrupt(tmp_path, capsys
     (tmp_path / "ds" / "manifest.json").write_text("[1, 2]")
     one_line_error(capsys, ["dataset", "info", str(tmp_path / "ds")], "manifest.json is corrupt",
                    "JSON list")  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["solve", "pdg6dof", "--warmstart", "tscvx", "--model", "{run}"],
+        ["solve", "rendezvous", "--warmstart", "art", "--model", "{run}"],
+        ["bench", "art", "--model", "{run}"],
+        ["bench", "tscvx", "--model", "{run}"],
+        ["export", "--model", "{run}", "--onnx", "{out}"],
+    ],
+)
+def test_every_command_words_a_missing_model_run_the_same(tmp_path, capsys, argv):
+    run, out = tmp_path / "no-such-run", tmp_path / "a.onnx"
+    argv = [a.format(run=run, out=out) for a in argv]
+    one_line_error(capsys, argv, f"--model {run}: no such run folder or checkpoint file")
+    assert list(tmp_path.iterdir()) == []

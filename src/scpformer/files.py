@@ -93,6 +93,15 @@ def check_output_folder(path: str | Path, what: str) -> Path:
     return path
 
 
+def require_model_path(model: str | Path) -> Path:
+    """``--model``: ``model`` as a path after checking that it exists (a run folder or a
+    checkpoint file), so that every command words a missing run the same way."""
+    path = Path(model)
+    if not path.exists():
+        raise ValueError(f"--model {path}: no such run folder or checkpoint file")
+    return path
+
+
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary name, fsync and a rename.
 

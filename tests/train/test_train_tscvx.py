@@ -211,6 +211,20 @@ def test_resume_continues_and_an_existing_run_is_not_overwritten(fake_pdg, tmp_p
     assert {str(f): f.read_bytes() for f in run.rglob("*") if f.is_file()} == kept
 
 
+def test_a_folder_of_other_files_is_refused_and_the_other_network_welcome(fake_pdg, tmp_path):
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "manifest.json").write_text("{}")
+    with pytest.raises(ValueError, match=r"not a T-SCvx run's \(manifest\.json\)"):
+        train(fake_pdg, tmp_path / "data", networks=("tight",))
+    assert [f.name for f in (tmp_path / "data").iterdir()] == ["manifest.json"]
+    run = tmp_path / "side_by_side"
+    train(fake_pdg, run, networks=("tight",), overrides=FAST | {"epochs": 1})
+    train(fake_pdg, run, networks=("solution",), solution_epochs=1)
+    assert (run / "solution" / "checkpoint.pt").is_file() and (
+        run / "metrics_validation.json"
+    ).is_file()
+
+
 def test_evaluation_on_the_test_split_writes_its_files(fake_pdg, tmp_path):
     run = tmp_path / "eval"
     train(fake_pdg, run)

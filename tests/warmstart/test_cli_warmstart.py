@@ -14,8 +14,11 @@ from scpformer.warmstart import ArtWarmStart
 
 
 @pytest.fixture
-def checkpoint(monkeypatch):
-    """Make ``ArtWarmStart.from_checkpoint`` replay ``u`` [and RTN ``states``] (set by the test)."""
+def checkpoint(monkeypatch, tmp_path):
+    """Make ``ArtWarmStart.from_checkpoint`` replay ``u`` [and RTN ``states``] (set by the test);
+    ``--model RUN`` names a folder in the working directory (``--model`` must exist)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "RUN").mkdir()
     norm = AffineNormalization.random(100, seed=5)
     asked = {}
 

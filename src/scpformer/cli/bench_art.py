@@ -39,6 +39,7 @@ import numpy as np
 
 from scpformer.cli.argtypes import count
 from scpformer.cli.commands import command_help
+from scpformer.files import require_model_path
 
 MODES = ("cached", "cached, 2 calls", "cached, bf16", "cached, int8", "no cache")
 FORMATS = {"cached, bf16": "bf16", "cached, int8": "int8"}  # mode -> start() keyword
@@ -357,7 +358,7 @@ def load_setup(args: argparse.Namespace) -> dict[str, Any]:
     if args.model is not None:
         from scpformer.train.checkpoint import load_checkpoint
 
-        checkpoint = load_checkpoint(args.model)
+        checkpoint = load_checkpoint(require_model_path(args.model))
         model, frame = checkpoint.model, checkpoint.frame
         normalization = checkpoint.normalization
         label = f"{args.model} ({checkpoint.kind}, {checkpoint.family}, {frame})"

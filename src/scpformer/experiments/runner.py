@@ -35,7 +35,7 @@ from scpformer.data.executors import Executor, LocalPool, RayPool
 from scpformer.data.family import SampleResult
 from scpformer.data.splits import load_splits
 from scpformer.data.storage import ShardedSamples, file_sha256, read_manifest
-from scpformer.files import check_output_folder
+from scpformer.files import check_output_folder, require_model_path
 from scpformer.validation import check_int, shown
 
 RESULTS_NAME = "results.csv"
@@ -88,10 +88,7 @@ def require_models(options: RunOptions, count: int | None = None) -> tuple[Path,
         raise ValueError("--model RUN is required (a folder made by `scpformer train`)")
     if count is not None and len(options.models) != count:
         raise ValueError(f"--model: expected {count} run(s), got {len(options.models)}")
-    for path in options.models:
-        if not path.exists():
-            raise ValueError(f"--model {path}: no such run folder or checkpoint file")
-    return options.models
+    return tuple(require_model_path(path) for path in options.models)
 
 
 def require_n(options: RunOptions) -> int:

@@ -24,6 +24,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from scpformer.files import require_model_path
+
 PRETRAINED_DIR = Path(__file__).resolve().parent
 MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = "scpformer.pretrained"
@@ -100,4 +102,4 @@ def default_model(family: str, root: Path | None = None) -> Path:
 
 def resolve_model(model: Path | str | None, family: str) -> Path:
     """``--model``: the shipped, verified model of ``family`` when default, else ``model``."""
-    return default_model(family) if is_default(model) else Path(model)
+    return default_model(family) if is_default(model) else require_model_path(model)

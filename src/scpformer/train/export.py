@@ -38,6 +38,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from scpformer.files import require_model_path
 from scpformer.train.checkpoint import (
     CHECKPOINT_NAME,
     Checkpoint,
@@ -170,11 +171,9 @@ def run_networks(run: Path | str) -> list[tuple[str, Path]]:
         When ``run`` is neither a checkpoint file nor a folder holding ``checkpoint.pt`` or
         sub-folders that do.
     """
-    run = Path(run)
+    run = require_model_path(run)
     if run.is_file():
         return [("", run)]
-    if not run.is_dir():
-        raise ValueError(f"--model {run}: no such run folder or checkpoint file")
     if (run / CHECKPOINT_NAME).is_file():
         return [("", run / CHECKPOINT_NAME)]
     found = sorted(p.parent.name for p in run.glob(f"*/{CHECKPOINT_NAME}"))

@@ -400,6 +400,7 @@ def train_tscvx(
                                  **{"warmup_steps": SOLUTION_WARMUP[preset_name], **overrides,
                                     "epochs": solution_epochs or epochs[1]}),
     }  # fmt: skip
+    _check_run_folder(out)
     for name in networks:
         _check_new_or_resume(out / name, resume)
     world, device = distributed.start(configs["tight"].device)
@@ -441,6 +442,27 @@ class _RunContext:
     device: torch.device
     progress: bool
     thrust_weight: float = 1.0
+
+
+RUN_ENTRIES = (CONFIG_NAME, *NETWORKS, "MODEL_CARD.md", "metrics_*.json", "tight_*.csv")
+
+
+def _check_run_folder(out: Path) -> None:
+    """Refuse an ``out`` that holds files of something else than a T-SCvx run (a dataset, an
+    experiment): training would write its networks among them. A run of the other network
+    (``--networks tight`` and ``--networks solution`` side by side) is welcome."""
+    if not out.is_dir():
+        return
+    strangers = sorted(
+        entry.name
+        for entry in out.iterdir()
+        if not entry.name.startswith(".") and not any(entry.match(p) for p in RUN_ENTRIES)
+    )
+    if strangers:
+        raise ValueError(
+            f"--out {out} holds files that are not a T-SCvx run's ({', '.join(strangers[:3])}"
+            f"{', ...' if len(strangers) > 3 else ''}); choose an empty or new folder"
+        )
 
 
 def _check_new_or_resume(folder: Path, resume: bool) -> None:

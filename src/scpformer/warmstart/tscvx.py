@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from scpformer.files import require_model_path
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES, constraint_values
 from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory, straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
@@ -59,9 +60,7 @@ class TscvxWarmStart:
 
         A missing or unreadable run is a ``ValueError`` naming it.
         """
-        path = Path(run_dir)
-        if not path.exists():
-            raise ValueError(f"--model {path}: no such T-SCvx run folder")
+        path = require_model_path(run_dir)
         try:
             from scpformer.models.tscvx import load_tscvx_predictor
         except ModuleNotFoundError as err:
