@@ -12,7 +12,8 @@ def test_an_out_path_that_is_a_file_is_a_one_line_usage_error(tmp_path, capsys):
     blocker.write_text("")
     assert main(["demo", "--out", str(blocker)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("scpformer: error: --out")
+    assert len(err) == 1 and err[0] == f"scpformer: error: --out {blocker} is a file, not a folder"
+    assert blocker.read_text() == ""
 
 
 @pytest.mark.slow

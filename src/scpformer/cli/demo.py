@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.cli.commands import command_help
+from scpformer.files import check_output_folder
 
 # The instances shown, sampled from each family's Table 1 ranges. Rendezvous seed 4: its
 # convex guess violates the keep-out and cone constraints at 15 nodes (C = 15), and so does
@@ -79,7 +80,7 @@ def add_demo_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    out = args.out
+    out = check_output_folder(args.out, "--out")  # a file or a read-only place, named as such
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
