@@ -181,7 +181,8 @@ def _not_an_archive(path: Path) -> str | None:
     """
     if zipfile.is_zipfile(path):
         return None
-    head = path.read_bytes()[:32]
+    with path.open("rb") as fh:
+        head = fh.read(32)
     if not head:
         return "the file is empty"
     if head.startswith(b"PK"):
