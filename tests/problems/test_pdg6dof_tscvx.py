@@ -1,5 +1,7 @@
 """T-SCvx (Algorithm 2): oracle predictions reach the cold optimum; wrong ones fall back."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ from scpformer.problems.pdg6dof.tscvx import (
     TscvxProblem,
     consistent_guess,
     eq22_update,
+    gimbal_projected_directions,
 )
 from scpformer.scp.scvx import SCvxParameters
 from scpformer.scp.solution import Status
@@ -129,9 +132,24 @@ def test_consistent_guess_normalizes_quaternions_and_clips_to_the_bounds():
     assert np.all(np.diff(z.x[:, 13]) <= 0.0)
     thrust = np.linalg.norm(z.u, axis=1)
     assert thrust.min() >= c.T_min - 1e-12 and thrust.max() <= c.T_max + 1e-12
+    gimbal = math.cos(math.radians(c.delta_max_deg)) * thrust - z.u[:, 0]
+    assert gimbal.max() <= 1e-12  # Eq. 6b at every node
     assert z.p[0] == c.tf_max
     with pytest.raises(ValueError, match="expected"):
         consistent_guess(instance, x[:10], u, 5.0, N)
+
+
+def test_gimbal_projection_keeps_inside_turns_to_the_edge_and_resets_backwards():
+    delta = 20.0
+    inside = [math.cos(0.1), math.sin(0.1), 0.0]
+    outside = [math.cos(1.0), 0.0, -math.sin(1.0)]  # 57 deg off e1, pointing -z
+    backwards = [-0.9, 0.3, math.sqrt(1 - 0.9**2 - 0.3**2)]
+    d = gimbal_projected_directions(np.array([inside, outside, backwards]), delta)
+    np.testing.assert_allclose(d[0], inside)
+    edge = [math.cos(math.radians(delta)), 0.0, -math.sin(math.radians(delta))]
+    np.testing.assert_allclose(d[1], edge, atol=1e-15)
+    np.testing.assert_allclose(d[2], [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0)
 
 
 @pytest.mark.parametrize(
