@@ -46,11 +46,14 @@ class Oracle:
         self.cold, self.guess, self.flip = cold, guess, flip
         self.n_nodes = cold.trajectory.x.shape[0]
 
-    def predict_tight(self, theta: np.ndarray, k: int) -> np.ndarray:
+    def predict_tight(self, theta: np.ndarray, k: np.ndarray) -> np.ndarray:
+        return np.array([self._flags(int(j)) for j in np.atleast_1d(k)])
+
+    def _flags(self, k: int) -> np.ndarray:
         history = self.cold.history
-        flags = history[min(int(k), len(history)) - 1].tight_flags
+        flags = history[min(k, len(history)) - 1].tight_flags
         if self.flip:
-            flipped = np.random.default_rng(int(k)).random(flags.shape) < self.flip
+            flipped = np.random.default_rng(k).random(flags.shape) < self.flip
             flags = flags ^ flipped
         return flags
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.instance import PDGInstance
@@ -75,6 +76,20 @@ def test_each_name_node_row_maps_to_the_conic_rows_of_that_constraint_at_that_no
         assert slack[nonneg[0]] == pytest.approx(-values[flag], abs=1e-9), (name, node)
         cone_rows = rows.size - 1
         assert cone_rows == {"mass": 0, "thrust_min": 0, "glideslope": 3, "tilt": 3}.get(name, 4)
+
+
+def test_the_layouts_parameter_map_gives_cvxpys_conic_data_of_the_subproblem(linearized):
+    reduced = linearized[3]
+    data = reduced.conic_data()
+    data_map = reduced.layout.data_map
+    P, c, A, b = data_map.values()
+    rows = np.ones(data_map.n_rows, dtype=bool)
+    columns = np.ones(data_map.n_columns, dtype=bool)
+    np.testing.assert_array_equal(c, data["c"])
+    np.testing.assert_array_equal(b, data["b"])
+    assert (data_map.A.submatrix(A, rows, columns) != sp.csc_array(data["A"])).nnz == 0
+    expected_P = sp.triu(sp.csc_array(data["P"])).tocsc()
+    assert (data_map.P.submatrix(P, columns, columns) != expected_P).nnz == 0
 
 
 def test_the_thrust_cone_is_kept_while_thrust_max_or_gimbal_is_kept(linearized):

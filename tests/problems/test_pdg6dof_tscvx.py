@@ -31,10 +31,15 @@ class OraclePredictor:
         self.solution, self.flags, self.guess = solution, flags, guess
 
     def predict_tight(self, theta, k):
-        if self.flags is not None:
-            return self.flags
         history = self.solution.history
-        return history[min(int(k), len(history)) - 1].tight_flags
+        return np.array(
+            [
+                self.flags
+                if self.flags is not None
+                else history[min(int(j), len(history)) - 1].tight_flags
+                for j in np.atleast_1d(k)
+            ]
+        )
 
     def predict_solution(self, theta):
         if self.guess is not None:

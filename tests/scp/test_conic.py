@@ -3,8 +3,15 @@
 import cvxpy as cp
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
-from scpformer.scp.conic import SOLVERS, assign, solve_timed, variable_slices
+from scpformer.scp.conic import (
+    SOLVERS,
+    ConicDataMap,
+    assign,
+    solve_timed,
+    variable_slices,
+)
 
 
 def _parametric_problem() -> tuple[cp.Problem, dict[str, cp.Variable], cp.Parameter]:
@@ -74,3 +81,59 @@ def test_assign_rejects_what_the_subproblem_cannot_take_and_keeps_the_old_value(
     with pytest.raises(ValueError, match=message):
         assign(radius, value)
     assert radius.value == 2.0
+
+
+def _problem_with_parameters_everywhere() -> tuple[cp.Problem, list[cp.Parameter]]:
+    """Parameters in the quadratic weight (P), in the constraint matrix (A), the offsets (b)
+    and the linear cost (c), with a second-order cone."""
+    x = cp.Variable(4, name="x")
+    t = cp.Variable(name="t")
+    w = cp.Parameter(nonneg=True, name="w")
+    M = cp.Parameter((2, 4), name="M")
+    h = cp.Parameter(2, name="h")
+    g = cp.Parameter(4, name="g")
+    cost = w * cp.sum_squares(x) + g @ x + t
+    constraints = [M @ x == h, cp.norm(x[:3], 2) <= t, x[3] >= -h[0], t <= 10.0]
+    return cp.Problem(cp.Minimize(cost), constraints), [w, M, h, g]
+
+
+def test_the_conic_data_map_writes_the_numbers_cvxpys_parameter_map_writes():
+    problem, parameters = _problem_with_parameters_everywhere()
+    rng = np.random.default_rng(0)
+    data_map = None
+    for _ in range(3):  # one map, several parameter values
+        for p in parameters:
+            p.value = (
+                np.abs(rng.normal(size=p.shape)) if p.is_nonneg() else rng.normal(size=p.shape)
+            )
+        data, _, _ = problem.get_problem_data(cp.CLARABEL, solver_opts={})
+        data_map = data_map or ConicDataMap(problem)
+        P, c, A, b = data_map.values()
+        every_row = np.ones(data_map.n_rows, dtype=bool)
+        every_column = np.ones(data_map.n_columns, dtype=bool)
+        np.testing.assert_array_equal(c, data["c"])
+        np.testing.assert_array_equal(b, data["b"])
+        expected_A = sp.csc_array(data["A"]).toarray()
+        np.testing.assert_array_equal(
+            data_map.A.submatrix(A, every_row, every_column).toarray(), expected_A
+        )
+        expected_P = sp.triu(sp.csc_array(data["P"])).toarray()
+        np.testing.assert_array_equal(
+            data_map.P.submatrix(P, every_column, every_column).toarray(), expected_P
+        )
+
+
+def test_a_submatrix_of_the_map_equals_scipys_slice():
+    problem, parameters = _problem_with_parameters_everywhere()
+    rng = np.random.default_rng(1)
+    for p in parameters:
+        p.value = np.abs(rng.normal(size=p.shape)) if p.is_nonneg() else rng.normal(size=p.shape)
+    data, _, _ = problem.get_problem_data(cp.CLARABEL, solver_opts={})
+    data_map = ConicDataMap(problem)
+    _, _, A, _ = data_map.values()
+    rows = rng.random(data_map.n_rows) < 0.6
+    columns = rng.random(data_map.n_columns) < 0.6
+    sub = data_map.A.submatrix(A, rows, columns)
+    expected = sp.csc_array(data["A"]).toarray()[rows][:, columns]
+    assert sub.shape == expected.shape and sub.has_sorted_indices
+    np.testing.assert_array_equal(sub.toarray(), expected)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
 import pytest
 
 from scpformer.cli.main import main
@@ -22,7 +23,7 @@ class OraclePredictor:
         self.solution = solution
 
     def predict_tight(self, theta, k):
-        return self.solution.history[-1].tight_flags
+        return np.array([self.solution.history[-1].tight_flags for _ in np.atleast_1d(k)])
 
     def predict_solution(self, theta):
         z = self.solution.trajectory
@@ -98,3 +99,29 @@ def test_a_lookup_warm_start_needs_its_own_run(tmp_path, capsys, kind):
     assert f"--warmstart {kind} needs --model RUN" in _one_error_line(capsys)
     assert main(["solve", "pdg6dof", "--warmstart", kind, "--model", str(tmp_path)]) == 2
     assert "not a T-SCvx run" in _one_error_line(capsys)
+
+
+def test_batched_tight_flags_are_the_networks_flags_at_each_iteration():
+    # The warm start predicts TIGHT_BATCH iterations per forward pass; every k must still
+    # get the network's flags for (theta, k), across the batch boundary too.
+    from scpformer.data.pdg6dof_family import theta_vector
+    from scpformer.warmstart.tscvx import TIGHT_BATCH
+
+    provider = TscvxWarmStart.from_run(default_model("pdg6dof"))
+    instance = PDGInstance()
+    flags = provider.tight(instance)
+    theta = theta_vector(instance)
+    per_k = [provider.predictor.predict_tight(theta, k) for k in range(1, 2 * TIGHT_BATCH + 2)]
+    assert len({f.tobytes() for f in per_k}) > 1  # the flags do change with k
+    for k, expected in enumerate(per_k, start=1):
+        np.testing.assert_array_equal(flags(k), expected)
+
+
+def test_flags_of_the_wrong_size_are_refused():
+    class WrongSize(OraclePredictor):
+        def predict_tight(self, theta, k):
+            return np.zeros((len(np.atleast_1d(k)), 7), dtype=bool)
+
+    provider = TscvxWarmStart(WrongSize(None))
+    with pytest.raises(ValueError, match=r"predict_tight gave flags of shape \(8, 7\)"):
+        provider.tight(PDGInstance())(1)

@@ -9,10 +9,12 @@ cones belong to each ``(name, node)`` row of
 :func:`~scpformer.problems.pdg6dof.constraints.constraint_index`, and where each variable
 sits in the conic solution vector. A reduced solve then
 
-1. lets cvxpy write the full conic data from the current parameters (no canonicalization),
-2. drops the rows and cones of the left-out ``(name, node)`` rows and the columns that no
-   kept row, quadratic or linear cost term touches any more (the epigraph variable of a
-   dropped norm),
+1. writes the full conic data from the current parameters with the layout's
+   :class:`~scpformer.scp.conic.ConicDataMap` (cvxpy's parameter tensors times the parameter
+   vector, no canonicalization and no scipy matrix assembly),
+2. selects the entries of the kept rows and columns: it drops the rows and cones of the
+   left-out ``(name, node)`` rows and the columns that no kept row, quadratic or linear cost
+   term touches any more (the epigraph variable of a dropped norm),
 3. calls Clarabel on the smaller problem and maps its primal solution back to ``(x, u,
    sigma, nu, buffers)``.
 
@@ -56,6 +58,7 @@ from scpformer.problems.pdg6dof.subproblem import (
 from scpformer.scp.conic import (
     SOLVED,
     SOLVERS,
+    ConicDataMap,
     VariableSlices,
     clarabel_status,
     primal_value,
@@ -85,6 +88,7 @@ class ConicLayout:
     virtual_rows: np.ndarray  # (m,) bool: the nonnegative rows of the |nu| epigraph
     virtual_columns: np.ndarray  # (n,) bool: nu and its epigraph variables
     nu_columns: np.ndarray  # (n,) bool: nu alone
+    data_map: ConicDataMap  # the parameter map of the compiled problem, as plain arrays
 
     @property
     def n_rows(self) -> int:
@@ -139,6 +143,7 @@ def conic_layout(sub: PDGSubproblem) -> ConicLayout:
         virtual_rows=virtual_rows,
         virtual_columns=virtual_columns,
         nu_columns=nu_columns,
+        data_map=ConicDataMap(sub.problem),
     )
     if layout.n_rows != data["A"].shape[0]:
         raise RuntimeError(f"conic layout maps {layout.n_rows} rows, A has {data['A'].shape[0]}")
@@ -220,7 +225,8 @@ class ReducedSubproblem:
         self._cone_count = 0
 
     def conic_data(self) -> dict[str, object]:
-        """The full conic data of the current parameter values (cvxpy's parameter map only)."""
+        """The full conic data of the current parameter values, through cvxpy's own map (the
+        reference that :class:`~scpformer.scp.conic.ConicDataMap` is tested against)."""
         data, _, _ = self.sub.problem.get_problem_data(SOLVERS["clarabel"], solver_opts={})
         return data
 
@@ -235,27 +241,26 @@ class ReducedSubproblem:
         dynamics multipliers exceed the penalty weight is returned with status
         :data:`VIRTUAL_NEEDED`, an infeasible one with Clarabel's status: the caller solves
         again with ``nu``. ``solve_time`` is the Clarabel call alone (setup or update, and
-        solve); ``wall_time`` includes the parameter map, the slicing and the unpacking.
+        solve); ``wall_time`` includes the parameter map, the selection and the unpacking.
         """
         start = time.perf_counter()
-        data = self.conic_data()
-        rows = self.layout.kept_rows(keep, keep_box)
+        lay, data = self.layout, self.layout.data_map
+        P_values, c, A_values, b = data.values()
+        rows = lay.kept_rows(keep, keep_box)
         if not keep_virtual:
-            rows &= ~self.layout.virtual_rows
-        A = sp.csr_array(data["A"])[rows]
-        c = np.asarray(data["c"], dtype=float)
-        P = sp.csc_array(data["P"]) if "P" in data else sp.csc_array((c.size, c.size))  # LP/SOCP
-        cols = _used_columns(A, P, c)
+            rows &= ~lay.virtual_rows
+        cols = self._used_columns(rows, c)
         if not keep_virtual:
-            cols &= ~self.layout.virtual_columns
-            nu_block = sp.csc_array(A[:, self.layout.nu_columns])
-        A = sp.csc_array(A[:, cols])
-        P = sp.triu(P[cols][:, cols]).tocsc()
+            cols &= ~lay.virtual_columns
+        A = data.A.submatrix(A_values, rows, cols)
+        P = (
+            data.P.submatrix(P_values, cols, cols)
+            if data.P is not None
+            else sp.csc_array((int(cols.sum()), int(cols.sum())))
+        )
         t0 = time.perf_counter()
         try:
-            solver = self._clarabel(
-                (rows.tobytes(), cols.tobytes()), P, c[cols], A, data["b"][rows]
-            )
+            solver = self._clarabel((rows.tobytes(), cols.tobytes()), P, c[cols], A, b[rows])
             result = solver.solve()
         except Exception as err:  # a solver failure is a status (conic.py)
             return failed_solution(f"solver_error: {err}", time.perf_counter() - start, 0.0)
@@ -269,13 +274,33 @@ class ReducedSubproblem:
         )
         status = clarabel_status(result)
         if status in SOLVED and not keep_virtual:
-            multipliers = np.abs(nu_block.T @ np.asarray(result.z))
+            multipliers = self._nu_multipliers(A_values, rows, np.asarray(result.z))
             status = status if multipliers.max(initial=0.0) <= lambda_ else VIRTUAL_NEEDED
         if status not in SOLVED:
             return failed_solution(status, time.perf_counter() - start, solve_time)
         full = np.zeros(cols.size)
         full[cols] = np.asarray(result.x)
         return self._unpack(full, lambda_, status, solve_time, start)
+
+    def _used_columns(self, rows: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """Columns that a kept row of ``A``, the quadratic term or the linear cost touches."""
+        data = self.layout.data_map
+        used = c != 0.0
+        used[data.A.columns[rows[data.A.rows]]] = True
+        if data.P is not None:
+            used[data.P.rows] = True
+            used[data.P.columns] = True
+        return used
+
+    def _nu_multipliers(self, A_values: np.ndarray, rows: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """``|A_nu^T y|`` per column of ``nu``: the dual ``z`` of the kept rows against the
+        entries of the ``nu`` columns in those rows (the exactness test of the docstring)."""
+        entries = self.layout.data_map.A
+        select = rows[entries.rows] & self.layout.nu_columns[entries.columns]
+        row_index = np.cumsum(rows) - 1
+        weights = A_values[select] * z[row_index[entries.rows[select]]]
+        sums = np.bincount(entries.columns[select], weights, minlength=self.layout.nu_columns.size)
+        return np.abs(sums[self.layout.nu_columns])
 
     def _clarabel(
         self, key: tuple, P: sp.csc_array, q: np.ndarray, A: sp.csc_array, b: np.ndarray
@@ -319,12 +344,3 @@ class ReducedSubproblem:
         return self.sub.solution_from(
             values, lambda_, status, solve_time, time.perf_counter() - start
         )
-
-
-def _used_columns(A: sp.csr_array, P: sp.csc_array, c: np.ndarray) -> np.ndarray:
-    """Columns some kept row, the quadratic term or the linear cost touches."""
-    used = np.zeros(A.shape[1], dtype=bool)
-    used[A.indices] = True
-    used[P.indices] = True  # rows of P's nonzeros ...
-    used[np.diff(P.indptr) > 0] = True  # ... and its columns (P may hold one triangle)
-    return used | (c != 0.0)

@@ -60,8 +60,9 @@ class TscvxPredictor(Protocol):
 
     n_nodes: int
 
-    def predict_tight(self, theta: np.ndarray, k: int) -> np.ndarray:
-        """Flags (7N,) of the rows predicted tight at SCvx iteration ``k`` (1-based)."""
+    def predict_tight(self, theta: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Flags (B, 7N) of the rows predicted tight for ``theta`` (B, 16) at SCvx iterations
+        ``k`` (B,) (1-based): T-SCvx asks for several iterations of one instance at once."""
 
     def predict_solution(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """Predicted ``(x (N, 14), u (N, 3), t_f)``."""
