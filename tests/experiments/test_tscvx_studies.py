@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -105,3 +106,15 @@ def test_ood_selection_takes_half_from_beyond_the_threshold():
     positions, ood = ood_selection(Split(), 6, seed=0)
     assert positions.size == 6 and ood.sum() == 2
     assert set(positions[ood]) == {7, 8} and set(positions[~ood]) <= set(range(7))
+
+
+def test_the_report_names_the_model_card_of_the_shipped_model_and_the_preset_of_a_run(tmp_path):
+    from scpformer.experiments.tscvx_studies import train_command
+    from scpformer.pretrained import default_model
+
+    shipped = default_model("pdg6dof")
+    assert train_command("tscvx", shipped, Path("r8")).endswith(f"{shipped}/MODEL_CARD.md")
+    (tmp_path / "config.json").write_text('{"preset": "small"}')
+    line = train_command("tscvx", tmp_path, Path("r8"))
+    assert line == f"scpformer train tscvx --data r8 --out {tmp_path} --preset small"
+    assert "command unknown" in train_command("tscvx", tmp_path / "missing", Path("r8"))

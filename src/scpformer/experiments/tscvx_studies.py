@@ -163,6 +163,8 @@ def train_command(kind: str, run: Path, data: Path) -> str:
         try:
             preset = json.loads((run / "config.json").read_text()).get("preset")
         except (OSError, ValueError):
+            if (run / "MODEL_CARD.md").is_file():  # a shipped model: weights and card only
+                return f"# {run}: the shipped model; its commands are in {run}/MODEL_CARD.md"
             return f"# {run}: no readable config.json (command unknown)"
         return f"scpformer train tscvx --data {data} --out {run} --preset {preset}"
     try:
