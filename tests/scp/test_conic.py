@@ -137,3 +137,13 @@ def test_a_submatrix_of_the_map_equals_scipys_slice():
     expected = sp.csc_array(data["A"]).toarray()[rows][:, columns]
     assert sub.shape == expected.shape and sub.has_sorted_indices
     np.testing.assert_array_equal(sub.toarray(), expected)
+
+
+def test_the_conic_data_map_names_a_parameter_without_a_value():
+    problem, parameters = _problem_with_parameters_everywhere()
+    for p in parameters:
+        p.value = np.ones(p.shape)
+    data_map = ConicDataMap(problem)
+    parameters[2].value = None  # h
+    with pytest.raises(ValueError, match="parameter 'h' has no value"):
+        data_map.values()

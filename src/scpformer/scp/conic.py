@@ -269,13 +269,23 @@ class ConicDataMap:
         self._q_tensor = sp.csr_array(prog.q)
 
     def parameter_vector(self) -> np.ndarray:
-        """The current parameter values stacked as cvxpy stacks them (last entry: 1)."""
+        """The current parameter values stacked as cvxpy stacks them (last entry: 1).
+
+        Raises
+        ------
+        ValueError
+            Naming a parameter that has no value yet.
+        """
         prog = self._prog
+
+        def value(pid: int) -> np.ndarray:
+            parameter = prog.id_to_param[pid]
+            if parameter.value is None:
+                raise ValueError(f"parameter {parameter.name()!r} has no value")
+            return np.asarray(parameter.value, dtype=float)
+
         return get_parameter_vector(
-            prog.total_param_size,
-            prog.param_id_to_col,
-            prog.param_id_to_size,
-            lambda pid: np.asarray(prog.id_to_param[pid].value),
+            prog.total_param_size, prog.param_id_to_col, prog.param_id_to_size, value
         )
 
     def values(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
