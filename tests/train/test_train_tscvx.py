@@ -334,3 +334,12 @@ def test_bench_times_the_predictor_calls(capsys):
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "predict_tight, batch 1" in out and "predict_solution, batch 2" in out
+    assert "predict_tight, batch 1, caches cold" in out  # as between two conic solves
+
+
+def test_the_bench_runs_the_cache_eviction_untimed_before_every_timed_call():
+    from scpformer.cli.bench_tscvx import median_seconds
+
+    events = []
+    median_seconds(lambda: events.append("call"), 3, 2, between=lambda: events.append("evict"))
+    assert events == ["call", "call"] + ["evict", "call"] * 3

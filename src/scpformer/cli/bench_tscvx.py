@@ -11,6 +11,12 @@ reuse), on ``--threads`` torch threads
 its hardware). The predictor is warmed up first (:meth:`TscvxPredictor.warm_up`: batch-1
 calls then run through traced networks, as in the T-SCvx studies). Random weights of a preset
 unless ``--model`` gives a trained run. torch is imported when the command runs.
+
+The batch-1 cases are also timed with the per-core caches cold (:func:`cache_evictor` runs
+between the calls): inside a T-SCvx run each call comes after a conic solve that has pushed
+the weights out, and there a batch-1 ``predict_tight`` took about 0.9 ms against 0.17 ms in a
+warm loop (measured in session 29; T-SCvx therefore predicts several iterations per call,
+:data:`scpformer.warmstart.tscvx.TIGHT_BATCH`).
 """
 
 from __future__ import annotations
@@ -80,16 +86,39 @@ def random_predictor(preset_name: str, tokens: str | None, seed: int):
     return TscvxPredictor(tight, solution, norm)
 
 
-def median_seconds(call: Callable[[], object], repeats: int, warmup: int) -> float:
-    """Median wall time of ``call`` over ``repeats`` runs after ``warmup`` untimed ones."""
+def median_seconds(
+    call: Callable[[], object],
+    repeats: int,
+    warmup: int,
+    between: Callable[[], object] | None = None,
+) -> float:
+    """Median wall time of ``call`` over ``repeats`` runs after ``warmup`` untimed ones;
+    ``between`` runs untimed before each timed call."""
     for _ in range(warmup):
         call()
     times = []
     for _ in range(repeats):
+        if between is not None:
+            between()
         start = time.perf_counter()
         call()
         times.append(time.perf_counter() - start)
     return statistics.median(times)
+
+
+EVICTION_BYTES = 16 * 2**20  # more than the per-core L2 caches of the machines we measure on
+
+
+def cache_evictor() -> Callable[[], object]:
+    """Something to run between calls that pushes the networks' weights out of the per-core
+    caches, as a conic solve between two T-SCvx iterations does (``scratch += 1`` over
+    ``EVICTION_BYTES``)."""
+    scratch = np.zeros(EVICTION_BYTES // 8)
+
+    def evict() -> None:
+        scratch.__iadd__(1.0)
+
+    return evict
 
 
 def run_bench(args: argparse.Namespace) -> int:
@@ -131,5 +160,9 @@ def run_bench(args: argparse.Namespace) -> int:
           f"parameters, {args.threads} thread(s), median of {args.repeats} calls)")  # fmt: skip
     for label, call in cases.items():
         seconds = median_seconds(call, args.repeats, args.warmup)
-        print(f"  {label:<28} {1e3 * seconds:8.3f} ms")
+        print(f"  {label:<40} {1e3 * seconds:8.3f} ms")
+    evict = cache_evictor()  # what a call between two conic solves meets
+    for label, call in list(cases.items())[:3]:
+        seconds = median_seconds(call, args.repeats, args.warmup, between=evict)
+        print(f"  {label + ', caches cold':<40} {1e3 * seconds:8.3f} ms")
     return 0
