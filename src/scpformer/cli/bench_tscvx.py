@@ -111,12 +111,12 @@ EVICTION_BYTES = 16 * 2**20  # more than the per-core L2 caches of the machines 
 
 def cache_evictor() -> Callable[[], object]:
     """Something to run between calls that pushes the networks' weights out of the per-core
-    caches, as a conic solve between two T-SCvx iterations does (``scratch += 1`` over
+    caches, as a conic solve between two T-SCvx iterations does (one pass of ``+= 1`` over
     ``EVICTION_BYTES``)."""
     scratch = np.zeros(EVICTION_BYTES // 8)
 
     def evict() -> None:
-        scratch.__iadd__(1.0)
+        np.add(scratch, 1.0, out=scratch)
 
     return evict
 
