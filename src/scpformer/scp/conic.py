@@ -203,19 +203,22 @@ class TensorEntries:
     tensor: sp.csr_array  # (nnz, parameters + 1)
     rows: np.ndarray  # (nnz,) int
     columns: np.ndarray  # (nnz,) int
-    shape: tuple[int, int]
 
     @classmethod
-    def of(cls, reduced: Any, n_columns: int) -> TensorEntries:
-        """From cvxpy's condensed map (``ReducedMat``) of a matrix with ``n_columns`` columns
-        (``n_columns + 1`` when the map holds an offset column, which then comes last)."""
+    def of(cls, reduced: Any) -> TensorEntries:
+        """From cvxpy's condensed map (``ReducedMat``) of a matrix (an offset column, if the
+        map holds one, is its last column)."""
         reduced.cache()
-        indices, indptr, shape = reduced.problem_data_index
+        indices, indptr, _ = reduced.problem_data_index
         columns = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
         rows = np.asarray(indices, dtype=np.int64)
         order = np.lexsort((rows, columns))  # canonical CSC, whatever cvxpy's order
         tensor = sp.csr_array(reduced.reduced_mat)[order]
-        return cls(tensor, rows[order], columns[order], (int(shape[0]), n_columns))
+        return cls(tensor, rows[order], columns[order])
+
+    def restricted(self, keep: np.ndarray) -> TensorEntries:
+        """The entries of the boolean mask ``keep`` (nnz,) alone, in the same order."""
+        return TensorEntries(self.tensor[keep], self.rows[keep], self.columns[keep])
 
     def submatrix(
         self, values: np.ndarray, kept_rows: np.ndarray, kept_columns: np.ndarray
@@ -252,20 +255,16 @@ class ConicDataMap:
         self._prog = prog
         n = int(prog.x.size)
         self.n_rows, self.n_columns = int(data["A"].shape[0]), n
-        entries = TensorEntries.of(prog.reduced_A, n + 1)
+        entries = TensorEntries.of(prog.reduced_A)  # A, then the offset column b
         in_A = entries.columns < n
-        self.A = TensorEntries(
-            -entries.tensor[in_A], entries.rows[in_A], entries.columns[in_A], (self.n_rows, n)
-        )
+        A = entries.restricted(in_A)
+        self.A = TensorEntries(-A.tensor, A.rows, A.columns)  # Clarabel's sign: b - A x
         self._b_tensor = entries.tensor[~in_A]
         self._b_rows = entries.rows[~in_A]
         self.P: TensorEntries | None = None
         if prog.P is not None:
-            full = TensorEntries.of(prog.reduced_P, n)
-            upper = full.rows <= full.columns
-            self.P = TensorEntries(
-                full.tensor[upper], full.rows[upper], full.columns[upper], (n, n)
-            )
+            full = TensorEntries.of(prog.reduced_P)
+            self.P = full.restricted(full.rows <= full.columns)  # the upper triangle
         self._q_tensor = sp.csr_array(prog.q)
 
     def parameter_vector(self) -> np.ndarray:
