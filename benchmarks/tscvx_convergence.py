@@ -216,7 +216,11 @@ def parse_args(argv: Sequence[str] | None = None) -> Any:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
-    rows = run(args)
+    try:
+        rows = run(args)
+    except (ValueError, OSError) as err:  # no test split, an unreadable model or dataset
+        print(f"tscvx_convergence.py: error: {err}", file=sys.stderr)
+        return 2
     if not rows:
         print("no instance on which cold SCvx converged", file=sys.stderr)
         return 1

@@ -86,3 +86,14 @@ def test_a_folder_without_a_manifest_is_refused_before_any_solve(run_benchmark, 
     done = run_benchmark("tscvx_convergence.py", "--data", str(tmp_path), "--out", "x")
     assert done.returncode == 2
     assert "no manifest.json" in done.stderr
+
+
+def test_a_corrupt_manifest_is_a_clear_error_not_a_traceback(run_benchmark, tmp_path):
+    data = tmp_path / "pdg"
+    data.mkdir()
+    (data / "manifest.json").write_text("{ not json")
+    done = run_benchmark("tscvx_convergence.py", "--data", str(data), "--out", str(tmp_path / "o"))
+    assert done.returncode == 2
+    assert "manifest" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "o").exists()  # nothing written
