@@ -145,6 +145,9 @@ def summary(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
         for name in columns:
             values = np.array([r[name] for r in mine], dtype=float)
             reached = values[np.isfinite(values)]
+            if not reached.size:
+                parts.append(f"  {name:22s} reached by none of {values.size}")
+                continue
             parts.append(
                 f"  {name:22s} mean {reached.mean():5.2f}  median {np.median(reached):4.1f}"
                 f"  reached {reached.size}/{values.size}"

@@ -97,3 +97,13 @@ def test_a_corrupt_manifest_is_a_clear_error_not_a_traceback(run_benchmark, tmp_
     assert "manifest" in done.stderr
     assert "Traceback" not in done.stderr
     assert not (tmp_path / "o").exists()  # nothing written
+
+
+def test_the_summary_names_a_tolerance_that_no_run_reached():
+    rows = [
+        {"method": "cold", "wall_s": 0.5, "solves_within_0.1pct": 9.0},
+        {"method": "tscvx", "wall_s": 0.2, "solves_within_0.1pct": math.inf},
+    ]
+    text = _script().summary(rows, ["solves_within_0.1pct"])
+    assert "mean  9.00" in text
+    assert "reached by none of 1" in text
