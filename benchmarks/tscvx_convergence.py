@@ -33,7 +33,6 @@ import argparse
 import csv
 import math
 import sys
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -96,34 +95,21 @@ def tolerance_column(tol: float) -> str:
 
 
 def run(args: Any) -> list[dict[str, Any]]:
-    """Solve the selected instances with both methods; the rows of :func:`instance_rows`."""
-    import torch
-
-    from scpformer.data.pdg6dof_family import PDG6DoFFamily, instance_from_theta
+    """Solve the selected instances with both methods (the issue experiment's
+    :class:`~scpformer.experiments.tscvx_studies.SolveTimeSolver`); the rows of
+    :func:`instance_rows`."""
     from scpformer.data.storage import read_manifest
     from scpformer.experiments.runner import select_test_instances, theta_tasks
-    from scpformer.experiments.tscvx_studies import solver_config
-    from scpformer.models.predictors import load_predictor
+    from scpformer.experiments.tscvx_studies import SolveTimeSolver
     from scpformer.pretrained import default_model
-    from scpformer.problems.pdg6dof.problem import solve
-    from scpformer.warmstart.tscvx import TscvxWarmStart
 
-    torch.set_num_threads(1)
-    config = solver_config(read_manifest(args.data).config)
     model = default_model("pdg6dof") if args.model == "default" else Path(args.model)
-    predictor = load_predictor(model, "tscvx")
-    predictor.warm_up()
-    PDG6DoFFamily(config).warm_up()
+    solver = SolveTimeSolver({"tscvx": model}, read_manifest(args.data).config)
+    solver.warm_up()  # one torch thread, the networks traced, the subproblem compiled
     tasks = theta_tasks(args.data, select_test_instances(args.data, args.n, args.seed))
     rows: list[dict[str, Any]] = []
     for done, task in enumerate(tasks):
-        instance = instance_from_theta(task.theta, config.constants)
-        solutions = {}
-        for method in METHODS if done % 2 == 0 else METHODS[::-1]:
-            guess = None if method == "cold" else TscvxWarmStart(predictor)
-            start = time.perf_counter()
-            solution = solve(instance, config.solver, guess=guess)
-            solutions[method] = (solution, time.perf_counter() - start)
+        instance, solutions = solver.solutions(task)
         if not solutions["cold"][0].converged:
             print(f"instance {task.index}: cold SCvx did not converge, left out", file=sys.stderr)
             continue

@@ -214,6 +214,15 @@ class SolveTimeSolver:
         return order if index % 2 == 0 else order[::-1]
 
     def solve(self, task: InstanceTask) -> dict[str, Any]:
+        instance, done = self.solutions(task)
+        row: dict[str, Any] = {KEY: task.index, "status": "ok", "message": ""}
+        for method, (solution, wall) in done.items():
+            row.update(method_columns(method, solution, wall, instance, done[COLD][0]))
+        return row
+
+    def solutions(self, task: InstanceTask) -> tuple[Any, dict[str, tuple[Any, float]]]:
+        """The instance of ``task`` and, per method in :meth:`methods` order, its solution and
+        wall time (inference included)."""
         from scpformer.data.pdg6dof_family import instance_from_theta
 
         config = solver_config(self.data_config)
@@ -222,10 +231,7 @@ class SolveTimeSolver:
             method: self._timed(method, instance, config.solver)
             for method in self.methods(task.index)
         }
-        row: dict[str, Any] = {KEY: task.index, "status": "ok", "message": ""}
-        for method, (solution, wall) in done.items():
-            row.update(method_columns(method, solution, wall, instance, done[COLD][0]))
-        return row
+        return instance, done
 
     def _timed(self, method: str, instance: Any, solver: Any) -> tuple[Any, float]:
         from scpformer.problems.pdg6dof.problem import solve
