@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.integrate import DOP853
 
-from scpformer.dynamics import powered_descent as pd
+from scpformer.dynamics import powered_descent_kernels as pdk
+from scpformer.dynamics import powered_descent_truth as truth
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.correction import LeastChangeCorrection
 from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory
@@ -110,16 +110,20 @@ class PDGProblem:
         self.instance = instance
         self.config = config
         self.model = instance.constants.model()
+        self.packed_model = pdk.packed_constants(self.model)
         self.subproblem = compiled_subproblem(
             config.n_nodes, config.fix_roll, config.prox_weight, config.scvx.solver
         )
         start_cold(self.subproblem.problem)  # the run's solves reuse one solver object
 
     def dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        return pd.dynamics(self.model, x, u)
+        """Eq. 4 at the points (K, 14), (K, 3): the compiled kernel
+        (:mod:`scpformer.dynamics.powered_descent_kernels`)."""
+        return pdk.dynamics(self.packed_model, x, u)
 
     def linearize(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return pd.linearize(self.model, x, u)
+        """Eq. 4 and its Jacobians at the points: the compiled kernel."""
+        return pdk.linearize(self.packed_model, x, u)
 
     def initial_guess(self) -> Trajectory:
         """The default cold start: the cubic-profile guess (:mod:`.guess`)."""
@@ -340,61 +344,32 @@ def propagate(
     most 1.1e-7 from a propagation at rtol 1e-13, four orders below the defect tolerance).
     Returns the states at ``samples_per_interval`` equally spaced instants per interval plus
     the final one: ((N - 1) * samples_per_interval + 1, 14).
+
+    The integrator is scipy's DOP853 compiled (:mod:`scpformer.dynamics.powered_descent_truth`)
+    on the truth right-hand side :func:`~scpformer.dynamics.powered_descent.scalar_rates`,
+    written independently of the discretization's kernels; the vehicle's inertia is diagonal
+    (``VehicleConstants.J_B_diag``). Raises ``RuntimeError`` naming the interval where the
+    step size collapses (a state that overflows included).
     """
     tol = tol or VerificationTolerances()
-    model = instance.constants.model()
-    diagonal = np.count_nonzero(model.J_B - np.diag(np.diag(model.J_B))) == 0
-    rhs_model = pd.dynamics_scalar if diagonal else pd.dynamics
+    constants = np.asarray(instance.constants.model().scalars)
     n = z.x.shape[0]
     m = samples_per_interval
     dt = float(z.p[0]) / (n - 1)
     sample_times = np.linspace(0.0, 1.0, m + 1)[1:] * dt
     out = np.empty(((n - 1) * m + 1, instance.x0.size))
     out[0] = instance.x0
-    step = None
+    step = 0.0  # the first interval selects its own first step
     for k in range(n - 1):
-        u_k, slope = z.u[k], (z.u[k + 1] - z.u[k]) / dt
-
-        def rhs(
-            t: float, x: np.ndarray, u_k: np.ndarray = u_k, slope: np.ndarray = slope
-        ) -> np.ndarray:
-            return rhs_model(model, x, u_k + t * slope)
-
-        try:
-            step = _integrate_interval(rhs, out[k * m], sample_times, out[1 + k * m :], step, tol)
-        except RuntimeError as err:
-            raise RuntimeError(f"nonlinear propagation failed on interval {k}: {err}") from None
+        params = np.concatenate([constants, z.u[k], (z.u[k + 1] - z.u[k]) / dt])
+        rows = out[1 + k * m : 1 + (k + 1) * m]
+        step = truth.integrate(params, out[k * m], sample_times, step, tol.rtol, tol.atol, rows)
+        if step == truth.TOO_SMALL_STEP:
+            raise RuntimeError(
+                f"nonlinear propagation failed on interval {k}: the step size fell below ten "
+                "ulps of the time (a non-finite or diverging state)"
+            )
     return out
-
-
-def _integrate_interval(
-    rhs: Callable[[float, np.ndarray], np.ndarray],
-    state: np.ndarray,
-    sample_times: np.ndarray,
-    out: np.ndarray,
-    first_step: float | None,
-    tol: VerificationTolerances,
-) -> float | None:
-    """Integrate ``rhs`` from ``state`` at 0 to ``sample_times[-1]`` and write the states at
-    ``sample_times`` into the first rows of ``out`` (DOP853's dense output between steps, its
-    last step's state at the end). Returns the step size it proposes next (``None``, and the
-    next interval starts with scipy's heuristic, if scipy does not expose it)."""
-    end = float(sample_times[-1])
-    first = min(first_step, end) if first_step else None
-    solver = DOP853(rhs, 0.0, state, end, rtol=tol.rtol, atol=tol.atol, first_step=first)
-    j, last = 0, len(sample_times) - 1
-    while solver.status == "running":
-        message = solver.step()
-        if solver.status == "failed":
-            raise RuntimeError(str(message))
-        if j < last and sample_times[j] <= solver.t:
-            dense = solver.dense_output()
-            while j < last and sample_times[j] <= solver.t:
-                out[j] = dense(sample_times[j])
-                j += 1
-    out[last] = solver.y
-    proposed = getattr(solver, "h_abs", None)  # scipy's next step (not a documented attribute)
-    return float(proposed) if proposed else None
 
 
 def verify_trajectory(
