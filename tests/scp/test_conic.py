@@ -9,6 +9,7 @@ from scpformer.scp.conic import (
     SOLVERS,
     ConicDataMap,
     assign,
+    clarabel_inputs,
     solve_timed,
     variable_slices,
 )
@@ -147,3 +148,47 @@ def test_the_conic_data_map_names_a_parameter_without_a_value():
     parameters[2].value = None  # h
     with pytest.raises(ValueError, match="parameter 'h' has no value"):
         data_map.values()
+
+
+def test_clarabel_reads_the_list_inputs_as_the_scipy_ones_in_setup_and_update():
+    """:func:`clarabel_inputs` hands Clarabel the same problem: the same iterates to the
+    last bit, whether a solver is built from them or updated with them."""
+    import clarabel
+
+    problem, parameters = _problem_with_parameters_everywhere()
+    rng = np.random.default_rng(2)
+    data_map = None
+    results = []
+    for _ in range(2):
+        for p in parameters:
+            p.value = (
+                np.abs(rng.normal(size=p.shape)) if p.is_nonneg() else rng.normal(size=p.shape)
+            )
+        data, _, _ = problem.get_problem_data(cp.CLARABEL, solver_opts={})
+        data_map = data_map or ConicDataMap(problem)
+        dims = data["dims"]
+        cones = [clarabel.ZeroConeT(dims.zero), clarabel.NonnegativeConeT(dims.nonneg)]
+        cones += [clarabel.SecondOrderConeT(int(size)) for size in dims.soc]
+        P = sp.triu(sp.csc_array(data["P"])).tocsc()
+        scipy_inputs = (P, data["c"], sp.csc_array(data["A"]), data["b"])
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        built = [
+            clarabel.DefaultSolver(*inputs, cones, settings)
+            for inputs in (scipy_inputs, clarabel_inputs(*scipy_inputs))
+        ]
+        results.append([solver.solve() for solver in built])
+        if len(results) == 1:
+            first = built
+        else:  # the solvers of the first values, updated with the second's
+            first[0].update(P=P, q=data["c"], A=scipy_inputs[2], b=data["b"])
+            as_lists = clarabel_inputs(*scipy_inputs)
+            first[1].update(P=as_lists[0], q=as_lists[1], A=as_lists[2], b=as_lists[3])
+            results.append([solver.solve() for solver in first])
+    for from_scipy, from_lists in results:
+        assert str(from_scipy.status) == str(from_lists.status) == "Solved"
+        assert from_scipy.iterations == from_lists.iterations
+        np.testing.assert_array_equal(np.asarray(from_scipy.x), np.asarray(from_lists.x))
+    updated, fresh = np.asarray(results[2][0].x), np.asarray(results[1][0].x)
+    np.testing.assert_allclose(updated, fresh, rtol=1e-5, atol=1e-6)  # the update took
+    assert np.abs(updated - np.asarray(results[0][0].x)).max() > 1e-2

@@ -40,6 +40,7 @@ the caller solves again with ``nu``.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 
@@ -60,6 +61,7 @@ from scpformer.scp.conic import (
     SOLVERS,
     ConicDataMap,
     VariableSlices,
+    clarabel_inputs,
     clarabel_status,
     primal_value,
     solver_options,
@@ -148,6 +150,12 @@ def conic_layout(sub: PDGSubproblem) -> ConicLayout:
     if layout.n_rows != data["A"].shape[0]:
         raise RuntimeError(f"conic layout maps {layout.n_rows} rows, A has {data['A'].shape[0]}")
     return layout
+
+
+@functools.lru_cache(maxsize=8)
+def cached_layout(sub: PDGSubproblem) -> ConicLayout:
+    """The conic layout of a process-wide compiled subproblem (computed once per process)."""
+    return conic_layout(sub)
 
 
 def _virtual_parts(
@@ -308,9 +316,10 @@ class ReducedSubproblem:
         """A Clarabel solver holding this data: the previous one updated in place when the
         kept rows and columns are the same (it keeps its symbolic factorization, as cvxpy's
         ``reuse`` path does, :func:`scpformer.scp.conic.solver_options`), else a new one."""
+        P_in, q_in, A_in, b_in = clarabel_inputs(P, q, A, b)
         if self._solver is not None and self._solver_key == key:
             try:
-                self._solver.update(P=P, q=q, A=A, b=b)
+                self._solver.update(P=P_in, q=q_in, A=A_in, b=b_in)
                 return self._solver
             except Exception:  # a changed sparsity pattern: build a new solver
                 pass
@@ -320,7 +329,7 @@ class ReducedSubproblem:
         settings.verbose = False
         for name, value in solver_options("clarabel", True, CONIC_SETTINGS).items():
             setattr(settings, name, value)
-        self._solver = clarabel.DefaultSolver(P, q, A, b, cones, settings)
+        self._solver = clarabel.DefaultSolver(P_in, q_in, A_in, b_in, cones, settings)
         self._solver_key, self._cone_count = key, len(cones) - 2
         return self._solver
 

@@ -33,7 +33,6 @@ trajectory that the full problem's verification rejects and converges at least a
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -48,8 +47,8 @@ from scpformer.problems.pdg6dof.problem import (
     PDGSolverConfig,
     candidate,
 )
-from scpformer.problems.pdg6dof.reduced import ConicLayout, ReducedSubproblem, conic_layout
-from scpformer.problems.pdg6dof.subproblem import PDGSubproblem, SubproblemSolution
+from scpformer.problems.pdg6dof.reduced import ReducedSubproblem, cached_layout
+from scpformer.problems.pdg6dof.subproblem import SubproblemSolution
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Trajectory
 from scpformer.validation import check_int, check_positive
@@ -190,12 +189,6 @@ def convex_excess(instance: PDGInstance, z: Trajectory) -> float:
     return float(np.maximum(values[list(con.CONVEX_ROWS)], 0.0).sum())
 
 
-@functools.lru_cache(maxsize=8)
-def _layout(sub: PDGSubproblem) -> ConicLayout:
-    """The conic layout of a process-wide compiled subproblem (computed once)."""
-    return conic_layout(sub)
-
-
 @dataclass
 class TscvxLog:
     """What each subproblem solve of a T-SCvx run did (``Solution.extras["tscvx"]``)."""
@@ -228,7 +221,7 @@ class TscvxProblem(PDGProblem):
         super().__init__(instance, config)
         self.tight = tight  # k -> (7N,) bool flags predicted tight at iteration k
         self.params = params
-        self.reduced = ReducedSubproblem(self.subproblem, _layout(self.subproblem))
+        self.reduced = ReducedSubproblem(self.subproblem, cached_layout(self.subproblem))
         self.scales = row_scales(instance, config.n_nodes)
         self.log = TscvxLog()
         self.full_mode = False
