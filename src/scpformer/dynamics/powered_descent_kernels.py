@@ -5,9 +5,9 @@ every RK4 stage of every interval (``4 n_sub`` calls of (N - 1) points per SCvx 
 and the numpy form of :mod:`scpformer.dynamics.powered_descent` spends almost all of its
 time there in the per-call overhead of some hundred small array operations on (49, 3, 3)
 blocks. These kernels compute the same quantities point by point in compiled loops: one call
-of :func:`linearize` on 49 points takes about 10 us against about 260 us for
-:func:`scpformer.dynamics.powered_descent.linearize` (measured in the README, "Compiled
-dynamics").
+of :func:`linearize` on 49 points takes about 35 us against about 280 us for
+:func:`scpformer.dynamics.powered_descent.linearize` (medians of 200 calls; README,
+"Compiled dynamics, and Clarabel without cvxpy in the loop").
 
 The formulas are those of :mod:`scpformer.dynamics.powered_descent` (Eq. 4 of the T-SCvx
 paper, the polynomial direction-cosine matrix ``C(q) = I + 2 q0 [qv x] + 2 [qv x]^2`` and its
@@ -16,17 +16,17 @@ module stays the readable reference: tests hold the two together to 1e-12 and ch
 against finite differences. The vehicle constants come in as one flat vector,
 :func:`packed_constants`.
 
-Compiled on first use and cached on disk by numba (``cache=True``), so a process pays the
-compilation (a few seconds) only the first time on a machine.
+Compiled on first use and cached on disk (:data:`scpformer.jit.compiled`), so only the
+first process on a machine pays the compilation (about 7 s for these kernels).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from scpformer.dynamics.powered_descent import N_CONTROL, N_STATE, RigidBodyModel
+from scpformer.jit import compiled
 
 Array = NDArray[np.float64]
 
@@ -71,7 +71,7 @@ def _batch(x: Array, u: Array) -> tuple[Array, Array]:
     return x, u
 
 
-@njit(cache=True)
+@compiled
 def _dcm(q0: float, q1: float, q2: float, q3: float, C: Array) -> None:
     """``C(q) = I + 2 q0 [qv x] + 2 [qv x]^2`` into ``C`` (3, 3)."""
     C[0, 0] = 1.0 - 2.0 * (q2 * q2 + q3 * q3)
@@ -85,7 +85,7 @@ def _dcm(q0: float, q1: float, q2: float, q3: float, C: Array) -> None:
     C[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
 
 
-@njit(cache=True)
+@compiled
 def _rotate_jacobian(
     q0: float, q1: float, q2: float, q3: float, w: Array, scale: float, out: Array
 ) -> None:
@@ -106,7 +106,7 @@ def _rotate_jacobian(
             out[i, j + 1] += scale * (2.0 * value - 2.0 * q0 * _skew(w, i, j))
 
 
-@njit(cache=True)
+@compiled
 def _skew(w: Array, i: int, j: int) -> float:
     """Entry ``(i, j)`` of ``[w x]``."""
     if i == j:
@@ -118,7 +118,7 @@ def _skew(w: Array, i: int, j: int) -> float:
     return -w[1] if j == 0 else w[0]
 
 
-@njit(cache=True)
+@compiled
 def _point(p: Array, x: Array, u: Array, f: Array, C: Array, v_B: Array, aero: Array) -> None:
     """Eq. 4 at one point into ``f`` (14,), leaving ``C``, ``v_B`` and ``A_B`` for the
     Jacobians."""
@@ -155,7 +155,7 @@ def _point(p: Array, x: Array, u: Array, f: Array, C: Array, v_B: Array, aero: A
     f[13] = -p[_ALPHA] * np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2) - p[_BETA]
 
 
-@njit(cache=True)
+@compiled
 def _dynamics(p: Array, x: Array, u: Array) -> Array:
     f = np.empty((x.shape[0], N_STATE))
     C, v_B, aero = np.empty((3, 3)), np.empty(3), np.empty(3)
@@ -164,7 +164,7 @@ def _dynamics(p: Array, x: Array, u: Array) -> Array:
     return f
 
 
-@njit(cache=True)
+@compiled
 def _linearize(p: Array, x: Array, u: Array) -> tuple[Array, Array, Array]:
     K = x.shape[0]
     f = np.empty((K, N_STATE))
@@ -186,7 +186,7 @@ def _linearize(p: Array, x: Array, u: Array) -> tuple[Array, Array, Array]:
     return f, A, B
 
 
-@njit(cache=True)
+@compiled
 def _point_jacobians(
     p: Array,
     x: Array,
@@ -239,7 +239,7 @@ def _point_jacobians(
             B[13, j] = -p[_ALPHA] * u[j] / thrust
 
 
-@njit(cache=True)
+@compiled
 def _aero_jacobians(
     x: Array,
     C: Array,
@@ -278,7 +278,7 @@ def _aero_jacobians(
     _mm_into(torque_dA, dvB_dq, A[10:13, 6:10], 1.0)
 
 
-@njit(cache=True)
+@compiled
 def _skew_matrix(w: Array) -> Array:
     """``[w x]`` (3, 3)."""
     out = np.empty((3, 3))
@@ -288,7 +288,7 @@ def _skew_matrix(w: Array) -> Array:
     return out
 
 
-@njit(cache=True)
+@compiled
 def _mm_into(a: Array, b: Array, out: Array, scale: float) -> None:
     """``out += scale a @ b`` for small matrices, in plain loops (a BLAS call costs more at
     this size)."""

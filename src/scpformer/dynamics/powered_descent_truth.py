@@ -19,11 +19,11 @@ per process without the on-disk cache.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 from scipy.integrate._ivp import dop853_coefficients as coefficients
 
 from scpformer.dynamics.powered_descent import scalar_rates
+from scpformer.jit import compiled
 
 Array = NDArray[np.float64]
 
@@ -42,7 +42,7 @@ ERROR_EXPONENT = -1.0 / 8.0  # -1 / (error estimator order + 1)
 TOO_SMALL_STEP = -1.0  # returned instead of the next step size when a step fails
 
 
-@njit(cache=True)
+@compiled
 def integrate(
     params: Array, y0: Array, times: Array, first_step: float, rtol: float, atol: float,
     out: Array,
@@ -77,7 +77,7 @@ def integrate(
     return h_abs
 
 
-@njit(cache=True)
+@compiled
 def _step(params, t, y, f, h_abs, end, rtol, atol, K):  # type: ignore[no-untyped-def]
     """One accepted step (scipy's ``RungeKutta._step_impl``): ``(next h_abs, t, y, f)``."""
     min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
@@ -100,7 +100,7 @@ def _step(params, t, y, f, h_abs, end, rtol, atol, K):  # type: ignore[no-untype
         rejected = True
 
 
-@njit(cache=True)
+@compiled
 def _rk_stages(params, t, y, f, h, K):  # type: ignore[no-untyped-def]
     """The twelve stages and the 8th-order solution (scipy's ``rk_step``)."""
     K[0] = f
@@ -118,7 +118,7 @@ def _rk_stages(params, t, y, f, h, K):  # type: ignore[no-untyped-def]
     return y_new, f_new
 
 
-@njit(cache=True)
+@compiled
 def _error_norm(K, h, scale):  # type: ignore[no-untyped-def]
     """The 5th/3rd-order blended error estimate of DOP853 in the RMS norm of ``scale``."""
     err5 = np.zeros(scale.size)
@@ -133,7 +133,7 @@ def _error_norm(K, h, scale):  # type: ignore[no-untyped-def]
     return abs(h) * err5_2 / np.sqrt((err5_2 + 0.01 * err3_2) * scale.size)
 
 
-@njit(cache=True)
+@compiled
 def _dense_coefficients(params, t_old, y_old, f_old, h, y, f, K):  # type: ignore[no-untyped-def]
     """The 7th-order interpolant of the last step (scipy's ``_dense_output_impl``)."""
     for s in range(N_STAGES + 1, N_EXTENDED):
@@ -155,7 +155,7 @@ def _dense_coefficients(params, t_old, y_old, f_old, h, y, f, K):  # type: ignor
     return F
 
 
-@njit(cache=True)
+@compiled
 def _dense_value(F, y_old, x):  # type: ignore[no-untyped-def]
     """The interpolant at the fraction ``x`` of the step (scipy's ``Dop853DenseOutput``)."""
     y = np.zeros_like(y_old)
@@ -165,7 +165,7 @@ def _dense_value(F, y_old, x):  # type: ignore[no-untyped-def]
     return y + y_old
 
 
-@njit(cache=True)
+@compiled
 def _initial_step(params, y0, f0, end, rtol, atol):  # type: ignore[no-untyped-def]
     """scipy's ``select_initial_step`` for a method of error-estimator order 7."""
     scale = atol + np.abs(y0) * rtol
@@ -182,7 +182,7 @@ def _initial_step(params, y0, f0, end, rtol, atol):  # type: ignore[no-untyped-d
     return min(100.0 * h0, h1, end)
 
 
-@njit(cache=True)
+@compiled
 def foh_rates(t: float, x: Array, params: Array) -> Array:
     """Eq. 4 under the FOH thrust ``u_k + t slope`` of one interval, ``params = (constants
     (15, :attr:`~scpformer.dynamics.powered_descent.RigidBodyModel.scalars`), u_k (3),
