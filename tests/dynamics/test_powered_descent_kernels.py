@@ -69,7 +69,7 @@ def test_a_zero_mass_gives_non_finite_rates_not_an_exception():
     constants = pdk.packed_constants(MODELS["nominal"].model())
     x, u = random_states(np.random.default_rng(14), 3)
     x[1, 13] = 0.0
-    f, A, B = pdk.linearize(constants, x, u)
+    f, A, _ = pdk.linearize(constants, x, u)
     assert not np.isfinite(f[1]).all() and not np.isfinite(A[1]).all()
     assert np.isfinite(f[[0, 2]]).all() and np.isfinite(A[[0, 2]]).all()
     assert not np.isfinite(pd.dynamics_scalar(MODELS["nominal"].model(), x[1], u[1])).all()

@@ -183,9 +183,9 @@ def dynamics_scalar(model: RigidBodyModel, x: Array, u: Array) -> Array:
 
     Numerically the same as :func:`dynamics` (a test holds them together) but compiled
     (:func:`scalar_rates`): 1.6 us for a single state against 61 us for :func:`dynamics`,
-    whose time there is numpy's per-call overhead. Written independently of the vectorized form and of the
-    discretization's kernels (:mod:`scpformer.dynamics.powered_descent_kernels`), it also
-    cross-checks them. Assumes a diagonal (principal-axis) inertia matrix, as every scenario
+    whose time there is numpy's per-call overhead. Written independently of the vectorized
+    form and of the discretization's kernels (:mod:`scpformer.dynamics.powered_descent_kernels`),
+    it also cross-checks them. Assumes a diagonal (principal-axis) inertia matrix, as every scenario
     of the papers has.
     """
     return scalar_rates(
