@@ -74,3 +74,29 @@ def test_truth_propagation_follows_scipy_dop853_step_for_step(first_step):
     np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-13)
     assert step == pytest.approx(reference.h_abs, rel=1e-6)  # error norms: round-off
     assert math.isfinite(step)
+
+
+@pytest.mark.parametrize("where", ["state", "thrust", "slope"])
+def test_a_non_finite_input_ends_the_integration_with_a_too_small_step(where):
+    """nan makes every error estimate nan; the step must shrink to the floor and stop (a
+    nan-blind comparison would loop forever)."""
+    constants = np.asarray(VehicleConstants().model().scalars)
+    x0 = np.concatenate([[3.0, 0.0, 0.0], [0.0] * 3, [1.0, 0.0, 0.0, 0.0], [0.0] * 3, [2.0]])
+    thrust, slope = np.array([3.0, 0.0, 0.0]), np.zeros(3)
+    {"state": x0, "thrust": thrust, "slope": slope}[where][1] = np.nan
+    out = np.empty((2, 14))
+    params = truth_params(constants, thrust, slope)
+    step = truth.integrate(params, x0, np.array([0.25, 0.5]), 0.0, 1e-10, 1e-12, out)
+    assert step == truth.TOO_SMALL_STEP
+
+
+def test_propagation_names_the_interval_where_the_state_stops_being_finite():
+    from scpformer.problems.pdg6dof.guess import straight_line_trajectory
+    from scpformer.problems.pdg6dof.instance import sample_instances
+    from scpformer.problems.pdg6dof.problem import propagate
+
+    instance = sample_instances(np.random.default_rng(0), 1)[0]
+    z = straight_line_trajectory(instance, 10)
+    z.u[4] = np.nan
+    with pytest.raises(RuntimeError, match="nonlinear propagation failed on interval 3"):
+        propagate(instance, z)

@@ -84,7 +84,7 @@ def _step(params, t, y, f, h_abs, end, rtol, atol, K):  # type: ignore[no-untype
     h_abs = max(h_abs, min_step)
     rejected = False
     while True:
-        if h_abs < min_step:
+        if not h_abs >= min_step:  # written so that a nan step ends the integration too
             return TOO_SMALL_STEP, t, y, f
         t_new = min(t + h_abs, end)
         h = t_new - t
@@ -96,7 +96,9 @@ def _step(params, t, y, f, h_abs, end, rtol, atol, K):  # type: ignore[no-untype
             if rejected:
                 factor = min(1.0, factor)
             return h * factor, t_new, y_new, f_new
-        h_abs = h * max(MIN_FACTOR, SAFETY * error**ERROR_EXPONENT)
+        # a nan error (a non-finite stage) shrinks the step like a large one, as in scipy
+        shrink = SAFETY * error**ERROR_EXPONENT
+        h_abs = h * (shrink if shrink > MIN_FACTOR else MIN_FACTOR)
         rejected = True
 
 
