@@ -18,6 +18,10 @@ sits in the conic solution vector. A reduced solve then
 3. calls Clarabel on the smaller problem and maps its primal solution back to ``(x, u,
    sigma, nu, buffers)``.
 
+With every row kept this is the full subproblem, and cold SCvx solves its subproblems this way
+too (:meth:`~scpformer.problems.pdg6dof.problem.PDGProblem._solve`): the same numbers as
+cvxpy's ``get_problem_data`` and Clarabel interface, without their per-solve cost.
+
 What a ``(name, node)`` row owns in the conic problem (cvxpy 1.9 canonicalization, checked
 by the layout tests against :func:`~scpformer.problems.pdg6dof.constraints.constraint_values`):
 mass and thrust_min one nonnegative row; glideslope, tilt and omega one nonnegative row and
