@@ -117,6 +117,7 @@ class PDGProblem:
         )
         start_cold(self.subproblem.problem)  # the run's solves reuse one solver object
         self._direct: ReducedSubproblem | None = None  # Clarabel on the data map (_solve)
+        self._every_row = np.ones(len(con.CONSTRAINT_NAMES) * config.n_nodes, dtype=bool)
 
     def dynamics(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Eq. 4 at the points (K, 14), (K, 3): the compiled kernel
@@ -297,8 +298,7 @@ class PDGProblem:
         self.subproblem.set_trust_region(eta, lambda_, box, weight)
         if self._direct is None:
             self._direct = ReducedSubproblem(self.subproblem, cached_layout(self.subproblem))
-        every_row = np.ones(len(con.CONSTRAINT_NAMES) * self.config.n_nodes, dtype=bool)
-        return candidate(self._direct.solve(every_row, lambda_))
+        return candidate(self._direct.solve(self._every_row, lambda_))
 
     def trust_region(self, eta: float) -> tuple[float, float]:
         """The soft weight and the box radius of the trust region of radius ``eta``: the
