@@ -74,8 +74,8 @@ def test_each_name_node_row_maps_to_the_conic_rows_of_that_constraint_at_that_no
         nonneg = rows[(rows >= lay.n_zero) & (rows < lay.n_zero + lay.n_nonneg)]
         assert nonneg.size == 1, (name, node)
         assert slack[nonneg[0]] == pytest.approx(-values[flag], abs=1e-9), (name, node)
-        cone_rows = rows.size - 1
-        assert cone_rows == {"mass": 0, "thrust_min": 0, "glideslope": 3, "tilt": 3}.get(name, 4)
+        cone_rows = rows.size - 1  # the thrust cone is the mass row's too: owned by no flag
+        assert cone_rows == {"glideslope": 3, "tilt": 3, "omega": 4}.get(name, 0)
 
 
 def test_the_layouts_parameter_map_gives_cvxpys_conic_data_of_the_subproblem(linearized):
@@ -92,16 +92,24 @@ def test_the_layouts_parameter_map_gives_cvxpys_conic_data_of_the_subproblem(lin
     assert (data_map.P.submatrix(P, columns, columns) != expected_P).nnz == 0
 
 
-def test_the_thrust_cone_is_kept_while_thrust_max_or_gimbal_is_kept(linearized):
+def test_the_thrust_cone_shared_with_the_mass_row_is_kept_with_no_flag(linearized):
+    # cvxpy canonicalizes |U_k| once for thrust_max, gimbal and the end points of Eq. 4a's
+    # quadrature: without that cone the mass row's epigraph variable would be free, so it
+    # belongs to no (name, node) row and stays in every reduced problem.
     lay = linearized[3].layout
-    thrust_max, gimbal = (con.CONSTRAINT_NAMES.index(n) * N + 7 for n in ("thrust_max", "gimbal"))
-    shared = np.intersect1d(lay.rows_of(thrust_max), lay.rows_of(gimbal))
-    assert shared.size == 4
-    for kept in (thrust_max, gimbal):
-        keep = np.zeros(7 * N, dtype=bool)
-        keep[kept] = True
-        assert lay.kept_rows(keep)[shared].all()
-    assert not lay.kept_rows(np.zeros(7 * N, dtype=bool))[shared].any()
+    first = lay.n_zero + lay.n_nonneg + np.concatenate([[0], np.cumsum(lay.soc_sizes)])
+    A = linearized[3].conic_data()["A"].tocsr()
+    u_offset, _ = lay.variables["u"]
+    u_columns = set(range(u_offset, u_offset + 3 * N))
+    thrust_cones = [
+        row
+        for row, size in zip(first[:-1], lay.soc_sizes, strict=True)
+        if size == 4 and set(A[row + 1 : row + 4].indices) <= u_columns
+        and len(set(A[row + 1 : row + 4].indices)) == 3
+    ]  # |v| <= t with v = U_k itself (one column per row), not a quadrature point
+    assert len(thrust_cones) == N
+    kept = lay.kept_rows(np.zeros(7 * N, dtype=bool), keep_box=False)
+    assert all(kept[row : row + 4].all() for row in thrust_cones)
 
 
 def test_reduced_solve_with_every_row_equals_the_full_subproblem(linearized):
@@ -125,10 +133,11 @@ def test_leaving_rows_out_gives_fewer_rows_cones_and_columns(linearized):
     sol = reduced.solve(keep, 10.0, keep_box=False)
     assert sol.status == "optimal"
     small = reduced.last_size
-    mass_row_cones = len(MASS_QUADRATURE[0]) * (N - 1)  # Eq. 4a's norms, kept in every solve
+    interior = len(MASS_QUADRATURE[0]) - 2  # Eq. 4a's norms between the nodes, per interval
+    mass_row_cones = interior * (N - 1) + N  # and |U_k| at the nodes, kept in every solve
     assert small.cones == mass_row_cones < full.cones
     assert small.rows < full.rows - 6 * N - 700  # rows, cones and the safeguard box
-    assert small.columns == full.columns - 4 * N  # the four norms' epigraph variables
+    assert small.columns == full.columns - 3 * N  # the other three norms' epigraph variables
 
 
 @pytest.fixture(scope="module")

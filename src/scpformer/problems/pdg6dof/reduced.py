@@ -26,10 +26,11 @@ What a ``(name, node)`` row owns in the conic problem (cvxpy 1.9 canonicalizatio
 by the layout tests against :func:`~scpformer.problems.pdg6dof.constraints.constraint_values`):
 mass and thrust_min one nonnegative row; glideslope, tilt and omega one nonnegative row and
 the second-order cone of their norm's epigraph variable; thrust_max and gimbal one
-nonnegative row each and, together, the cone of the thrust norm they share (kept while either
-is kept). Equalities, the virtual-control rows, the final-time bounds and the trust region
-are always kept; with ``drop_box`` the safeguard box of the soft trust region is left out
-too (the caller checks the solution against it, see :meth:`ReducedSubproblem.solve`).
+nonnegative row each. The cone of the thrust norm ``|U_k|`` that they share is also the end
+point of the mass row's quadrature (Eq. 4a), so no flag owns it: like the equalities, the
+virtual-control rows, the final-time bounds and the trust region it is always kept; with
+``drop_box`` the safeguard box of the soft trust region is left out too (the caller checks
+the solution against it, see :meth:`ReducedSubproblem.solve`).
 
 With ``keep_virtual=False`` the virtual control ``nu`` is fixed at zero: its columns, the
 nonnegative rows of its ``|nu|`` epigraph and the epigraph's columns are left out (a third of
@@ -200,14 +201,24 @@ def _epigraph_id(cone: cp.constraints.SOC) -> int | None:
 
 
 def _norm_owners(ordered: list[cp.Constraint], flag_of: dict[int, int]) -> dict[int, list[int]]:
-    """Epigraph variable id -> flag bases of the named constraints that bound it."""
+    """Epigraph variable id -> flag bases of the named constraints that bound it.
+
+    An epigraph that a constraint outside the named rows also uses (the thrust norm, which
+    the mass row of Eq. 4a shares with thrust_max and gimbal) has no owner: its cone is kept
+    in every reduced problem.
+    """
     owners: dict[int, list[int]] = {}
+    shared: set[int] = set()
     for constraint in ordered:
-        if constraint.id in flag_of:
-            for var in constraint.variables():
+        if isinstance(constraint, cp.constraints.SOC):
+            continue
+        for var in constraint.variables():
+            if constraint.id in flag_of:
                 owners.setdefault(var.id, []).append(flag_of[constraint.id])
+            else:
+                shared.add(var.id)
     epigraphs = {_epigraph_id(c) for c in ordered if isinstance(c, cp.constraints.SOC)} - {None}
-    return {vid: bases for vid, bases in owners.items() if vid in epigraphs}
+    return {vid: bases for vid, bases in owners.items() if vid in epigraphs - shared}
 
 
 @dataclass(frozen=True)

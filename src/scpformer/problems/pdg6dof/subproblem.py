@@ -206,9 +206,9 @@ class PDGSubproblem:
             + self.z
             + self.nu
         )
-        self.mass_row = self._mass_row()
+        thrust = cp.norm(U, 2, axis=1)  # |U_k|: Eqs. 6a-b and the mass row's end points
+        self.mass_row = self._mass_row(thrust)
         dynamics = [X[1:, :MASS] == linearized[:, :MASS], self.mass_row]
-        thrust = cp.norm(U, 2, axis=1)
         ones = np.ones((self.n_nodes, 1))
         terminal_q, terminal_w = terminal_attitude_columns(self.fix_roll)
         self.inequalities = {  # one (N,) constraint per name of constraints.CONSTRAINT_NAMES
@@ -247,22 +247,25 @@ class PDGSubproblem:
             cost = cost + self._deviation_without_constant()
         return cp.Problem(cp.Minimize(cost), constraints)
 
-    def _mass_row(self) -> cp.Constraint:
+    def _mass_row(self, thrust: cp.Expression) -> cp.Constraint:
         """``m_{k+1} <= m_k - sigma_bar alpha dtau I_k(U) + S_k^m sigma + c_k + nu_k^m`` (Eq. 4a).
 
         ``I_k(U) = sum_j w_j |(1 - s_j) U_k + s_j U_{k+1}|``, ``dtau = 1 / (N - 1)``: the
         composite Simpson rule of :data:`MASS_QUADRATURE`, which is what the two-step RK4 of the
         discretization computes for a state-independent rate (module docstring; the numbers
-        at the reference come from :func:`mean_thrust`). The norms are their own
-        expressions, not the thrust norm of Eq. 6a, so that the reduced subproblem of T-SCvx
-        (:mod:`~scpformer.problems.pdg6dof.reduced`) keeps their cones with every row.
+        at the reference come from :func:`mean_thrust`). The end points ``s = 0, 1`` are the
+        node norms ``|U_k|`` of Eqs. 6a-b, ``thrust``: one cone per node instead of two per
+        interval, 98 fewer second-order cones at N = 50 (the subproblem is the same). The
+        reduced subproblem of T-SCvx (:mod:`~scpformer.problems.pdg6dof.reduced`) keeps
+        that shared cone, and the interior points' cones, with every row.
         """
         X, U = self.X, self.U
         points, weights = MASS_QUADRATURE
         mean_norm = sum(
-            w * cp.norm((1.0 - s) * U[:-1] + s * U[1:], 2, axis=1)
+            w * (thrust[:-1] if s == 0.0 else thrust[1:] if s == 1.0
+                 else cp.norm((1.0 - s) * U[:-1] + s * U[1:], 2, axis=1))
             for s, w in zip(points, weights, strict=True)
-        )
+        )  # fmt: skip
         return X[1:, MASS] <= (
             X[:-1, MASS]
             - self.mass_rate * mean_norm
