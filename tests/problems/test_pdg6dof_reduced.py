@@ -104,7 +104,8 @@ def test_the_thrust_cone_shared_with_the_mass_row_is_kept_with_no_flag(linearize
     thrust_cones = [
         row
         for row, size in zip(first[:-1], lay.soc_sizes, strict=True)
-        if size == 4 and set(A[row + 1 : row + 4].indices) <= u_columns
+        if size == 4
+        and set(A[row + 1 : row + 4].indices) <= u_columns
         and len(set(A[row + 1 : row + 4].indices)) == 3
     ]  # |v| <= t with v = U_k itself (one column per row), not a quadrature point
     assert len(thrust_cones) == N
