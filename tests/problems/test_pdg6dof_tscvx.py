@@ -14,6 +14,8 @@ from scpformer.problems.pdg6dof.tscvx import (
     consistent_guess,
     eq22_update,
     gimbal_projected_directions,
+    sharpened_magnitudes,
+    solve_tscvx,
 )
 from scpformer.scp.scvx import SCvxParameters
 from scpformer.scp.solution import Status
@@ -179,7 +181,15 @@ def test_eq22_contraction_exponent_has_a_floor():
 
 
 @pytest.mark.parametrize(
-    ("field", "value"), [("margin", -1.0), ("shrink_floor", 2.0), ("max_repairs", 1.5)]
+    ("field", "value"),
+    [
+        ("margin", -1.0),
+        ("shrink_floor", 2.0),
+        ("max_repairs", 1.5),
+        ("thrust_gain", 0.0),
+        ("eta_ub", -1.0),
+        ("eta_ub", 1.0),  # below eta_init = 2
+    ],
 )
 def test_bad_tscvx_parameters_are_refused_by_name(field, value):
     with pytest.raises(ValueError, match=field):
@@ -234,3 +244,46 @@ def test_a_solve_without_nu_that_needs_nu_is_repeated_with_it(cold):
         assert problem.log.virtual_retries == int(drop)
     assert steps[1].virtual_norm > 1.0
     np.testing.assert_allclose(steps[1].trajectory.x, steps[0].trajectory.x, atol=1e-6)
+
+
+def test_sharpening_pushes_magnitudes_to_the_nearer_bound_about_a_fixed_midpoint():
+    T_min, T_max = 0.3, 5.0
+    unit = np.array([-0.2, 0.0, 0.1, 0.4, 0.5, 0.55, 0.6, 0.9, 1.0, 1.3])
+    thrust = T_min + unit * (T_max - T_min)
+    clipped = T_min + np.clip(unit, 0.0, 1.0) * (T_max - T_min)
+    np.testing.assert_allclose(sharpened_magnitudes(thrust, T_min, T_max, 1.0), clipped)
+    sharp = (sharpened_magnitudes(thrust, T_min, T_max, 4.0) - T_min) / (T_max - T_min)
+    np.testing.assert_allclose(sharp, [0, 0, 0, 0.1, 0.5, 0.7, 0.9, 1, 1, 1], atol=1e-12)
+    assert np.all(np.diff(sharp) >= 0.0)
+
+
+def test_consistent_guess_sharpens_thrust_magnitudes_and_keeps_their_directions():
+    instance = PDGInstance()
+    c = instance.constants
+    rng = np.random.default_rng(3)
+    direction = gimbal_projected_directions(
+        np.column_stack([np.ones(N), 0.1 * rng.normal(size=(N, 2))]), c.delta_max_deg
+    )
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    u = direction * rng.uniform(c.T_min, c.T_max, size=(N, 1))
+    x = np.tile(instance.x0, (N, 1))
+    z = consistent_guess(instance, x, u, 5.0, N, thrust_gain=3.0)
+    norms = np.linalg.norm(z.u, axis=1)
+    np.testing.assert_allclose(z.u / norms[:, None], direction, atol=1e-12)
+    expected = sharpened_magnitudes(np.linalg.norm(u, axis=1), c.T_min, c.T_max, 3.0)
+    np.testing.assert_allclose(norms, expected, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_tscvx_trust_radius_stays_below_its_own_bound_and_reaches_the_optimum(cold):
+    # From a perturbed guess the ratio test would grow the radius towards Table 1's 10.
+    guess = OraclePredictor(cold).predict_solution(None)
+    predictor = OraclePredictor(cold, guess=(guess[0], guess[1] * 1.05, guess[2] * 0.97))
+    params = TscvxParameters(eta_ub=3.0, cold_fallback=False)
+    ws = TscvxWarmStart(predictor, params)
+    z = ws.guess(PDGInstance()).trajectory
+    solution = solve_tscvx(PDGInstance(), PDGSolverConfig(), z, ws.tight(PDGInstance()), params)
+    assert solution.status is Status.CONVERGED, solution.message
+    radii = [record.trust_radius for record in solution.history]
+    assert max(radii) <= 3.0 and max(radii) > params.eta_init
+    assert _gap(solution, cold) <= 5e-3

@@ -89,7 +89,9 @@ class TscvxWarmStart:
 
         try:
             x, u, tf = self.predictor.predict_solution(theta_vector(instance))
-            predicted = consistent_guess(instance, x, u, tf, config.n_nodes)
+            predicted = consistent_guess(
+                instance, x, u, tf, config.n_nodes, self.params.thrust_gain
+            )
         except ValueError as err:
             return self._result(fallback(), False, f"prediction unusable: {err}", {}, start)
         details = {"J_prediction": _penalized_cost(instance, config, predicted)}

@@ -488,11 +488,10 @@ def solve(
             message="initial state violates " + ", ".join(violated),
         )
     problem = PDGProblem(instance, config)
-    default = problem.initial_guess()
     if guess is None:
-        return solve_with_restart(problem, default, eta_init)
+        return solve_with_restart(problem, problem.initial_guess(), eta_init)
     if isinstance(guess, Trajectory | list | tuple | np.ndarray | dict):
-        guess = _checked_guess(guess, default)
+        guess = _checked_guess(guess, problem.initial_guess())
         return solve_scvx(problem, guess, config.scvx, eta_init=eta_init)
     from scpformer.problems.pdg6dof.guess import ANALYTIC_GUESSES
     from scpformer.warmstart.base import as_provider
@@ -509,7 +508,7 @@ def solve(
     result = provider.guess(instance)
     if result.trajectory is None:
         raise ValueError(f"guess: the warm start produced no trajectory ({result.record.reason})")
-    checked = _checked_guess(result.trajectory, default)
+    checked = _checked_guess(result.trajectory, problem.initial_guess())
     default_start = isinstance(provider, AnalyticWarmStart) and provider.profile == "cubic_profile"
     if default_start:  # the default cold start, named: the same solve as guess=None
         solution = solve_with_restart(problem, checked, eta_init)
