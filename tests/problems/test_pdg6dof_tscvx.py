@@ -287,3 +287,28 @@ def test_tscvx_trust_radius_stays_below_its_own_bound_and_reaches_the_optimum(co
     radii = [record.trust_radius for record in solution.history]
     assert max(radii) <= 3.0 and max(radii) > params.eta_init
     assert _gap(solution, cold) <= 5e-3
+
+
+@pytest.mark.slow
+def test_sticky_rows_keep_the_lookahead_predictions_and_every_row_kept_before(cold):
+    # Iteration k predicts the mass row of node k alone; those rows are far from active at
+    # the optimum (the mass is well above m_dry early on), so only the predictions keep them.
+    def tight(k):
+        return np.arange(7 * N) == k
+
+    z = cold.trajectory
+    kept = {}
+    for sticky in (True, False):
+        params = TscvxParameters(lookahead=3, sticky_rows=sticky, margin=0.0)
+        problem = TscvxProblem(PDGInstance(), PDGSolverConfig(), tight, params)
+        evaluation = problem.evaluate(z)
+        kept[sticky] = []
+        for _ in range(2):
+            problem.solve_subproblem(z, evaluation, 2.0, 2.0, "clarabel")
+            kept[sticky].append(problem._keep.copy())
+    first, second = kept[True]
+    assert first[[1, 2, 3]].all() and not first[4]
+    assert (second | ~first).all()
+    first, second = kept[False]
+    assert first[1] and not first[[2, 3]].any()
+    assert second[2] and not second[1]
