@@ -125,9 +125,8 @@ class TscvxParameters:
     2.1 instead of 3.4 set-ups per run. On three slices of 100 rotated seed 26 validation
     draws (samples 0, 4, 8, ...; 1, 5, 9, ...; 3, 7, 11, ...) the mean run went from 113.7,
     125.2 and 112.6 ms to 106.9, 119.5 and 108.0 ms, the medians from 103.6, 115.6 and 104.7
-    to 99.2, 117.3 and 101.6 ms, with 4.9-5.0 conic solves either way. (In session 32, before
-    the mass row shared the thrust cones and before ``thrust_gain`` and ``eta_ub``, it made
-    no difference: 120.8 against 120.2 ms.)
+    to 99.2, 117.3 and 101.6 ms, with 4.9-5.0 conic solves either way. (Before ``thrust_gain``
+    and ``eta_ub`` shortened the runs it made no difference: 120.8 against 120.2 ms.)
     ``margin``: a row left out of the prediction is still kept when the current iterate has
     ``g / scale >= -margin`` (scales of :func:`row_scales`: 30% of the constraint's range by
     default), so that a step of the trust region's size rarely crosses a left-out row (with
