@@ -458,9 +458,7 @@ def solve_tscvx(
         eta_ub=params.eta_ub,
         eta_lb=min(config.scvx.eta_lb, params.eta_init),
     )
-    solution = solve_scvx(
-        problem, guess, scvx, eta_init=params.eta_init, radius_update=problem.update_radius
-    )
+    solution = solve_scvx(problem, guess, scvx, radius_update=problem.update_radius)
     log = problem.log
     if not solution.converged and params.cold_fallback:
         log.fallback = "cold"
