@@ -72,7 +72,7 @@ def main() -> int:
             for name, (keep, box, virtual) in row_sets(problem, z, config.n_nodes).items():
                 sol = reduced.solve(keep, config.scvx.lambda_, box, virtual)
                 assert sol.status == "optimal", (name, sol.status)
-                times.setdefault(name, []).append(sol.solve_time)
+                times.setdefault(name, []).append(sol.solver_time)
                 s = reduced.last_size
                 sizes.setdefault(name, []).append(
                     (s.flags_kept, s.rows, s.cones, s.columns, s.iterations)

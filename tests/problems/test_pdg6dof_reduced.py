@@ -121,7 +121,7 @@ def test_reduced_solve_with_every_row_equals_the_full_subproblem(linearized):
     np.testing.assert_allclose(sol.x, full.trajectory.x, atol=1e-6)
     np.testing.assert_allclose(sol.u, full.trajectory.u, atol=1e-6)
     assert sol.sigma == pytest.approx(full.trajectory.p[0], abs=1e-6)
-    assert sol.linear_cost == pytest.approx(full.linear_cost, abs=1e-6)
+    assert sol.cost == pytest.approx(full.linear_cost, abs=1e-6)
     assert reduced.last_size.rows == reduced.layout.n_rows
 
 
@@ -174,7 +174,7 @@ def test_without_nu_the_solve_matches_the_one_with_nu_on_half_the_columns(at_opt
     assert np.abs(with_nu.nu).sum() < 1e-6  # nu = 0 is the optimum: the two must agree
     np.testing.assert_allclose(without.x, with_nu.x, atol=1e-4)
     np.testing.assert_allclose(without.u, with_nu.u, atol=1e-4)
-    assert without.linear_cost == pytest.approx(with_nu.linear_cost, abs=1e-6)
+    assert without.cost == pytest.approx(with_nu.cost, abs=1e-6)
     assert not without.nu.any()
     n_nu = 14 * (N - 1)
     assert small.columns == full_size.columns - 2 * n_nu  # nu and its |nu| epigraph

@@ -16,6 +16,7 @@ This module holds what they share:
   equilibration; measured 74 -> 69 ms per 6-DoF subproblem);
   :func:`start_cold` makes the next call build a fresh one, so that every SCP run (every
   instance) starts from the same solver state and gives the same bytes in any process;
+* :class:`SubproblemSolution` -- what one subproblem solve returns, the same for every family;
 * :class:`ConicDataMap` -- the parameter map of a compiled problem as plain arrays (one
   sparse matrix-vector product per matrix), for callers that hand the conic data to the
   solver themselves (the reduced 6-DoF subproblems of T-SCvx);
@@ -27,6 +28,7 @@ This module holds what they share:
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Mapping
@@ -80,6 +82,32 @@ class ConicCall:
     def solved(self) -> bool:
         """Optimal or optimal-inaccurate (the caller flags the latter through ``status``)."""
         return self.status in SOLVED
+
+
+@dataclass(frozen=True, kw_only=True)
+class SubproblemSolution:
+    """What one solve of a family's convex subproblem returns, in the family's units.
+
+    ``status`` is cvxpy's status string; the arrays are ``None`` when the solve failed (then
+    ``cost`` and ``sigma`` are NaN and ``message`` says why). The 6-DoF subproblem fills
+    ``sigma``, ``nu`` and ``buffers``; the rendezvous subproblems leave them unset.
+    """
+
+    status: str
+    x: np.ndarray | None  # states at the nodes (6-DoF: (N, 14); rendezvous: (N+1, 6) [m])
+    u: np.ndarray | None  # (N, 3) controls (6-DoF: thrust; rendezvous: impulses, RTN [m/s])
+    cost: float  # objective: 6-DoF the linearized cost L^k (Eq. 13); rendezvous sum_k |u_k|_2
+    solver_time: float  # s inside the conic solver call (data in, raw solution out)
+    wall_time: float  # s from the parameter values to the unpacked solution
+    sigma: float = math.nan  # 6-DoF: time dilation (final time)
+    nu: np.ndarray | None = None  # 6-DoF: (N-1, 14) virtual control
+    buffers: np.ndarray | None = None  # 6-DoF: (N,) virtual buffers of the thrust lower bound
+    message: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """A usable solution: optimal, or optimal_inaccurate (flagged by ``status``)."""
+        return self.status in SOLVED and self.x is not None
 
 
 VariableSlices = Mapping[str, tuple[int, tuple[int, ...]]]  # name -> (offset, shape)

@@ -331,15 +331,15 @@ def penalty(defects: np.ndarray, values: np.ndarray) -> float:
 def candidate(sol: SubproblemSolution) -> Candidate:
     """The SCvx candidate of a subproblem solution (failed solves keep their status)."""
     if sol.status not in SOLVED or sol.x is None:
-        return Candidate(None, np.nan, np.nan, np.nan, sol.status, sol.solve_time, False)
+        return Candidate(None, np.nan, np.nan, np.nan, sol.status, sol.solver_time, False)
     virtual_max = max(float(np.abs(sol.nu).max()), float(sol.buffers.max()))
     return Candidate(
         trajectory=Trajectory(x=sol.x, u=sol.u, p=np.array([sol.sigma])),
-        linear_cost=sol.linear_cost,
+        linear_cost=sol.cost,
         virtual_norm=float(np.abs(sol.nu).sum() + sol.buffers.sum()),
         virtual_max=virtual_max,
         status=sol.status,
-        solver_time=sol.solve_time,
+        solver_time=sol.solver_time,
         ok=True,
     )
 

@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import cvxpy as cp
@@ -62,6 +61,7 @@ import numpy as np
 from scpformer.cache import cached_pickle
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.scp.conic import (
+    SubproblemSolution,
     VariableSlices,
     assign,
     batched_matvec,
@@ -71,23 +71,6 @@ from scpformer.scp.conic import (
     variable_slices,
 )
 from scpformer.scp.discretization import FOHDiscretization
-
-
-@dataclass(frozen=True)
-class SubproblemSolution:
-    """What one conic solve returns; ``status`` is cvxpy's status string."""
-
-    status: str
-    x: np.ndarray | None  # (N, 14)
-    u: np.ndarray | None  # (N, 3)
-    sigma: float
-    nu: np.ndarray | None  # (N-1, 14) virtual control
-    buffers: np.ndarray | None  # (N,) virtual buffers of the thrust lower bound
-    linear_cost: float  # L^k of Eq. 13
-    solve_time: float  # seconds inside the conic solver call
-    wall_time: float  # seconds from the parameter values to the unpacked solution
-    message: str = ""
-
 
 STATE_GROUPS: tuple[tuple[str, int, int], ...] = (
     ("r", 0, 3),
@@ -445,8 +428,8 @@ class PDGSubproblem:
             sigma=float(sigma),
             nu=np.array(nu, dtype=float),
             buffers=np.array(buffers, dtype=float),
-            linear_cost=float(linear_cost),
-            solve_time=solve_time,
+            cost=float(linear_cost),
+            solver_time=solve_time,
             wall_time=wall_time,
         )
 
@@ -499,8 +482,8 @@ def failed_solution(status: str, wall: float, solve_time: float) -> SubproblemSo
         sigma=math.nan,
         nu=None,
         buffers=None,
-        linear_cost=math.nan,
-        solve_time=solve_time,
+        cost=math.nan,
+        solver_time=solve_time,
         wall_time=wall,
         message=status,
     )

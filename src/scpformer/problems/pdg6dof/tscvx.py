@@ -50,7 +50,7 @@ from scpformer.problems.pdg6dof.problem import (
     candidate,
 )
 from scpformer.problems.pdg6dof.reduced import ReducedSubproblem, cached_layout
-from scpformer.problems.pdg6dof.subproblem import SubproblemSolution
+from scpformer.scp.conic import SubproblemSolution
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Trajectory
 from scpformer.validation import check_int, check_positive
@@ -398,7 +398,7 @@ class TscvxProblem(PDGProblem):
         solver_time, repairs = 0.0, 0
         while True:
             sol = self.reduced.solve(self._keep, lambda_, keep_box, keep_virtual)
-            solver_time += sol.solve_time
+            solver_time += sol.solver_time
             if not keep_virtual and sol.x is None:  # needs nu (or failed): solve with it
                 keep_virtual, keep_box = True, not (self.params.drop_box and weight > 0.0)
                 self.log.virtual_retries += 1

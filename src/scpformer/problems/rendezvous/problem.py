@@ -622,7 +622,7 @@ def _finish(
     if sol is not None and sol.ok and verify:
         t0 = time.perf_counter()
         verification = verify_solution(
-            setup.instance, setup.model, sol.x, sol.dv, kind, setup.config.verification
+            setup.instance, setup.model, sol.x, sol.u, kind, setup.config.verification
         )
         t_ver = time.perf_counter() - t0
         status, message = verified_status(status, message, verification)
@@ -635,7 +635,7 @@ def _finish(
     )
     return Solution(
         status=status,
-        trajectory=Trajectory(x=sol.x, u=sol.dv, p=np.zeros(0)) if ok else None,
+        trajectory=Trajectory(x=sol.x, u=sol.u, p=np.zeros(0)) if ok else None,
         t=setup.model.t,
         cost=sol.cost if ok else math.nan,
         iterations=len(history),

@@ -28,14 +28,13 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
 
 import cvxpy as cp
 import numpy as np
 
 from scpformer.cache import cached_pickle
 from scpformer.scp.conic import (
-    SOLVED,
+    SubproblemSolution,
     assign,
     batched_matvec,
     canonicalize,
@@ -46,24 +45,6 @@ from scpformer.scp.conic import (
 KINDS = ("tpbvp", "convex", "scp")
 INACCURATE = cp.OPTIMAL_INACCURATE
 U_SCALE = 1e3  # decision variable U = U_SCALE * dv (mm/s)
-
-
-@dataclass(frozen=True)
-class SubproblemSolution:
-    """What one conic solve returns; ``status`` is cvxpy's status string."""
-
-    status: str
-    x: np.ndarray | None  # (N+1, 6) scaled mean ROE [m]
-    dv: np.ndarray | None  # (N, 3) impulses, RTN [m/s]
-    cost: float  # sum_k |dv_k|_2 [m/s]
-    solver_time: float  # s inside the conic solver call (data in, raw solution out)
-    wall_time: float  # s from the parameter values to the unpacked solution
-    message: str = ""
-
-    @property
-    def ok(self) -> bool:
-        """A usable solution: optimal, or optimal_inaccurate (flagged by ``status``)."""
-        return self.status in SOLVED and self.x is not None
 
 
 class RendezvousSubproblem:
@@ -157,7 +138,7 @@ class RendezvousSubproblem:
         return SubproblemSolution(
             status=call.status,
             x=self.X.value.copy(),
-            dv=dv,
+            u=dv,
             cost=float(np.linalg.norm(dv, axis=1).sum()),
             solver_time=call.solver_time,
             wall_time=call.wall_time,
@@ -168,7 +149,7 @@ def _failed(status: str, wall: float, solver_time: float) -> SubproblemSolution:
     return SubproblemSolution(
         status=status,
         x=None,
-        dv=None,
+        u=None,
         cost=math.nan,
         solver_time=solver_time,
         wall_time=wall,

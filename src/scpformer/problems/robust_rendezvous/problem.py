@@ -131,7 +131,7 @@ def solve_tpbvp(instance: RobustInstance, config: RobustSolverConfig | None = No
         if not sol.ok or config.dynamics == "stm" or solves >= TPBVP_MAX_SOLVES:
             break
         x = sol.x + c
-        lin = linearize_dynamics(instance, model, x, sol.dv, config.dynamics)
+        lin = linearize_dynamics(instance, model, x, sol.u, config.dynamics)
         if solves > 1 and float(np.abs(lin.defect).max()) < TPBVP_DEFECT_M:
             break
         Phi, Gamma = lin.Phi, lin.Gamma
@@ -139,7 +139,7 @@ def solve_tpbvp(instance: RobustInstance, config: RobustSolverConfig | None = No
             c[k + 1] = Phi[k] @ c[k] + lin.f[k]
     if sol.ok:
         x = sol.x + c
-        status, traj = Status.CONVERGED, Trajectory(x=x, u=sol.dv, p=np.zeros(0))
+        status, traj = Status.CONVERGED, Trajectory(x=x, u=sol.u, p=np.zeros(0))
     else:
         infeasible = sol.status.startswith("infeasible")
         status = Status.INFEASIBLE_INSTANCE if infeasible else Status.SOLVER_FAILED
