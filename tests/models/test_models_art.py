@@ -8,6 +8,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from scpformer.models.art import ART, ART_PRESETS, TRAIN_DEFAULTS, ArtConfig  # noqa: E402
+from scpformer.models.capabilities import unavailable_reason  # noqa: E402
 
 TINY = ArtConfig(n_layer=2, n_head=2, n_embd=16, context=12, dropout=0.0)
 
@@ -252,7 +253,19 @@ def teacher_forced_actions(model, batch, **weights):
     return torch.stack(actions, 1)
 
 
-@pytest.mark.parametrize(("weights", "tolerance"), [("bf16", 2e-2), ("int8", 6e-2)])
+def needs(weights):
+    """Skip where this CPU cannot run ``weights`` kernels (saying why)."""
+    reason = unavailable_reason(weights)
+    return pytest.mark.skipif(reason is not None, reason=f"{weights} kernels: {reason}")
+
+
+@pytest.mark.parametrize(
+    ("weights", "tolerance"),
+    [
+        pytest.param("bf16", 2e-2, marks=needs("bf16")),
+        pytest.param("int8", 6e-2, marks=needs("int8")),
+    ],
+)
 def test_low_precision_generation_agrees_with_the_full_forward_to_its_accuracy(weights, tolerance):
     model = tiny_model()
     batch = random_batch(3, 8)
@@ -262,6 +275,7 @@ def test_low_precision_generation_agrees_with_the_full_forward_to_its_accuracy(w
     assert 0 < error < tolerance
 
 
+@needs("int8")
 def test_int8_generation_follows_weight_updates():
     model = tiny_model()
     batch = random_batch(2, 4)
@@ -273,6 +287,14 @@ def test_int8_generation_follows_weight_updates():
     after = teacher_forced_actions(model, batch, int8=True)
     full = model(batch)[0]["action"]
     assert (after - full).norm() / full.norm() < 6e-2 < (after - before).norm() / full.norm()
+
+
+@pytest.mark.parametrize("weights", ["bf16", "int8"])
+def test_low_precision_generation_where_the_cpu_lacks_it_is_a_clear_error(monkeypatch, weights):
+    monkeypatch.setenv(f"SCPFORMER_DISABLE_{weights.upper()}", "1")
+    with pytest.raises(ValueError, match=f"^{weights} generation is not available on this mach"):
+        tiny_model().start(1, **{weights: True})
+    tiny_model().start(1)  # float32 still runs
 
 
 def test_bf16_and_int8_together_are_an_error():

@@ -15,6 +15,10 @@ next state, and R and C are updated (Eq. 20 and the keep-out check of Eq. 21). S
   quantized activations (``model.start(..., int8=True)``);
 * ``no cache``: the full teacher-forcing forward over the whole prefix at every step.
 
+bf16 and int8 kernels do not run on every x86-64 CPU (:mod:`scpformer.models.capabilities`):
+where they don't, ``--bf16`` / ``--int8`` print one line saying so, their rows are left out,
+and the other modes are timed as usual (exit status 0).
+
 Beside the times: ``vs no cache``, the speed-up over ``no cache`` at the same batch, and
 ``vs cached``, the relative error of a mode's controls against the float32 ``cached`` run
 (float rounding for ``no cache`` and ``2 calls``; the approximation for bf16 and int8).
@@ -71,10 +75,14 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "--skip-uncached", action="store_true", help="skip the (slow) run without the cache"
     )
     parser.add_argument(
-        "--bf16", action="store_true", help="also time generation with bfloat16 weights"
+        "--bf16",
+        action="store_true",
+        help="also time generation with bfloat16 weights (where this CPU runs them)",
     )
     parser.add_argument(
-        "--int8", action="store_true", help="also time generation with int8 weights"
+        "--int8",
+        action="store_true",
+        help="also time generation with int8 weights (where this CPU runs them)",
     )
     parser.set_defaults(handler=run_bench)
 
@@ -423,6 +431,16 @@ def report(setup: dict[str, Any], timings: list[Timing], threads: int) -> list[s
     return lines
 
 
+def low_precision_note(flag: str) -> str | None:
+    """None when ``--bf16`` / ``--int8`` kernels run here, else the one line saying they don't."""
+    from scpformer.models.capabilities import unavailable_reason
+
+    reason = unavailable_reason(flag)
+    if reason is None:
+        return None
+    return f"--{flag}: {flag} generation is not available on this machine ({reason}); rows skipped"
+
+
 def run_bench(args: argparse.Namespace) -> int:
     check_args(args)
     import torch
@@ -434,9 +452,12 @@ def run_bench(args: argparse.Namespace) -> int:
         plan.append(("no cache", 1))
     plan.append(("cached", args.batch))
     for flag, mode in (("int8", "cached, int8"), ("bf16", "cached, bf16")):
-        if getattr(args, flag):
+        note = low_precision_note(flag) if getattr(args, flag) else "not asked"
+        if note is None:
             plan[1:1] = [(mode, 1)]
             plan.append((mode, args.batch))
+        elif note != "not asked":
+            print(note, flush=True)
     plan = list(dict.fromkeys(plan))  # --batch 1: each (mode, batch) once
     timings = time_plan(setup, plan, args.repeats, progress=True)
     print("\n".join(report(setup, timings, args.threads)))

@@ -38,6 +38,7 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional
 
+from scpformer.models.capabilities import require_low_precision
 from scpformer.models.sequence import (
     ACTIVATIONS,
     StepCache,
@@ -251,10 +252,11 @@ class ART(TokenSequenceModel):
         d = cfg.n_embd // cfg.n_head
         cpu = param.device.type == "cpu"
         onednn = cpu and onednn_available()
-        if weights == "bfloat16" and not onednn:
-            raise ValueError("bf16 generation needs oneDNN on the CPU (torch.backends.mkldnn)")
-        if weights == "int8" and not (cpu and int8_available()):
-            raise ValueError("int8 generation needs the x86 quantized engine on the CPU")
+        low = {"bfloat16": "bf16", "int8": "int8"}.get(weights)
+        if low is not None and not cpu:
+            raise ValueError(f"{low} generation runs on the CPU only, not on {param.device}")
+        if low is not None:  # the kernels of this CPU, tried once (models.capabilities)
+            require_low_precision(low)
         if weights == "float32" and not (onednn and (cfg.n_embd >= 256 or batch_size >= 8)):
             weights = "plain"
         packed = [self._weights(b, batch_size, weights) for b in self.blocks]
@@ -393,7 +395,12 @@ _DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 
 
 def _pack(weight: Tensor, bias: Tensor | None, weights: str, batch_size: int) -> Tensor:
-    """``weight`` (out, in) in the layout of ``weights`` (see :meth:`ART._weights`)."""
+    """``weight`` (out, in) in the layout of ``weights`` (see :meth:`ART._weights`).
+
+    The bfloat16 and int8 layouts need CPU kernels that not every x86-64 CPU has: callers
+    check :func:`scpformer.models.capabilities.require_low_precision` first (``start`` does),
+    which tries this function once on a tiny layer.
+    """
     if weights == "plain":
         return weight.t().contiguous()  # (in, out)
     if weights != "int8":
@@ -406,12 +413,6 @@ def _pack(weight: Tensor, bias: Tensor | None, weights: str, batch_size: int) ->
         return torch.ops.quantized.linear_prepack(
             quantized, None if bias is None else bias.detach()
         )
-
-
-def int8_available() -> bool:
-    """Whether PyTorch has the x86 (fbgemm) engine for int8 dynamic quantized products."""
-    engines = torch.backends.quantized.supported_engines
-    return "x86" in engines or "fbgemm" in engines
 
 
 def quantized_linear(x: Tensor, pack: Tensor, bias: None) -> Tensor:

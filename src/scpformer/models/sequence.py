@@ -359,7 +359,9 @@ class TokenSequenceModel(nn.Module):
         closed loop the errors grow (trained small preset, 20 sampled rendezvous: controls
         off by 1.1e-2 median / 3.6e-2 max with bf16, 5.6e-2 / 0.62 with int8, whose
         trajectory cost changed by up to 28 %); ``scpformer bench art --bf16 --int8``
-        prints the error beside the time.
+        prints the error beside the time. Not every x86-64 CPU runs these kernels: where this
+        one does not, both raise ``LowPrecisionUnavailableError`` (a ``ValueError``; see
+        :mod:`scpformer.models.capabilities`).
         """
         context = self.codec.context
         max_steps = context if max_steps is None else max_steps
