@@ -1,11 +1,18 @@
 import json
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from scpformer.cli.main import main
 from scpformer.experiments.report import Comparison, Report
-from scpformer.experiments.summary import ResultsError, collect, write_summary
+from scpformer.experiments.summary import (
+    ResultsError,
+    collect,
+    render,
+    stale_commits,
+    write_summary,
+)
 
 
 def fake_experiment(results, name, reproduces, rows, command="scpformer experiment run x"):
@@ -56,8 +63,13 @@ def test_scpformer_report_tabulates_every_experiment_with_its_commands(tmp_path,
     text = out.read_text()
     a, b = text.index("## ART paper Table 9 (`exp-a`)"), text.index("## robust ART paper Fig. 11")
     assert a < b  # sorted by folder name
-    assert "| cost [m/s] | 0.25 | 0.27 | n = 5 |" in text[a:b]
-    assert "| rate [%] | 10 | 12 |  |\n| time [s] | ~2 | 0.1 | mean |" in text[b:]
+    # not in the registry, so no declared sources: staleness unknown, shown as stale
+    assert "| cost [m/s] | 0.25 | 0.27 | reproduced (stale) | n = 5 |" in text[a:b]
+    assert (
+        "| rate [%] | 10 | 12 | reproduced (stale) |  |\n"
+        "| time [s] | ~2 | 0.1 | not reproduced (stale) | mean |"
+    ) in text[b:]
+    assert "(`exp-b`) | partly (stale) |" in text[:a]  # the overview's status column
     assert "scpformer generate rendezvous --n 10 --out /data/exp-a\n" in text[a:b]
     assert "scpformer experiment run exp-a --n 5\n```" in text[a:b]
     assert "[../results/exp-b/report.md](../results/exp-b/report.md)" in text[b:]
@@ -121,12 +133,56 @@ def test_a_missing_results_folder_is_an_error_naming_it(tmp_path):
         collect(tmp_path / "nowhere")
 
 
-def test_every_committed_result_folder_has_readable_results_json():
+def test_every_committed_result_folder_has_readable_results_json_with_its_provenance():
     folder = Path(__file__).resolve().parents[2] / "docs" / "results"
     results = collect(folder)
     assert {r.experiment for r in results} >= {"art-warmstart", "art-forecast-scp"}
     for result in results:
         assert result.rows and result.command.startswith("scpformer experiment run")
+        run = result.run
+        assert set(run) >= {"version", "commit", "dirty", "date", "machine", "commands"}
+        assert set(run["machine"]) >= {"cpu", "cores", "threads"}
+        assert run["commands"][-1].startswith("scpformer experiment run"), result.folder
+
+
+def git(repo, *args):
+    return subprocess.run(
+        ["git", "-C", str(repo), *args], capture_output=True, text=True, check=True
+    ).stdout.strip()
+
+
+def test_a_result_is_stale_when_a_later_commit_changes_a_declared_source(tmp_path):
+    repo = tmp_path / "repo"
+    (repo / "src").mkdir(parents=True)
+    git(repo, "init", "-q")
+    git(repo, "config", "user.email", "t@example.com")
+    git(repo, "config", "user.name", "t")
+    (repo / "src" / "algo.py").write_text("x = 1\n")
+    (repo / "other.py").write_text("y = 1\n")
+    git(repo, "add", ".")
+    git(repo, "commit", "-q", "-m", "first")
+    measured = git(repo, "rev-parse", "HEAD")
+    (repo / "other.py").write_text("y = 2\n")
+    git(repo, "commit", "-q", "-am", "unrelated")
+    assert stale_commits(measured, ["src/algo.py"], repo) == []
+    (repo / "src" / "algo.py").write_text("x = 2\n")
+    git(repo, "commit", "-q", "-am", "the algorithm")
+    later = stale_commits(measured, ["src"], repo)
+    assert later == [git(repo, "rev-parse", "HEAD")]
+    assert stale_commits("unknown", ["src"], repo) is None
+    assert stale_commits(measured, ["src"], tmp_path / "not-a-repo") is None
+
+
+def test_a_stale_result_says_stale_in_the_overview_heading_and_every_row(tmp_path):
+    fake_experiment(tmp_path, "exp-a", "Table 1", [("q", "1", "1.1", ""), ("r", "yes", "no", "")])
+    results = collect(tmp_path)
+    text = render(results, tmp_path / "R.md", stale={"exp-a": "stale: 2 later commit(s)"})
+    assert "## Table 1 (`exp-a`) - STALE" in text
+    assert "| q | 1 | 1.1 | reproduced (stale) |" in text
+    assert "| r | yes | no | not reproduced (stale) |" in text
+    assert "| partly (stale) |" in text and "stale: 2 later commit(s)" in text
+    current = render(results, tmp_path / "R.md", stale={"exp-a": ""})
+    assert "stale" not in current.split("## Table 1")[1].lower()
 
 
 def test_a_results_folder_without_experiments_leaves_the_page_as_it_is(tmp_path, capsys):

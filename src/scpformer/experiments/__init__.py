@@ -27,6 +27,12 @@ class Experiment:
     module: str  # module defining run(options, *, command) -> Path of report.md
     default_n: int  # test instances at the default size (about 20 min on two cores)
     models: str  # what --model takes
+    # Source paths (files, folders or git pathspecs, relative to the repository) whose code
+    # decides the experiment's numbers. A committed result is stale when a commit after the
+    # one it was measured at changed any of them: `git log --format=%H <commit>..HEAD --
+    # <depends_on>` is non-empty (scpformer.experiments.summary.stale_commits). Report and
+    # summary formatting are left out: they change no number.
+    depends_on: tuple[str, ...] = ()
 
     def runner(self) -> Callable[..., Path]:
         """The experiment's ``run`` function."""
@@ -46,6 +52,18 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.forecast_study",
             default_n=200,
             models="ART, GRU and LSTM runs trained on Problem 1 twins",
+            depends_on=(
+                "src/scpformer/experiments/forecast_study.py",
+                "src/scpformer/experiments/forecast.py",
+                "src/scpformer/problems/rendezvous",
+                "src/scpformer/dynamics",
+                "src/scpformer/data/rendezvous_family.py",
+                "src/scpformer/models/art.py",
+                "src/scpformer/models/sequence.py",
+                "src/scpformer/models/normalization.py",
+                "src/scpformer/warmstart/art.py",
+                "src/scpformer/models/rnn.py",
+            ),
         ),
         Experiment(
             name="art-forecast-scp",
@@ -54,6 +72,18 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.forecast_study",
             default_n=200,
             models="ART, GRU and LSTM runs (any order; kinds read from the checkpoints)",
+            depends_on=(
+                "src/scpformer/experiments/forecast_study.py",
+                "src/scpformer/experiments/forecast.py",
+                "src/scpformer/problems/rendezvous",
+                "src/scpformer/dynamics",
+                "src/scpformer/data/rendezvous_family.py",
+                "src/scpformer/models/art.py",
+                "src/scpformer/models/sequence.py",
+                "src/scpformer/models/normalization.py",
+                "src/scpformer/warmstart/art.py",
+                "src/scpformer/models/rnn.py",
+            ),
         ),
         Experiment(
             name="robust-forecast",
@@ -62,6 +92,19 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.forecast_study",
             default_n=120,
             models="ART (and GRU/LSTM) runs trained on a robust-rendezvous dataset",
+            depends_on=(
+                "src/scpformer/experiments/forecast_study.py",
+                "src/scpformer/experiments/forecast.py",
+                "src/scpformer/problems/robust_rendezvous",
+                "src/scpformer/problems/rendezvous",
+                "src/scpformer/dynamics",
+                "src/scpformer/data/robust_rendezvous_family.py",
+                "src/scpformer/scp",
+                "src/scpformer/models/art.py",
+                "src/scpformer/models/sequence.py",
+                "src/scpformer/models/normalization.py",
+                "src/scpformer/warmstart/art.py",
+            ),
         ),
         Experiment(
             name="art-conditioning",
@@ -70,6 +113,16 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.conditioning",
             default_n=40,
             models="one ART run",
+            depends_on=(
+                "src/scpformer/experiments/conditioning.py",
+                "src/scpformer/problems/rendezvous",
+                "src/scpformer/dynamics",
+                "src/scpformer/data/rendezvous_family.py",
+                "src/scpformer/models/art.py",
+                "src/scpformer/models/sequence.py",
+                "src/scpformer/models/normalization.py",
+                "src/scpformer/warmstart/art.py",
+            ),
         ),
         Experiment(
             name="art-warmstart",
@@ -78,6 +131,17 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.warmstart_study",
             default_n=300,
             models="one ART run",
+            depends_on=(
+                "src/scpformer/experiments/warmstart_study.py",
+                "src/scpformer/problems/rendezvous",
+                "src/scpformer/dynamics",
+                "src/scpformer/data/rendezvous_family.py",
+                "src/scpformer/scp",
+                "src/scpformer/warmstart",
+                "src/scpformer/models/art.py",
+                "src/scpformer/models/sequence.py",
+                "src/scpformer/models/normalization.py",
+            ),
         ),
         Experiment(
             name="robust-warmstart",
@@ -86,6 +150,18 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.robust_studies",
             default_n=60,
             models="ART runs trained on RTN and on ROE states",
+            depends_on=(
+                "src/scpformer/experiments/robust_studies.py",
+                "src/scpformer/problems/robust_rendezvous",
+                "src/scpformer/problems/rendezvous",
+                "src/scpformer/dynamics",
+                "src/scpformer/data/robust_rendezvous_family.py",
+                "src/scpformer/scp",
+                "src/scpformer/warmstart",
+                "src/scpformer/models/art.py",
+                "src/scpformer/models/sequence.py",
+                "src/scpformer/models/normalization.py",
+            ),
         ),
         Experiment(
             name="robust-trajectory",
@@ -94,6 +170,18 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.robust_studies",
             default_n=30,
             models="ART runs trained on RTN and/or ROE states (one per frame)",
+            depends_on=(
+                "src/scpformer/experiments/robust_studies.py",
+                "src/scpformer/problems/robust_rendezvous",
+                "src/scpformer/problems/rendezvous",
+                "src/scpformer/dynamics",
+                "src/scpformer/data/robust_rendezvous_family.py",
+                "src/scpformer/scp",
+                "src/scpformer/warmstart",
+                "src/scpformer/models/art.py",
+                "src/scpformer/models/sequence.py",
+                "src/scpformer/models/normalization.py",
+            ),
         ),
         Experiment(
             name="robust-posthoc",
@@ -102,6 +190,19 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.robust_studies",
             default_n=60,
             models="ART runs trained on RTN and/or ROE states (one per frame)",
+            depends_on=(
+                "src/scpformer/experiments/robust_studies.py",
+                "src/scpformer/experiments/robust_posthoc.py",
+                "src/scpformer/problems/robust_rendezvous",
+                "src/scpformer/problems/rendezvous",
+                "src/scpformer/dynamics",
+                "src/scpformer/data/robust_rendezvous_family.py",
+                "src/scpformer/scp",
+                "src/scpformer/warmstart",
+                "src/scpformer/models/art.py",
+                "src/scpformer/models/sequence.py",
+                "src/scpformer/models/normalization.py",
+            ),
         ),
         Experiment(
             name="tscvx-training",
@@ -110,6 +211,16 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.tscvx_studies",
             default_n=1,
             models="one T-SCvx run (scpformer train tscvx)",
+            depends_on=(
+                "src/scpformer/experiments/tscvx*",
+                "src/scpformer/experiments/prediction_metrics.py",
+                "src/scpformer/models/tscvx.py",
+                "src/scpformer/train",
+                "src/scpformer/data/tscvx_arrays.py",
+                "src/scpformer/data/pdg6dof_family.py",
+                "src/scpformer/data/augment.py",
+                "src/scpformer/problems/pdg6dof",
+            ),
         ),
         Experiment(
             name="tscvx-solve-time",
@@ -118,6 +229,16 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.tscvx_studies",
             default_n=100,
             models="one T-SCvx run",
+            depends_on=(
+                "src/scpformer/experiments/tscvx*",
+                "src/scpformer/problems/pdg6dof",
+                "src/scpformer/scp",
+                "src/scpformer/warmstart/tscvx.py",
+                "src/scpformer/models/tscvx.py",
+                "src/scpformer/data/pdg6dof_family.py",
+                "src/scpformer/data/tscvx_arrays.py",
+                "src/scpformer/pretrained/tscvx",
+            ),
         ),
         Experiment(
             name="tscvx-trajectory",
@@ -126,6 +247,16 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.tscvx_studies",
             default_n=1,
             models="one T-SCvx run",
+            depends_on=(
+                "src/scpformer/experiments/tscvx*",
+                "src/scpformer/problems/pdg6dof",
+                "src/scpformer/scp",
+                "src/scpformer/warmstart/tscvx.py",
+                "src/scpformer/models/tscvx.py",
+                "src/scpformer/data/pdg6dof_family.py",
+                "src/scpformer/data/tscvx_arrays.py",
+                "src/scpformer/pretrained/tscvx",
+            ),
         ),
         Experiment(
             name="tscvx-lookup",
@@ -134,6 +265,17 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.tscvx_studies",
             default_n=60,
             models="a T-SCvx run, a kdtree run and an interp run",
+            depends_on=(
+                "src/scpformer/experiments/tscvx*",
+                "src/scpformer/problems/pdg6dof",
+                "src/scpformer/scp",
+                "src/scpformer/warmstart/tscvx.py",
+                "src/scpformer/models/tscvx.py",
+                "src/scpformer/data/pdg6dof_family.py",
+                "src/scpformer/data/tscvx_arrays.py",
+                "src/scpformer/experiments/prediction_metrics.py",
+                "src/scpformer/models/lookup.py",
+            ),
         ),
     )
 }

@@ -3,20 +3,41 @@
 Each experiment folder ``RESULTS_DIR/NAME/`` holds ``report.md`` and ``results.json``
 (written together by :meth:`scpformer.experiments.report.Report.write`). This module reads
 the ``results.json`` of every folder that has a ``report.md`` and writes one Markdown page:
-per paper table or figure, the paper's number, ours, and the commands that reproduce ours
-(dataset, models, experiment), with a link to the full report. Registry experiments without
-a folder are listed as not run yet.
+an overview (status, where and when each result was measured, whether it is stale), then per
+paper table or figure the paper's number, ours, the status of each row, and the commands that
+reproduce ours (dataset, models, experiment), with a link to the full report. Registry
+experiments without a folder are listed as not run yet.
+
+Status: :func:`scpformer.experiments.report.row_status` (the rule is in that module's
+docstring), or the status an experiment recorded for a row.
+
+Stale: a result records the commit it was measured at (``results.json`` ``"run"``
+``"commit"``). It is **stale** when a later commit changed a source path its registry entry
+declares (:attr:`scpformer.experiments.Experiment.depends_on`), i.e. when ``git log
+--format=%H COMMIT..HEAD -- PATHS`` is non-empty in the checkout the package runs from. Any change counts, a comment as much as an algorithm: a stale result may still be
+right, but it was not measured with the code of today. Uncommitted changes do not count.
+When the commit is unknown or git cannot answer, the page says so ("stale: unknown").
 """
 
 from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass
+import subprocess
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from scpformer.experiments.report import REPORT_NAME, RESULTS_JSON_NAME, markdown_table
+from scpformer.experiments.report import (
+    REPORT_NAME,
+    RESULTS_JSON_NAME,
+    UNKNOWN,
+    experiment_status,
+    markdown_table,
+    repository_root,
+    row_status,
+)
 
 ROW_KEYS = ("paper_item", "metric", "paper", "ours", "command")  # required in every row
 TITLE = "Results: the papers' numbers beside ours"
@@ -35,7 +56,12 @@ class ExperimentResults:
     reproduces: str  # the paper table or figure
     command: str  # the experiment's command line
     provenance: tuple[str, ...]  # the commands that made its data and models
-    rows: tuple[dict[str, str], ...]  # ROW_KEYS (+ "note")
+    rows: tuple[dict[str, str], ...]  # ROW_KEYS (+ "note", "status")
+    run: dict[str, Any] = field(default_factory=dict)  # version, commit, date, machine, commands
+
+    def statuses(self) -> list[str]:
+        """Each row's status: the one recorded, else :func:`row_status`."""
+        return [r.get("status") or row_status(r["paper"], r["ours"]) for r in self.rows]
 
 
 def read_results(folder: Path) -> ExperimentResults:
@@ -63,6 +89,9 @@ def read_results(folder: Path) -> ExperimentResults:
         if missing:
             raise ResultsError(f"{path}: row {i} lacks {', '.join(missing)}")
     provenance = data.get("provenance", [])
+    run = data.get("run", {})
+    if not isinstance(run, dict):
+        raise ResultsError(f"{path}: 'run' must be an object")
     return ExperimentResults(
         folder=Path(folder),
         experiment=str(data.get("experiment", Path(folder).name)),
@@ -70,6 +99,7 @@ def read_results(folder: Path) -> ExperimentResults:
         command=str(data.get("command", "")),
         provenance=tuple(str(line) for line in provenance),
         rows=tuple({k: str(v) for k, v in row.items()} for row in data["rows"]),
+        run=run,
     )
 
 
@@ -95,31 +125,129 @@ def experiment_folders(results_dir: Path) -> list[Path]:
     return sorted({p.parent for name in names for p in Path(results_dir).glob(f"*/{name}")})
 
 
-def render(results: Sequence[ExperimentResults], out: Path, not_run: Sequence[str] = ()) -> str:
+def stale_commits(commit: str, paths: Sequence[str], repository: Path) -> list[str] | None:
+    """The commits after ``commit`` that changed ``paths`` (newest first), or ``None`` when
+    git cannot tell (no repository, unknown commit, no paths declared)."""
+    if not paths or not commit or commit == UNKNOWN:
+        return None
+    try:
+        log = subprocess.run(
+            ["git", "-C", str(repository), "log", "--format=%H", f"{commit}..HEAD", "--", *paths],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if log.returncode != 0:
+        return None
+    return log.stdout.split()
+
+
+def staleness(results: Sequence[ExperimentResults], repository: Path) -> dict[str, str]:
+    """Per experiment: ``""`` (current), ``"stale: ..."`` or ``"stale: unknown (...)"``."""
+    from scpformer.experiments import EXPERIMENTS
+
+    out = {}
+    for result in results:
+        entry = EXPERIMENTS.get(result.experiment)
+        commit = str(result.run.get("commit", UNKNOWN))
+        later = stale_commits(commit, entry.depends_on if entry else (), repository)
+        if later is None:
+            why = "commit unknown" if commit == UNKNOWN else "no declared sources or no git"
+            out[result.experiment] = f"stale: unknown ({why})"
+        elif later:
+            out[result.experiment] = (
+                f"stale: {len(later)} later commit(s) changed its sources, newest {later[0][:7]}"
+            )
+        else:
+            out[result.experiment] = ""
+    return out
+
+
+def _measured(run: Mapping[str, Any]) -> str:
+    commit = str(run.get("commit", UNKNOWN))
+    date = str(run.get("date", UNKNOWN))[:10]
+    return f"{commit[:7] if commit != UNKNOWN else UNKNOWN}, {date}"
+
+
+def render(
+    results: Sequence[ExperimentResults],
+    out: Path,
+    not_run: Sequence[str] = (),
+    stale: Mapping[str, str] | None = None,
+) -> str:
     """The Markdown page; links are relative to ``out``'s folder.
 
-    ``not_run`` names the paper items (e.g. registry entries) without results yet.
+    ``not_run`` names the paper items (e.g. registry entries) without results yet; ``stale``
+    maps an experiment to its :func:`staleness` text (empty or absent: current).
     """
+    stale = stale or {}
     parts = [
         f"# {TITLE}",
         "",
         "Generated by `scpformer report` from each experiment folder's `results.json`; do",
-        "not edit. Each section is one paper table or figure: the paper's number, ours, and",
-        "the commands that reproduce ours (dataset, models, then the experiment). The full",
-        "reports hold the configuration, detailed tables, figures and where we differ.",
+        "not edit. Each section is one paper table or figure: the paper's number, ours, the",
+        "status of each row, and the commands that reproduce ours (dataset, models, then the",
+        "experiment). The full reports hold the configuration, detailed tables, figures and",
+        "where we differ.",
+        "",
+        "Status: **reproduced**, **partly** or **not reproduced** by the rule in",
+        "`scpformer.experiments.report` (a number within 25% of the paper's, or a bound or",
+        "yes/no met, is reproduced; the same sign within a factor 3 is partly); **not rated**",
+        "where the paper prints no number. A result is **stale** when a commit after the one",
+        "it was measured at changed a source file its experiment declares",
+        "(`Experiment.depends_on`): it was not measured with today's code and needs a rerun",
+        "(`scripts/reproduce_results.sh`).",
         "",
     ]
+    overview = []
+    for result in results:
+        link = os.path.relpath(result.folder / RESULTS_JSON_NAME, Path(out).parent)
+        status = experiment_status(result.statuses())
+        flag = stale.get(result.experiment, "")
+        overview.append(
+            (
+                f"{result.reproduces or result.experiment} (`{result.experiment}`)",
+                status + (" (stale)" if flag else ""),
+                f"[{_measured(result.run)}]({link.replace(os.sep, '/')})",
+                flag or "current",
+            )
+        )
+    if overview:
+        parts += [
+            markdown_table(("result", "status", "measured (commit, date)", "stale"), overview),
+            "",
+        ]
     for result in results:
         link = os.path.relpath(result.folder / REPORT_NAME, Path(out).parent)
         title = result.reproduces or result.experiment
-        rows = [(r["metric"], r["paper"], r["ours"], r.get("note", "")) for r in result.rows]
-        commands = [*result.provenance, result.command or "# (command not recorded)"]
+        flag = stale.get(result.experiment, "")
+        suffix = " (stale)" if flag else ""
+        rows = [
+            (r["metric"], r["paper"], r["ours"], status + suffix, r.get("note", ""))
+            for r, status in zip(result.rows, result.statuses(), strict=True)
+        ]
+        commands = list(result.run.get("commands") or [])
+        if not commands:
+            commands = [*result.provenance, result.command or "# (command not recorded)"]
+        machine = result.run.get("machine", {})
         parts += [
-            f"## {title} (`{result.experiment}`)",
+            f"## {title} (`{result.experiment}`){' - STALE' if flag else ''}",
             "",
             f"Full report: [{link}]({link.replace(os.sep, '/')})",
             "",
-            markdown_table(("quantity", "paper", "ours", "note"), rows)
+        ]
+        if flag:
+            parts += [f"**This result is {flag}.** Rerun it before relying on it.", ""]
+        parts += [
+            f"Measured at commit `{result.run.get('commit', UNKNOWN)}` on "
+            f"{result.run.get('date', UNKNOWN)} (scpformer {result.run.get('version', UNKNOWN)}); "
+            f"machine: {machine.get('cpu', UNKNOWN)}, {machine.get('cores', UNKNOWN)} cores, "
+            f"{machine.get('threads', UNKNOWN)} threads used."
+            + (f" {result.run['note']}" if result.run.get("note") else ""),
+            "",
+            markdown_table(("quantity", "paper", "ours", "status", "note"), rows)
             if rows
             else "No comparison rows (see the full report).",
             "",
@@ -142,7 +270,7 @@ def write_summary(results_dir: Path, out: Path) -> Path:
     :class:`ResultsError`: its page would list every experiment as not run and replace the
     page at ``out``.
     """
-    from scpformer.data.storage import atomic_write_text
+    from scpformer.files import write_text_atomic as atomic_write_text
     from scpformer.experiments import EXPERIMENTS
     from scpformer.files import check_output_file
 
@@ -160,5 +288,6 @@ def write_summary(results_dir: Path, out: Path) -> Path:
         if name not in done
     ]
     out = Path(out)
-    atomic_write_text(out, render(results, out, not_run))
+    stale = staleness(results, repository_root() or Path(results_dir))
+    atomic_write_text(out, render(results, out, not_run, stale))
     return out
