@@ -15,7 +15,6 @@ import contextlib
 import hashlib
 import os
 import pickle
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -23,6 +22,7 @@ from typing import Any, TypeVar
 import cvxpy as cp
 
 from scpformer import __version__
+from scpformer.files import atomic_path
 
 T = TypeVar("T")
 
@@ -99,13 +99,6 @@ def _discard(path: Path) -> None:
 
 def _store(folder: Path, path: Path, key: str, obj: Any) -> None:
     """Write the entry atomically; any file-system failure only costs a later rebuild."""
-    tmp: Path | None = None
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=folder, delete=False, suffix=".tmp") as fh:
-            tmp = Path(fh.name)
-            pickle.dump((_MAGIC, key, obj), fh, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(tmp, path)
-    except OSError:  # a read-only or full disk, a cache folder that is a file
-        if tmp is not None:
-            _discard(tmp)
+    # a read-only or full disk, a cache folder that is a file: nothing stored
+    with contextlib.suppress(OSError), atomic_path(path) as tmp, tmp.open("wb") as fh:
+        pickle.dump((_MAGIC, key, obj), fh, protocol=pickle.HIGHEST_PROTOCOL)

@@ -2,8 +2,8 @@
 
 Outputs are checked before the work that produces them (:func:`check_output_file`,
 :func:`check_output_folder`), so that a solve is not lost to a path that cannot be written,
-and written through a temporary name and a rename, so that a failed write (full disk) leaves
-any earlier file at the path untouched.
+and written through a temporary name and a rename (:func:`atomic_path`, the one way a file is
+written), so that a failed write (full disk) leaves any earlier file at the path untouched.
 """
 
 from __future__ import annotations
@@ -102,13 +102,31 @@ def require_model_path(model: str | Path) -> Path:
     return path
 
 
-def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary name, fsync and a rename.
+@contextmanager
+def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
+    """A temporary name beside ``path`` to write to; renamed over ``path`` when the block ends.
 
-    A symbolic link is written through (its target replaced, the link kept). Raises
-    ``OSError`` (e.g. ``ENOSPC``) with the temporary file removed and any earlier file at
-    ``path`` untouched, and ``FileExistsError`` when ``path`` is there but is not a regular
-    file (a device, pipe or socket would be replaced by the rename).
+    The one way scpformer writes a file: whatever writes it (bytes, text, HDF5, ``torch.save``,
+    ``savefig``, an ONNX exporter) writes the yielded temporary path; on a clean exit the file
+    is fsynced and renamed over ``path``, so a reader never sees a half-written file and an
+    earlier file at ``path`` survives a failed write (full disk, bad value, a check that
+    fails inside the block). The temporary file is removed on every way out. A symbolic link
+    is written through (its target replaced, the link kept); parent folders are created.
+
+    Parameters
+    ----------
+    path
+        The file to write.
+    suffix
+        Ending of the temporary name, for writers that choose the format by it (``".png"``).
+
+    Raises
+    ------
+    OSError
+        Naming ``path`` (not the temporary name), e.g. ``ENOSPC``.
+    FileExistsError
+        When ``path`` is there but is not a regular file (a device, pipe or socket would be
+        replaced by the rename).
     """
     path = Path(path)
     if path.is_symlink():
@@ -116,14 +134,39 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     if path.exists() and not path.is_file():
         raise FileExistsError(errno.EEXIST, "exists and is not a regular file", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp{suffix}")
     with _naming(path, tmp):
-        with tmp.open("wb") as fh:
-            fh.write(data)
-            fh.flush()
+        yield tmp
+        with tmp.open("rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    return path
+        _fsync_folder(path.parent)
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make a rename in ``folder`` durable; a file system that cannot fsync a folder is fine."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through :func:`atomic_path`; returns the path written."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through :func:`atomic_path`; returns the path."""
+    return write_bytes_atomic(path, text.encode())
 
 
 @contextmanager
@@ -164,15 +207,11 @@ def interrupts_deferred() -> Iterator[None]:
 
 
 def save_npz_atomic(path: str | Path, arrays: dict[str, Any]) -> Path:
-    """Write ``arrays`` to the ``.npz`` file ``path`` through a temporary name and a rename.
+    """Write ``arrays`` to the ``.npz`` file ``path`` through :func:`atomic_path`.
 
     A reader never sees a half-written file and an existing file at ``path`` survives a
     failed write (full disk, bad value). Parent folders are created. Returns the path.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
-    with _naming(path, tmp):
+    with atomic_path(path, suffix=".npz") as tmp:
         np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    return path
+    return Path(path)

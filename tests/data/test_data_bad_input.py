@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from toy_families import MisbehavingFamily, ToyFamily
 
-from scpformer.data import storage
+from scpformer.data import shards, storage
 from scpformer.data.errors import DatasetError, DiskFullError
 from scpformer.data.generate import GenerateConfig, generate
 from scpformer.data.pdg6dof_family import PDG6DoFFamily
@@ -66,13 +66,13 @@ def test_an_output_path_that_is_a_file_is_refused(tmp_path):
 
 def test_a_corrupt_manifest_is_a_clear_error(toy_folder):
     (toy_folder / storage.MANIFEST_NAME).write_text('{"family": ')
-    with pytest.raises(DatasetError, match=r"manifest.json is corrupt"):
+    with pytest.raises(DatasetError, match=r"manifest.json: the manifest is damaged"):
         generate(ToyFamily(), config(toy_folder))
 
 
 def test_a_manifest_missing_a_field_names_the_field(toy_folder):
     (toy_folder / storage.MANIFEST_NAME).write_text('{"format_version": 1}')
-    with pytest.raises(DatasetError, match=r"manifest\.json is corrupt: manifest lacks") as info:
+    with pytest.raises(DatasetError, match=r"manifest\.json: the manifest is damaged \(manifest lacks") as info:
         storage.read_manifest(toy_folder)
     assert "family, seed, n, shard_size" in str(info.value)  # every missing one, in order
 
@@ -91,7 +91,7 @@ def test_a_manifest_missing_a_field_names_the_field(toy_folder):
 )
 def test_a_manifest_field_of_the_wrong_kind_is_named(toy_folder, edit, message):
     _tampered(toy_folder, edit)
-    with pytest.raises(DatasetError, match=r"manifest\.json is corrupt: ") as info:
+    with pytest.raises(DatasetError, match=r"manifest\.json: the manifest is damaged \(") as info:
         storage.read_manifest(toy_folder)
     assert message in str(info.value)
 
@@ -110,7 +110,7 @@ def test_a_manifest_naming_a_shard_outside_the_folder_is_corrupt_and_nothing_is_
     victim = toy_folder.parent / "victim.h5"
     victim.write_text("not yours")
     _tampered(toy_folder, lambda data: data["shards"][0].update(file=name))
-    with pytest.raises(DatasetError, match=r"manifest.json is corrupt: .*shard file"):
+    with pytest.raises(DatasetError, match=r"manifest\.json: the manifest is damaged \(.*shard file"):
         generate(ToyFamily(), config(toy_folder))
     assert victim.read_text() == "not yours"
 
@@ -127,7 +127,7 @@ def test_a_manifest_naming_a_shard_outside_the_folder_is_corrupt_and_nothing_is_
 )
 def test_a_manifest_with_a_wrongly_typed_number_names_it(toy_folder, edit, message):
     _tampered(toy_folder, edit)
-    with pytest.raises(DatasetError, match=r"manifest.json is corrupt: .*" + message):
+    with pytest.raises(DatasetError, match=r"manifest\.json: the manifest is damaged \(.*" + message):
         storage.read_manifest(toy_folder)
 
 
@@ -148,7 +148,7 @@ def test_invalid_settings_name_the_field(tmp_path, kwargs, message):
 
 
 def test_a_full_disk_stops_with_a_clear_message_and_keeps_finished_shards(tmp_path, monkeypatch):
-    real_write = storage.write_bytes_atomic
+    real_write = shards.write_bytes_atomic
 
     def fill_up_on_second_shard(path, data):
         if path.name == "shard-00001.h5":
@@ -156,12 +156,12 @@ def test_a_full_disk_stops_with_a_clear_message_and_keeps_finished_shards(tmp_pa
             raise OSError(errno.ENOSPC, "No space left on device")
         return real_write(path, data)
 
-    monkeypatch.setattr(storage, "write_bytes_atomic", fill_up_on_second_shard)
+    monkeypatch.setattr(shards, "write_bytes_atomic", fill_up_on_second_shard)
     with pytest.raises(DiskFullError, match=r"disk full while writing shard-00001.h5.*resume"):
         generate(ToyFamily(), config(tmp_path / "ds"))
     manifest = storage.read_manifest(tmp_path / "ds")
     assert [s.file for s in manifest.shards] == ["shard-00000.h5"]
-    monkeypatch.setattr(storage, "write_bytes_atomic", real_write)
+    monkeypatch.setattr(shards, "write_bytes_atomic", real_write)
     resumed = generate(ToyFamily(), config(tmp_path / "ds"))
     reference = generate(ToyFamily(), config(tmp_path / "ref"))
     assert resumed.resumed == 2 and resumed.generated == 3

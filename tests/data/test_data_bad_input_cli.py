@@ -24,7 +24,7 @@ import toy_families  # noqa: F401  (registers the toy family)
 from toy_families import ToyFamily
 
 from scpformer.cli.data import main
-from scpformer.data import storage
+from scpformer.data import shards, storage
 from scpformer.data.errors import DatasetError
 from scpformer.data.generate import GenerateConfig, generate
 
@@ -252,19 +252,19 @@ def test_a_second_generate_into_a_folder_in_use_is_refused(tmp_path, capsys):
 
 
 def test_a_full_disk_during_generate_is_one_line_and_the_run_resumes(tmp_path, capsys, monkeypatch):
-    real_write = storage.write_bytes_atomic
+    real_write = shards.write_bytes_atomic
 
     def fill_up_on_second_shard(path, data):
         if path.name == "shard-00001.h5":
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         return real_write(path, data)
 
-    monkeypatch.setattr(storage, "write_bytes_atomic", fill_up_on_second_shard)
+    monkeypatch.setattr(shards, "write_bytes_atomic", fill_up_on_second_shard)
     argv = ["generate", "toy", "--out", str(tmp_path / "ds"), *TOY]
     one_line_error(capsys, argv, 1, "disk full", "shard-00001.h5", "resume")
     kept = snapshot(tmp_path / "ds")
     assert [s.file for s in storage.read_manifest(tmp_path / "ds").shards] == ["shard-00000.h5"]
-    monkeypatch.setattr(storage, "write_bytes_atomic", real_write)
+    monkeypatch.setattr(shards, "write_bytes_atomic", real_write)
     assert main(argv) == 0
     assert storage.verify_dataset(tmp_path / "ds") == []
     shard0 = str(tmp_path / "ds" / "shard-00000.h5")

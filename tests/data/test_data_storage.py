@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from scpformer.cli.errors import Terminated, sigterm_raises
-from scpformer.data import storage
+from scpformer.data import shards, storage
 from scpformer.data.errors import DatasetError, DiskFullError
 from scpformer.data.family import Field
 
@@ -115,7 +115,7 @@ def test_a_signal_between_shard_and_manifest_waits_until_the_manifest_lists_the_
         signal.raise_signal(kind)  # the shard is on disk, the manifest not yet rewritten
         return info
 
-    monkeypatch.setattr(storage, "write_shard", signalled_after_writing)
+    monkeypatch.setattr(shards, "write_shard", signalled_after_writing)
     with pytest.raises((Terminated, KeyboardInterrupt)), sigterm_raises():
         storage.append_shard(
             tmp_path, empty, "shard-00001.h5", columns(), start=0, stop=4, attrs={}
@@ -149,7 +149,7 @@ def test_a_missing_or_corrupt_manifest_is_a_clear_error(tmp_path):
     with pytest.raises(DatasetError, match=r"no dataset in"):
         storage.read_manifest(tmp_path)
     (tmp_path / storage.MANIFEST_NAME).write_text("{not json")
-    with pytest.raises(DatasetError, match=r"manifest.json is corrupt"):
+    with pytest.raises(DatasetError, match=r"manifest.json: the manifest is damaged"):
         storage.read_manifest(tmp_path)
 
 

@@ -24,3 +24,8 @@ def is_disk_full(err: BaseException) -> bool:
         return True
     text = str(err)
     return "No space left on device" in text or "errno = 28" in text or "Disk quota" in text
+
+
+def short_message(err: BaseException) -> str:
+    """The first line of ``err``'s message (at most 200 characters), or its class name."""
+    return str(err).splitlines()[0][:200] if str(err) else type(err).__name__

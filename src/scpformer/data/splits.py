@@ -13,8 +13,9 @@ streaming shard by shard, and stored with the splits in ``DIR/splits.h5``.
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
-import os
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -23,8 +24,9 @@ import h5py
 import numpy as np
 
 from scpformer.data import storage
-from scpformer.data.errors import DatasetError
+from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full, short_message
 from scpformer.data.storage import ShardedSamples
+from scpformer.files import write_bytes_atomic
 
 SPLITS_NAME = "splits.h5"
 SPLIT_NAMES = ("train", "validation", "test")
@@ -155,54 +157,142 @@ class _Moments:
         return Stats(mean=self.mean, std=np.where(std < STD_FLOOR, 1.0, std), count=self.n)
 
 
-def make_splits(folder: Path | str, config: SplitConfig | None = None) -> Splits:
-    """Split the dataset at ``folder`` by groups, compute training statistics, store both."""
+def make_splits(
+    folder: Path | str, config: SplitConfig | None = None, *, force: bool = False
+) -> Splits:
+    """Split the dataset at ``folder`` by groups, compute training statistics, store both.
+
+    Splits already stored with the same configuration for the same data are returned as they
+    are (nothing written). Other splits are replaced only with ``force``: a trained run
+    depends on the splits it was trained with.
+
+    Raises
+    ------
+    DatasetError
+        When the dataset is incomplete or inconsistent (:func:`storage.require_consistent`),
+        or ``folder`` holds other splits and ``force`` is false.
+    """
     config = config or SplitConfig()
+    folder = Path(folder)
     samples = ShardedSamples(folder)
     try:
         if not samples.manifest.complete:
             raise DatasetError(f"{folder} is incomplete: finish it before splitting")
+        storage.require_consistent(folder, samples.manifest)
+        content = storage.content_id(samples.manifest)
+        existing = _existing_splits(folder, config, content, force)
+        if existing is not None:
+            return existing
         groups = samples.column(config.group_field)
         indices = assign_groups(groups, config.fractions, config.seed)
         splits = Splits(
             indices=indices,
             stats=training_stats(samples, indices["train"]),
             config=config,
-            content_id=storage.content_id(samples.manifest),
+            content_id=content,
         )
     finally:
         samples.close()
-    write_splits(Path(folder), splits)
+    write_splits(folder, splits)
     return splits
 
 
-def write_splits(folder: Path, splits: Splits) -> None:
-    """Write ``folder/splits.h5`` atomically."""
+def _existing_splits(folder: Path, config: SplitConfig, content: str, force: bool) -> Splits | None:
+    """The stored splits when they are the ones ``config`` makes for this data; ``None`` when
+    there are none, or they differ and ``force`` allows replacing them."""
     path = folder / SPLITS_NAME
-    tmp = path.with_name(path.name + storage.TMP_SUFFIX)
-    with h5py.File(tmp, "w") as h5:
+    if not path.exists():
+        return None
+    again = f"`scpformer dataset split {folder} --force` replaces them"
+    try:
+        old = load_splits(folder)
+    except DatasetError as err:
+        if force:
+            return None
+        raise DatasetError(f"{err}; {again}") from None
+    if old.config == config and old.content_id == content:
+        return old
+    if force:
+        return None
+    if old.content_id != content:
+        why = "made for other data"
+    else:
+        old_c, new_c = asdict(old.config), asdict(config)
+        why = (
+            "made with other settings ("
+            + ", ".join(
+                f"{k} {old_c[k]} there, {new_c[k]} here" for k in old_c if old_c[k] != new_c[k]
+            )
+            + ")"
+        )
+    raise DatasetError(f"{path} exists, {why}, and runs trained on it depend on it; {again}")
+
+
+def splits_digest(splits: Splits) -> str:
+    """sha256 over everything a ``splits.h5`` holds: configuration, data identity, sample
+    positions and statistics (stored with them and checked by :func:`load_splits`)."""
+    digest = hashlib.sha256()
+    digest.update(json.dumps(asdict(splits.config), sort_keys=True).encode())
+    digest.update(splits.content_id.encode())
+    for name in sorted(splits.indices):
+        digest.update(f"|indices/{name}|".encode())
+        digest.update(np.ascontiguousarray(splits.indices[name], dtype=np.int64).tobytes())
+    for name in sorted(splits.stats):
+        for key in ("mean", "std", "count"):
+            value = np.ascontiguousarray(getattr(splits.stats[name], key), dtype=np.float64)
+            digest.update(f"|stats/{name}/{key}|{value.shape}|".encode())
+            digest.update(value.tobytes())
+    return digest.hexdigest()
+
+
+def write_splits(folder: Path, splits: Splits) -> None:
+    """Write ``folder/splits.h5`` atomically, with its :func:`splits_digest`.
+
+    The file is built in memory and written with one plain write, so that a full disk fails
+    one write (naming the path, no temporary file left), never inside HDF5.
+
+    Raises
+    ------
+    DiskFullError
+        When the disk fills up; an earlier ``splits.h5`` is kept.
+    """
+    path = Path(folder) / SPLITS_NAME
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as h5:
         h5.attrs["config"] = json.dumps(asdict(splits.config))
         h5.attrs["content_id"] = splits.content_id
+        h5.attrs["sha256"] = splits_digest(splits)
         for name, positions in splits.indices.items():
             h5.create_dataset(f"indices/{name}", data=positions.astype(np.int64))
         for name, stats in splits.stats.items():
             for key in ("mean", "std", "count"):
                 h5.create_dataset(f"stats/{name}/{key}", data=getattr(stats, key))
-    os.replace(tmp, path)
+    try:
+        write_bytes_atomic(path, buffer.getvalue())
+    except OSError as err:
+        if is_disk_full(err):
+            raise DiskFullError(
+                f"disk full while writing {path}; nothing was changed: free space and re-run"
+            ) from None
+        raise
 
 
 def load_splits(folder: Path | str) -> Splits:
-    """The splits stored with the dataset at ``folder``.
+    """The splits stored with the dataset at ``folder``, after checking their checksum.
 
     Raises
     ------
     DatasetError
-        When there are none, or they were made for different data.
+        When there are none, they are damaged (checksum, positions out of range, statistics
+        that are not finite), or they were made for different data.
     """
     folder = Path(folder)
     path = folder / SPLITS_NAME
+    if path.is_dir():
+        raise DatasetError(f"{path} is a folder, not a splits file")
     if not path.is_file():
         raise DatasetError(f"no splits in {folder}: run `scpformer dataset split {folder}` first")
+    remake = f"remake it with `scpformer dataset split {folder} --force`"
     try:
         with h5py.File(path, "r") as h5:
             config = SplitConfig(**json.loads(h5.attrs["config"]))
@@ -212,11 +302,31 @@ def load_splits(folder: Path | str) -> Splits:
                 for name in h5.get("stats", {})
             }
             content = str(h5.attrs["content_id"])
-    except (OSError, KeyError, ValueError) as err:
-        raise DatasetError(f"{path} is corrupt ({err}); remake it with `dataset split`") from None
-    if content != storage.content_id(storage.read_manifest(folder)):
-        raise DatasetError(f"{path} was made for different data; remake it with `dataset split`")
-    return Splits(indices=indices, stats=stats, config=config, content_id=content)
+            stored = h5.attrs.get("sha256")
+    except (OSError, KeyError, TypeError, ValueError) as err:
+        raise DatasetError(f"{path} is damaged ({short_message(err)}); {remake}") from None
+    splits = Splits(indices=indices, stats=stats, config=config, content_id=content)
+    if stored is None:
+        raise DatasetError(f"{path} carries no checksum (an older scpformer made it); {remake}")
+    if str(stored) != splits_digest(splits):
+        raise DatasetError(f"{path} is damaged (its checksum differs from its content); {remake}")
+    manifest = storage.read_manifest(folder)
+    if content != storage.content_id(manifest):
+        raise DatasetError(f"{path} was made for different data; {remake}")
+    n = sum(s.count for s in manifest.shards)
+    for name, positions in indices.items():
+        if positions.size and (positions.min() < 0 or positions.max() >= n):
+            raise DatasetError(
+                f"{path} is damaged: split {name!r} holds sample positions outside [0, {n}); "
+                f"{remake}"
+            )
+    for name, field_stats in stats.items():
+        if not (np.isfinite(field_stats.mean).all() and np.isfinite(field_stats.std).all()):
+            raise DatasetError(
+                f"{path} is damaged: the statistics of {name!r} are not finite (NaN or "
+                f"infinity), which would train to NaN; {remake}"
+            )
+    return splits
 
 
 def check_splits(folder: Path | str) -> list[str]:

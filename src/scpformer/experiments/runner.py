@@ -35,7 +35,7 @@ from scpformer.data.executors import Executor, LocalPool, RayPool
 from scpformer.data.family import SampleResult
 from scpformer.data.splits import load_splits
 from scpformer.data.storage import ShardedSamples, file_sha256, read_manifest
-from scpformer.files import check_output_folder, require_model_path
+from scpformer.files import check_output_folder, require_model_path, write_text_atomic
 from scpformer.validation import check_int, shown
 
 RESULTS_NAME = "results.csv"
@@ -212,9 +212,7 @@ def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
                 "use a new --out or the same settings"
             )
     out.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(plain, indent=1) + "\n")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(plain, indent=1) + "\n")
 
 
 class ResultsCSV:

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -38,6 +37,7 @@ from scpformer.data.errors import DatasetError
 from scpformer.data.splits import SPLITS_NAME
 from scpformer.data.storage import file_sha256
 from scpformer.data.torch_views import ArtSequenceDataset
+from scpformer.files import write_text_atomic
 from scpformer.train import distributed
 from scpformer.train.checkpoint import (
     CHECKPOINT_NAME,
@@ -474,6 +474,4 @@ def _model_config(api: Any, kind: str, preset: str, folder: Path, frame: str) ->
 
 
 def _write_json(path: Path, value: dict[str, Any]) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(value, indent=2, default=str) + "\n")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(value, indent=2, default=str) + "\n")

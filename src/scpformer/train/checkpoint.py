@@ -26,7 +26,6 @@ dtype (:func:`to_plain`) and come back as arrays (:func:`from_plain`).
 
 from __future__ import annotations
 
-import os
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -39,6 +38,7 @@ from torch import nn
 
 from scpformer import __version__
 from scpformer.data.storage import MANIFEST_NAME, file_sha256
+from scpformer.files import atomic_path
 from scpformer.train.models_api import resolve
 from scpformer.validation import shown
 
@@ -159,16 +159,9 @@ def slim_checkpoint(source: Path | str, destination: Path | str) -> Path:
 
 
 def _write_payload(path: Path, payload: dict[str, Any]) -> Path:
-    """``torch.save`` to a temp file beside ``path``, fsync, then rename over ``path``."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with tmp.open("wb") as fh:
-            torch.save(payload, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    """``torch.save`` to ``path`` atomically (:func:`scpformer.files.atomic_path`)."""
+    with atomic_path(path) as tmp, tmp.open("wb") as fh:
+        torch.save(payload, fh)
     return path
 
 

@@ -38,7 +38,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from scpformer.files import require_model_path
+from scpformer.files import atomic_path, require_model_path
 from scpformer.train.checkpoint import (
     CHECKPOINT_NAME,
     Checkpoint,
@@ -275,8 +275,7 @@ def export_network(
     module = spec.module(ckpt.model).eval()
     torch.manual_seed(seed)
     example = spec.inputs(ckpt, 2, EXPORT_STEPS)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_path(path) as tmp:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notices
             torch.onnx.export(
@@ -290,9 +289,6 @@ def export_network(
                 dynamo=False,
             )
         onnx.checker.check_model(str(tmp))
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
     steps = ckpt.n_steps or getattr(ckpt.config, "context", EXPORT_STEPS)
     check = spec.inputs(ckpt, 3, steps)
     diff = max_abs_diff(module, ort.InferenceSession(str(path)), check)

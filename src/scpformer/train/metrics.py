@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from scpformer.files import atomic_path
 
 METRICS_NAME = "metrics.csv"
 LOSS_PLOT_NAME = "loss.png"
@@ -44,13 +45,11 @@ METRIC_COLUMNS = tuple(f.name for f in dataclasses.fields(EpochRecord))
 def write_metrics(run: Path, history: Sequence[EpochRecord]) -> Path:
     """Write ``run/metrics.csv``: one row per epoch, columns :data:`METRIC_COLUMNS`."""
     path = Path(run) / METRICS_NAME
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with tmp.open("w", newline="") as fh:
+    with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=METRIC_COLUMNS)
         writer.writeheader()
         for record in history:
             writer.writerow(record.to_dict())
-    os.replace(tmp, path)
     return path
 
 
@@ -73,7 +72,6 @@ def plot_losses(run: Path, history: Sequence[EpochRecord], title: str = "") -> P
     axes.set_title(title)
     axes.grid(True, alpha=0.3)
     axes.legend()
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
-    figure.savefig(tmp, dpi=100)
-    os.replace(tmp, path)
+    with atomic_path(path, suffix=".png") as tmp:
+        figure.savefig(tmp, dpi=100)
     return path

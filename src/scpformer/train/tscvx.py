@@ -54,8 +54,9 @@ from torch.nn import functional
 from scpformer import __version__
 from scpformer.data.errors import DatasetError
 from scpformer.data.splits import SPLIT_NAMES, SPLITS_NAME, load_splits
-from scpformer.data.storage import atomic_write_text, file_sha256
+from scpformer.data.storage import file_sha256
 from scpformer.data.torch_views import SolutionDataset
+from scpformer.files import write_text_atomic
 from scpformer.models.tscvx import (
     CONTROL_DIM,
     FAMILY,
@@ -514,7 +515,7 @@ def _train_network(
         losses = [s.best_val_loss for s in states]
         cv = {"folds": len(states), "best_val_loss": losses, "mean": float(np.mean(losses)),
               "std": float(np.std(losses)), "delivered": f"fold{len(states)}"}  # fmt: skip
-        atomic_write_text(folder / CV_NAME, json.dumps(cv, indent=2) + "\n")
+        write_text_atomic(folder / CV_NAME, json.dumps(cv, indent=2) + "\n")
     return NetworkResult(
         kind=kind,
         folder=folder,
@@ -659,7 +660,7 @@ def _write_run_config(
         "package_version": __version__,
     }
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, json.dumps(description, indent=2, default=str) + "\n")
+    write_text_atomic(path, json.dumps(description, indent=2, default=str) + "\n")
 
 
 # ======================================================================================

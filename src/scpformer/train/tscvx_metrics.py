@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.data.storage import atomic_write_text
+from scpformer.files import atomic_path, write_text_atomic
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
 
 # state groups of x (Eq. 24) and their slices; u is the thrust, tf the final time
@@ -191,16 +190,14 @@ def write_metrics_files(
     (``tag`` tells apart evaluations of one split, e.g. at another threshold)."""
     run.mkdir(parents=True, exist_ok=True)
     written = [run / f"metrics_{split}{tag}.json"]
-    atomic_write_text(written[0], json.dumps(metrics, indent=2, default=float) + "\n")
+    write_text_atomic(written[0], json.dumps(metrics, indent=2, default=float) + "\n")
     if "tight" in metrics:
         path = run / f"tight_{split}{tag}.csv"
         rows = [{"name": "all", **metrics["tight"]["overall"]}]
         rows += [{"name": k, **v} for k, v in metrics["tight"]["per_name"].items()]
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        with tmp.open("w", newline="") as fh:
+        with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
             writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
-        os.replace(tmp, path)
         written.append(path)
     return written
