@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scipy.stats import beta
 
 from scpformer.dynamics.orbits import eci_to_rtn, oe_to_eci, propagate_mean_j2, rtn_to_eci
 from scpformer.dynamics.roe import propagate_roe_mean, psi_matrix, stm_j2
@@ -375,8 +376,15 @@ def test_chance_solution_passes_the_monte_carlo_check_at_the_design_level(solved
         results[mode] = monte_carlo(instance, sol.trajectory.x, sol.trajectory.u, cfg)
     assert results["chance"].passes()
     assert results["chance"].p_design.mean() < SOLVED.uncertainty.delta
-    assert not results["deterministic"].passes()  # its arcs touch the ellipsoid at t*
-    assert results["deterministic"].p_design.max() > 10 * SOLVED.uncertainty.delta
+    deterministic = results["deterministic"]
+    assert not deterministic.passes()  # its arcs touch the ellipsoid at t*
+    # ... and not by a chance of the sampling: even for the worst of its K nodes, the one-sided
+    # Clopper-Pearson lower bound of the violation probability at confidence 1 - 1e-4 / K
+    # (Bonferroni over the nodes the worst was picked from) lies above Delta. The count it
+    # needs follows from the sample size: 13 of 2000 draws for K = 100 (16 on an AVX2 EPYC).
+    k, n = int(deterministic.counts().max()), deterministic.n_samples
+    lower = beta.ppf(1e-4 / deterministic.nodes.size, k, n - k + 1)  # Clopper-Pearson
+    assert lower > SOLVED.uncertainty.delta
 
 
 def test_chance_solution_passes_monte_carlo_in_the_truth_model_at_its_active_nodes(solved):
