@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from scipy.stats import beta
+from scipy import stats
 
 from scpformer.dynamics.orbits import eci_to_rtn, oe_to_eci, propagate_mean_j2, rtn_to_eci
 from scpformer.dynamics.roe import propagate_roe_mean, psi_matrix, stm_j2
@@ -383,7 +383,7 @@ def test_chance_solution_passes_the_monte_carlo_check_at_the_design_level(solved
     # (Bonferroni over the nodes the worst was picked from) lies above Delta. The count it
     # needs follows from the sample size: 13 of 2000 draws for K = 100 (16 on an AVX2 EPYC).
     k, n = int(deterministic.counts().max()), deterministic.n_samples
-    lower = beta.ppf(1e-4 / deterministic.nodes.size, k, n - k + 1)  # Clopper-Pearson
+    lower = stats.beta.ppf(1e-4 / deterministic.nodes.size, k, n - k + 1)  # Clopper-Pearson
     assert lower > SOLVED.uncertainty.delta
 
 
