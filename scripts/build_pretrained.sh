@@ -4,25 +4,25 @@
 # SHA-256 in manifest.json). Each model's card lists the commands below that made it.
 #
 #   scripts/build_pretrained.sh                       # all three models
-#   WORK=/tmp/pt scripts/build_pretrained.sh tscvx    # one model (art-rendezvous,
+#   WORK=../pt scripts/build_pretrained.sh tscvx      # one model (art-rendezvous,
 #                                                     # art-robust, tscvx)
 #
 # Time on the 2-core development machine, from the logs of the shipped models: rendezvous
-# data 23 min + ART 21 min (session 22, idle machine); made while other jobs ran beside them:
+# data 23 min + ART 21 min (idle machine); made while other jobs ran beside them:
 # robust data 60 min + ART 26 min; 6-DoF data: the first 4736 instances of a --n 6000 run stored after 1 h 32 min
-# of generation with other jobs beside it, then 7 min of augmentation with two workers (session
-# 15) + T-SCvx networks 20.6 min (the two side by side, one thread each). The whole script has
+# of generation with other jobs beside it, then 7 min of augmentation with two workers
+# + T-SCvx networks 20.6 min (the two side by side, one thread each). The whole script has
 # not been timed end to end, nor on an idle machine, where it should be shorter. Each
 # model builds alone (`scripts/build_pretrained.sh tscvx`); a smaller N_PDG shortens the
 # longest stage but makes another T-SCvx model than the shipped one. A rerun resumes the
 # dataset generation (`generate` keeps finished shards).
 #
-# Environment (defaults in brackets): WORK [/tmp/scpformer-pretrained] datasets and runs,
-# OUT [src/scpformer/pretrained] where the packaged models go, WORKERS [2], N_PDG [4736] 6-DoF
+# Run from the repository's root. Environment (defaults in brackets): WORK [build/pretrained]
+# datasets and runs, OUT [src/scpformer/pretrained] where the packaged models go, WORKERS [2], N_PDG [4736] 6-DoF
 # base instances (x8 by the rotation augmentation).
 set -euo pipefail
 
-WORK=${WORK:-/tmp/scpformer-pretrained}
+WORK=${WORK:-build/pretrained}
 OUT=${OUT:-src/scpformer/pretrained}
 WORKERS=${WORKERS:-2}
 N_PDG=${N_PDG:-4736}

@@ -5,12 +5,13 @@
 # experiment run all skip what is done).
 #
 #   scripts/reproduce_results.sh            # everything, default sizes (~8 h on 2 CPU cores)
-#   DATA=/tmp/d RUNS=/tmp/r scripts/reproduce_results.sh
+#   DATA=../data RUNS=../runs scripts/reproduce_results.sh
 #
-# Environment (defaults in brackets): DATA [/work/data] dataset root, RUNS [$DATA/runs] model
+# Run from the repository's root; the committed results name their data folders $DATA/...
+# Environment (defaults in brackets): DATA [data] dataset root, RUNS [$DATA/runs] model
 # runs, OUT [docs/results] experiment folders, WORKERS [2], SEED [0], N_RDV [3000] rendezvous
-# instances, N_ROB [1200] robust-rendezvous instances, EPOCHS [preset's] epochs of the
-# rendezvous models, TPBVP_EPOCHS ["art:6 gru:4 lstm:4"] of the Table 2 models (Problem 1
+# instances, N_ROB [1200] robust-rendezvous instances, RDV_EPOCHS ["art:8 gru:2 lstm:2"]
+# epochs of the rendezvous models (Table 3), TPBVP_EPOCHS ["art:6 gru:4 lstm:4"] of the Table 2 models (Problem 1
 # twin), ROBUST_EPOCHS [8] of the robust ones, N_WS [27000] rendezvous instances and WS_EPOCHS
 # [3] of the ART model of the art-warmstart study (Figs. 4-6; the shipped art-rendezvous: trained
 # on 3000 instances ART trailed CVX there, on 9000 it led by less than the paper's 20%, on
@@ -20,7 +21,7 @@
 # x8 rotations), RAY [unset] Ray address.
 set -euo pipefail
 
-DATA=${DATA:-/work/data}
+DATA=${DATA:-data}
 RUNS=${RUNS:-$DATA/runs}
 OUT=${OUT:-docs/results}
 WORKERS=${WORKERS:-2}
@@ -40,7 +41,7 @@ RDV_WS=$DATA/rdv-ws$N_WS
 TPBVP_EPOCHS=${TPBVP_EPOCHS:-art:6 gru:4 lstm:4}
 ROB=$DATA/rob$N_ROB
 ROB_WS=$DATA/rob-ws$N_ROB_WS
-EPOCHS_FLAG=${EPOCHS:+--epochs $EPOCHS}
+RDV_EPOCHS=${RDV_EPOCHS:-art:8 gru:2 lstm:2}
 RAY_FLAG=${RAY:+--ray $RAY}
 
 run() { echo "+ $*" >&2; "$@"; }
@@ -65,11 +66,12 @@ if [ ! -f "$RDV_WS/splits.h5" ]; then
 fi
 
 # 2. models: ART, GRU and LSTM on the same sequences (small presets: two CPU cores)
-for kind in art gru lstm; do
+for spec in $RDV_EPOCHS; do
+  kind=${spec%%:*}
   if [ -f "$RUNS/$kind-small/checkpoint.pt" ]; then resume=--resume; else resume=; fi
   # shellcheck disable=SC2086
   run scpformer train "$kind" --data "$RDV" --out "$RUNS/$kind-small" --preset small \
-    --frame rtn --seed "$SEED" $EPOCHS_FLAG $resume
+    --frame rtn --seed "$SEED" --epochs "${spec##*:}" --batch-size 32 --lr 0.001 $resume
 done
 #    and the same three learning the Problem 1 twin only (Table 2)
 for spec in $TPBVP_EPOCHS; do
@@ -93,7 +95,7 @@ common=(--data "$RDV" --workers "$WORKERS" --seed "$SEED" $RAY_FLAG)
 run scpformer experiment run art-warmstart --model "$RUNS/art-ws-small" --data "$RDV_WS" \
   --n "$((N_WS / 10))" --workers "$WORKERS" --seed "$SEED" $RAY_FLAG --out "$OUT/art-warmstart"
 run scpformer experiment run art-forecast-scp --model "$RUNS/art-small" \
-  --model "$RUNS/gru-small" --model "$RUNS/lstm-small" "${common[@]}" \
+  --model "$RUNS/gru-small" --model "$RUNS/lstm-small" "${common[@]}" --n 100 \
   --out "$OUT/art-forecast-scp"
 # shellcheck disable=SC2086
 run scpformer experiment run art-forecast-tpbvp --model "$RUNS/art-tpbvp-small" \
@@ -133,7 +135,7 @@ for name_n in "robust-warmstart:$((N_ROB_WS / 10))" robust-trajectory: \
     --model "$RUNS/art-robust-roe-small" --data "$ROB_WS" --workers "$WORKERS" --seed "$SEED" \
     ${n:+--n "$n"} $RAY_FLAG --out "$OUT/$name"
 done
-# Table 3's forecast rows for the robust ART (issue 12), with the 4-epoch RTN model it reports
+# Table 3's forecast rows for the robust ART, with the 4-epoch RTN model it reports
 if [ -f "$RUNS/art-robust-small/checkpoint.pt" ]; then resume=--resume; else resume=; fi
 # shellcheck disable=SC2086
 run scpformer train art --data "$ROB" --out "$RUNS/art-robust-small" --preset small \
@@ -162,8 +164,23 @@ wait "$tight"
 [ -f "$RUNS/interp/lookup.json" ] || run scpformer train interp --data "$PDG8" \
   --out "$RUNS/interp" --n-components 6
 pdg=(--data "$PDG8" --workers "$WORKERS" --seed "$SEED")
-for name in tscvx-training tscvx-solve-time tscvx-trajectory; do
+for name in tscvx-training tscvx-trajectory; do
   run scpformer experiment run "$name" --model "$RUNS/tscvx-small" "${pdg[@]}" --out "$OUT/$name"
+done
+#    Fig. 2 on held-out draws that no training or setting saw, with the shipped T-SCvx model
+#    (src/scpformer/pretrained/tscvx, made by scripts/build_pretrained.sh): 100 base draws of
+#    seed 27 in 8 rotations, 95% of them the test split (688 instances), the folder's report;
+#    25 base draws of seed 22 (176 instances) in heldout-seed22/
+for set in "27:100:688:$OUT/tscvx-solve-time" "22:25:176:$OUT/tscvx-solve-time/heldout-seed22"; do
+  IFS=: read -r seed n n_test out <<<"$set"
+  base=$DATA/pdg-seed$seed
+  if [ ! -f "$base/r8/splits.h5" ]; then
+    run scpformer generate pdg6dof --n "$n" --seed "$seed" --out "$base/base" --workers "$WORKERS"
+    run scpformer dataset augment "$base/base" --out "$base/r8" --workers "$WORKERS"
+    run scpformer dataset split "$base/r8" --fractions 0.05 0 0.95 --seed 0
+  fi
+  run scpformer experiment run tscvx-solve-time --model src/scpformer/pretrained/tscvx \
+    --data "$base/r8" --n "$n_test" --workers "$WORKERS" --seed 0 --out "$out"
 done
 run scpformer experiment run tscvx-lookup --model "$RUNS/tscvx-small" --model "$RUNS/kdtree" \
   --model "$RUNS/interp" "${pdg[@]}" --out "$OUT/tscvx-lookup"
