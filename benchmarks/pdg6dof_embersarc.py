@@ -19,7 +19,7 @@ each drawn rotation angle from upright (about its axis) and body rate (both afte
 the draws stay the same); the script prints one line per draw and exits 1 unless every draw
 converged.
 
-Measured (docs/embersarc-scenario.md; seed 0, 3 draws, single deterministic runs): with the
+Measured (docs/studies/embersarc-scenario.md; seed 0, 3 draws, single deterministic runs): with the
 stall test and restart (session 13) ours converges on draw 0 (68 solves, verified; 46 with
 session 24's restart of a creeping run, 42 with session 25's polish of accepted steps) and
 fails on draws 1 and 2 (stalled or at the cap) at velocity scale 1.0; before them it ended in
