@@ -42,6 +42,47 @@ class Experiment:
 _ART = "ART paper (art-rendezvous-transformer.txt)"
 _ROBUST = "robust ART paper (robust-art-chance-constrained.txt)"
 _TSCVX = "T-SCvx paper (t-scvx-6dof-powered-descent.txt)"
+# Source paths shared by several entries (an entry's own module is named in the entry).
+_ART_NETWORK = (
+    "src/scpformer/models/art.py",
+    "src/scpformer/models/sequence.py",
+    "src/scpformer/models/normalization.py",
+)
+_RENDEZVOUS_FAMILY = (
+    "src/scpformer/problems/rendezvous",
+    "src/scpformer/dynamics",
+    "src/scpformer/data/rendezvous_family.py",
+)
+_ROBUST_FAMILY = (
+    "src/scpformer/problems/robust_rendezvous",
+    "src/scpformer/problems/rendezvous",
+    "src/scpformer/dynamics",
+    "src/scpformer/data/robust_rendezvous_family.py",
+)
+_FORECAST = ("src/scpformer/experiments/forecast_study.py", "src/scpformer/experiments/forecast.py")
+_ART_FORECAST = (
+    *_FORECAST,
+    *_RENDEZVOUS_FAMILY,
+    *_ART_NETWORK,
+    "src/scpformer/warmstart/art.py",
+    "src/scpformer/models/rnn.py",
+)
+_ROBUST_STUDY = (
+    "src/scpformer/experiments/robust_studies.py",
+    *_ROBUST_FAMILY,
+    "src/scpformer/scp",
+    "src/scpformer/warmstart",
+    *_ART_NETWORK,
+)
+_TSCVX_SOLVE = (
+    "src/scpformer/experiments/tscvx*",
+    "src/scpformer/problems/pdg6dof",
+    "src/scpformer/scp",
+    "src/scpformer/warmstart/tscvx.py",
+    "src/scpformer/models/tscvx.py",
+    "src/scpformer/data/pdg6dof_family.py",
+    "src/scpformer/data/tscvx_arrays.py",
+)
 EXPERIMENTS: dict[str, Experiment] = {
     e.name: e
     for e in (
@@ -52,18 +93,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.forecast_study",
             default_n=200,
             models="ART, GRU and LSTM runs trained on Problem 1 twins",
-            depends_on=(
-                "src/scpformer/experiments/forecast_study.py",
-                "src/scpformer/experiments/forecast.py",
-                "src/scpformer/problems/rendezvous",
-                "src/scpformer/dynamics",
-                "src/scpformer/data/rendezvous_family.py",
-                "src/scpformer/models/art.py",
-                "src/scpformer/models/sequence.py",
-                "src/scpformer/models/normalization.py",
-                "src/scpformer/warmstart/art.py",
-                "src/scpformer/models/rnn.py",
-            ),
+            depends_on=_ART_FORECAST,
         ),
         Experiment(
             name="art-forecast-scp",
@@ -72,18 +102,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.forecast_study",
             default_n=200,
             models="ART, GRU and LSTM runs (any order; kinds read from the checkpoints)",
-            depends_on=(
-                "src/scpformer/experiments/forecast_study.py",
-                "src/scpformer/experiments/forecast.py",
-                "src/scpformer/problems/rendezvous",
-                "src/scpformer/dynamics",
-                "src/scpformer/data/rendezvous_family.py",
-                "src/scpformer/models/art.py",
-                "src/scpformer/models/sequence.py",
-                "src/scpformer/models/normalization.py",
-                "src/scpformer/warmstart/art.py",
-                "src/scpformer/models/rnn.py",
-            ),
+            depends_on=_ART_FORECAST,
         ),
         Experiment(
             name="robust-forecast",
@@ -93,16 +112,10 @@ EXPERIMENTS: dict[str, Experiment] = {
             default_n=120,
             models="ART (and GRU/LSTM) runs trained on a robust-rendezvous dataset",
             depends_on=(
-                "src/scpformer/experiments/forecast_study.py",
-                "src/scpformer/experiments/forecast.py",
-                "src/scpformer/problems/robust_rendezvous",
-                "src/scpformer/problems/rendezvous",
-                "src/scpformer/dynamics",
-                "src/scpformer/data/robust_rendezvous_family.py",
+                *_FORECAST,
+                *_ROBUST_FAMILY,
                 "src/scpformer/scp",
-                "src/scpformer/models/art.py",
-                "src/scpformer/models/sequence.py",
-                "src/scpformer/models/normalization.py",
+                *_ART_NETWORK,
                 "src/scpformer/warmstart/art.py",
             ),
         ),
@@ -115,12 +128,8 @@ EXPERIMENTS: dict[str, Experiment] = {
             models="one ART run",
             depends_on=(
                 "src/scpformer/experiments/conditioning.py",
-                "src/scpformer/problems/rendezvous",
-                "src/scpformer/dynamics",
-                "src/scpformer/data/rendezvous_family.py",
-                "src/scpformer/models/art.py",
-                "src/scpformer/models/sequence.py",
-                "src/scpformer/models/normalization.py",
+                *_RENDEZVOUS_FAMILY,
+                *_ART_NETWORK,
                 "src/scpformer/warmstart/art.py",
             ),
         ),
@@ -133,14 +142,10 @@ EXPERIMENTS: dict[str, Experiment] = {
             models="one ART run",
             depends_on=(
                 "src/scpformer/experiments/warmstart_study.py",
-                "src/scpformer/problems/rendezvous",
-                "src/scpformer/dynamics",
-                "src/scpformer/data/rendezvous_family.py",
+                *_RENDEZVOUS_FAMILY,
                 "src/scpformer/scp",
                 "src/scpformer/warmstart",
-                "src/scpformer/models/art.py",
-                "src/scpformer/models/sequence.py",
-                "src/scpformer/models/normalization.py",
+                *_ART_NETWORK,
             ),
         ),
         Experiment(
@@ -150,18 +155,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.robust_studies",
             default_n=60,
             models="ART runs trained on RTN and on ROE states",
-            depends_on=(
-                "src/scpformer/experiments/robust_studies.py",
-                "src/scpformer/problems/robust_rendezvous",
-                "src/scpformer/problems/rendezvous",
-                "src/scpformer/dynamics",
-                "src/scpformer/data/robust_rendezvous_family.py",
-                "src/scpformer/scp",
-                "src/scpformer/warmstart",
-                "src/scpformer/models/art.py",
-                "src/scpformer/models/sequence.py",
-                "src/scpformer/models/normalization.py",
-            ),
+            depends_on=_ROBUST_STUDY,
         ),
         Experiment(
             name="robust-trajectory",
@@ -170,18 +164,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.robust_studies",
             default_n=30,
             models="ART runs trained on RTN and/or ROE states (one per frame)",
-            depends_on=(
-                "src/scpformer/experiments/robust_studies.py",
-                "src/scpformer/problems/robust_rendezvous",
-                "src/scpformer/problems/rendezvous",
-                "src/scpformer/dynamics",
-                "src/scpformer/data/robust_rendezvous_family.py",
-                "src/scpformer/scp",
-                "src/scpformer/warmstart",
-                "src/scpformer/models/art.py",
-                "src/scpformer/models/sequence.py",
-                "src/scpformer/models/normalization.py",
-            ),
+            depends_on=_ROBUST_STUDY,
         ),
         Experiment(
             name="robust-posthoc",
@@ -190,19 +173,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.robust_studies",
             default_n=60,
             models="ART runs trained on RTN and/or ROE states (one per frame)",
-            depends_on=(
-                "src/scpformer/experiments/robust_studies.py",
-                "src/scpformer/experiments/robust_posthoc.py",
-                "src/scpformer/problems/robust_rendezvous",
-                "src/scpformer/problems/rendezvous",
-                "src/scpformer/dynamics",
-                "src/scpformer/data/robust_rendezvous_family.py",
-                "src/scpformer/scp",
-                "src/scpformer/warmstart",
-                "src/scpformer/models/art.py",
-                "src/scpformer/models/sequence.py",
-                "src/scpformer/models/normalization.py",
-            ),
+            depends_on=(*_ROBUST_STUDY, "src/scpformer/experiments/robust_posthoc.py"),
         ),
         Experiment(
             name="tscvx-training",
@@ -229,16 +200,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.tscvx_studies",
             default_n=100,
             models="one T-SCvx run",
-            depends_on=(
-                "src/scpformer/experiments/tscvx*",
-                "src/scpformer/problems/pdg6dof",
-                "src/scpformer/scp",
-                "src/scpformer/warmstart/tscvx.py",
-                "src/scpformer/models/tscvx.py",
-                "src/scpformer/data/pdg6dof_family.py",
-                "src/scpformer/data/tscvx_arrays.py",
-                "src/scpformer/pretrained/tscvx",
-            ),
+            depends_on=(*_TSCVX_SOLVE, "src/scpformer/pretrained/tscvx"),
         ),
         Experiment(
             name="tscvx-trajectory",
@@ -247,16 +209,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             module="scpformer.experiments.tscvx_studies",
             default_n=1,
             models="one T-SCvx run",
-            depends_on=(
-                "src/scpformer/experiments/tscvx*",
-                "src/scpformer/problems/pdg6dof",
-                "src/scpformer/scp",
-                "src/scpformer/warmstart/tscvx.py",
-                "src/scpformer/models/tscvx.py",
-                "src/scpformer/data/pdg6dof_family.py",
-                "src/scpformer/data/tscvx_arrays.py",
-                "src/scpformer/pretrained/tscvx",
-            ),
+            depends_on=(*_TSCVX_SOLVE, "src/scpformer/pretrained/tscvx"),
         ),
         Experiment(
             name="tscvx-lookup",
@@ -266,13 +219,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             default_n=60,
             models="a T-SCvx run, a kdtree run and an interp run",
             depends_on=(
-                "src/scpformer/experiments/tscvx*",
-                "src/scpformer/problems/pdg6dof",
-                "src/scpformer/scp",
-                "src/scpformer/warmstart/tscvx.py",
-                "src/scpformer/models/tscvx.py",
-                "src/scpformer/data/pdg6dof_family.py",
-                "src/scpformer/data/tscvx_arrays.py",
+                *_TSCVX_SOLVE,
                 "src/scpformer/experiments/prediction_metrics.py",
                 "src/scpformer/models/lookup.py",
             ),
