@@ -27,11 +27,13 @@ import typing
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from importlib import metadata
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
 from scpformer.data.errors import DatasetError
+
+_Family = TypeVar("_Family")
 
 DTYPES = ("float64", "float32", "int64", "int32", "bool", "str")
 
@@ -160,6 +162,16 @@ class FamilySpec:
     name: str  # registry and command-line name
     summary: str  # one line for --help
     build: Callable[[Mapping[str, Any] | None], DatasetFamily]  # None: paper defaults
+
+
+def family_from_config(
+    family: Callable[..., _Family], config_class: Any, config: Mapping[str, Any] | None
+) -> _Family:
+    """A family's :attr:`FamilySpec.build`: ``family(config_class.from_dict(config))``, or
+    ``family()`` (its paper defaults) when ``config`` is ``None`` or empty."""
+    if not config:
+        return family()
+    return family(config_class.from_dict(config))
 
 
 # Built-in families and the module that defines each one's ``SPEC``.

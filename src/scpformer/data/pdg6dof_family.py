@@ -44,6 +44,7 @@ from scpformer.data.family import (
     Field,
     SampleResult,
     dataclass_from_dict,
+    family_from_config,
     package_versions,
 )
 from scpformer.data.storage import ShardedSamples
@@ -220,9 +221,7 @@ class PDG6DoFFamily:
 
 def build(config: Mapping[str, Any] | None = None) -> PDG6DoFFamily:
     """The family from a resolved config dict (a manifest's), or Tables 1 and 2 defaults."""
-    if not config:
-        return PDG6DoFFamily()
-    return PDG6DoFFamily(PDG6DoFDataConfig.from_dict(config))
+    return family_from_config(PDG6DoFFamily, PDG6DoFDataConfig, config)
 
 
 SPEC = FamilySpec(

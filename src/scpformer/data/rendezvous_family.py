@@ -58,6 +58,7 @@ from scpformer.data.family import (
     Field,
     SampleResult,
     dataclass_from_dict,
+    family_from_config,
     package_versions,
 )
 from scpformer.problems.rendezvous.instance import (
@@ -355,9 +356,7 @@ class RendezvousFamily:
 
 def build(config: Mapping[str, Any] | None = None) -> RendezvousFamily:
     """The family from a resolved config dict (a manifest's), or the ART Table 1 defaults."""
-    if not config:
-        return RendezvousFamily()
-    return RendezvousFamily(RendezvousDataConfig.from_dict(config))
+    return family_from_config(RendezvousFamily, RendezvousDataConfig, config)
 
 
 SPEC = FamilySpec(

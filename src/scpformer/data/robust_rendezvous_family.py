@@ -53,6 +53,7 @@ from scpformer.data.family import (
     Field,
     SampleResult,
     dataclass_from_dict,
+    family_from_config,
     package_versions,
 )
 from scpformer.data.rendezvous_family import TARGET_KEYS, twin_fields, twin_schema
@@ -269,9 +270,7 @@ class RobustRendezvousFamily:
 
 def build(config: Mapping[str, Any] | None = None) -> RobustRendezvousFamily:
     """The family from a resolved config dict (a manifest's), or the robust tables' defaults."""
-    if not config:
-        return RobustRendezvousFamily()
-    return RobustRendezvousFamily(RobustDataConfig.from_dict(config))
+    return family_from_config(RobustRendezvousFamily, RobustDataConfig, config)
 
 
 SPEC = FamilySpec(
