@@ -382,7 +382,7 @@ def _patched_status(monkeypatch, status: str) -> None:
         sol = original(self, solver)
         if status == subproblems.INACCURATE:
             return dataclasses.replace(sol, status=status)
-        return subproblems._failed(status, sol.wall_time, sol.solver_time)
+        return subproblems.SubproblemSolution.failed(status, sol.wall_time, sol.solver_time)
 
     monkeypatch.setattr(subproblems.RendezvousSubproblem, "solve", solve_with_status)
 

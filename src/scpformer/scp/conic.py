@@ -109,6 +109,19 @@ class SubproblemSolution:
         """A usable solution: optimal, or optimal_inaccurate (flagged by ``status``)."""
         return self.status in SOLVED and self.x is not None
 
+    @classmethod
+    def failed(cls, status: str, wall_time: float, solver_time: float) -> SubproblemSolution:
+        """A solve that returned no solution: no arrays, NaN cost, ``status`` as the message."""
+        return cls(
+            status=status,
+            x=None,
+            u=None,
+            cost=math.nan,
+            solver_time=solver_time,
+            wall_time=wall_time,
+            message=status,
+        )
+
 
 VariableSlices = Mapping[str, tuple[int, tuple[int, ...]]]  # name -> (offset, shape)
 

@@ -59,7 +59,6 @@ from scpformer.problems.pdg6dof.subproblem import (
     CONIC_SETTINGS,
     PDGSubproblem,
     SubproblemSolution,
-    failed_solution,
 )
 from scpformer.scp.conic import (
     SOLVED,
@@ -286,7 +285,9 @@ class ReducedSubproblem:
             solver = self._clarabel((rows.tobytes(), cols.tobytes()), P, c[cols], A, b[rows])
             result = solver.solve()
         except Exception as err:  # a solver failure is a status (conic.py)
-            return failed_solution(f"solver_error: {err}", time.perf_counter() - start, 0.0)
+            return SubproblemSolution.failed(
+                f"solver_error: {err}", time.perf_counter() - start, 0.0
+            )
         solve_time = time.perf_counter() - t0
         self.last_size = ReducedSize(
             rows=int(rows.sum()),
@@ -300,7 +301,7 @@ class ReducedSubproblem:
             multipliers = self._nu_multipliers(A_values, rows, np.asarray(result.z))
             status = status if multipliers.max(initial=0.0) <= lambda_ else VIRTUAL_NEEDED
         if status not in SOLVED:
-            return failed_solution(status, time.perf_counter() - start, solve_time)
+            return SubproblemSolution.failed(status, time.perf_counter() - start, solve_time)
         full = np.zeros(cols.size)
         full[cols] = np.asarray(result.x)
         return self._unpack(full, lambda_, status, solve_time, start)

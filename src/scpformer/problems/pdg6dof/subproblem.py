@@ -373,7 +373,7 @@ class PDGSubproblem:
         slices = self.primal_slices(solver)
         call = solve_timed(self.problem, solver, reuse=True, settings=CONIC_SETTINGS, primal=slices)
         if not call.solved:
-            return failed_solution(call.status, call.wall_time, call.solver_time)
+            return SubproblemSolution.failed(call.status, call.wall_time, call.solver_time)
         return self.solution_from(
             call.values, lambda_, call.status, call.solver_time, call.wall_time
         )
@@ -472,21 +472,6 @@ def trust_region_scales(instance: PDGInstance) -> tuple[np.ndarray, np.ndarray, 
         ]
     )
     return scale_x, np.full(3, 0.25 * c.T_max), 0.5
-
-
-def failed_solution(status: str, wall: float, solve_time: float) -> SubproblemSolution:
-    return SubproblemSolution(
-        status=status,
-        x=None,
-        u=None,
-        sigma=math.nan,
-        nu=None,
-        buffers=None,
-        cost=math.nan,
-        solver_time=solve_time,
-        wall_time=wall,
-        message=status,
-    )
 
 
 def compiled_subproblem(

@@ -27,7 +27,6 @@ elementwise products over the whole horizon, so the expression tree does not gro
 from __future__ import annotations
 
 import functools
-import math
 
 import cvxpy as cp
 import numpy as np
@@ -133,7 +132,7 @@ class RendezvousSubproblem:
         """
         call = solve_timed(self.problem, solver)
         if not call.solved or self.X.value is None:
-            return _failed(call.status, call.wall_time, call.solver_time)
+            return SubproblemSolution.failed(call.status, call.wall_time, call.solver_time)
         dv = self.U.value / U_SCALE
         return SubproblemSolution(
             status=call.status,
@@ -143,18 +142,6 @@ class RendezvousSubproblem:
             solver_time=call.solver_time,
             wall_time=call.wall_time,
         )
-
-
-def _failed(status: str, wall: float, solver_time: float) -> SubproblemSolution:
-    return SubproblemSolution(
-        status=status,
-        x=None,
-        u=None,
-        cost=math.nan,
-        solver_time=solver_time,
-        wall_time=wall,
-        message=status,
-    )
 
 
 @functools.lru_cache(maxsize=16)
