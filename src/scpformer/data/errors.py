@@ -8,6 +8,8 @@ command prints it as one ``error:`` line (see :mod:`scpformer.cli.errors`).
 from __future__ import annotations
 
 import errno
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 
 class DatasetError(ValueError):
@@ -24,6 +26,21 @@ def is_disk_full(err: BaseException) -> bool:
         return True
     text = str(err)
     return "No space left on device" in text or "errno = 28" in text or "Disk quota" in text
+
+
+RESUME_HINT = "finished shards are kept: free space and re-run the same command to resume"
+
+
+@contextmanager
+def disk_full_as_error(where: object, then: str) -> Iterator[None]:
+    """Within the block, an error that reports a full disk (:func:`is_disk_full`) becomes a
+    :class:`DiskFullError` ``"disk full while writing {where}; {then}"``; others pass."""
+    try:
+        yield
+    except OSError as err:
+        if is_disk_full(err):
+            raise DiskFullError(f"disk full while writing {where}; {then}") from None
+        raise
 
 
 def short_message(err: BaseException) -> str:

@@ -19,7 +19,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full, short_message
+from scpformer.data.errors import (
+    RESUME_HINT,
+    DatasetError,
+    disk_full_as_error,
+    short_message,
+)
 from scpformer.data.family import Field
 from scpformer.files import write_text_atomic
 from scpformer.validation import check_int, check_type, known_fields
@@ -342,15 +347,8 @@ def write_manifest(folder: Path | str, manifest: Manifest) -> None:
             f"{path}: {where} is not a finite number (NaN or infinity), which a manifest cannot "
             "hold; nothing was written"
         ) from None
-    try:
+    with disk_full_as_error(path, RESUME_HINT):
         write_text_atomic(path, text)
-    except OSError as err:
-        if is_disk_full(err):
-            raise DiskFullError(
-                f"disk full while writing {path}; finished shards are kept: free space and "
-                "re-run the same command to resume"
-            ) from None
-        raise
 
 
 def _first_non_finite(value: Any, where: str = "") -> str | None:

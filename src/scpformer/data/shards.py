@@ -20,7 +20,12 @@ from typing import Any
 import h5py
 import numpy as np
 
-from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full, short_message
+from scpformer.data.errors import (
+    RESUME_HINT,
+    DatasetError,
+    disk_full_as_error,
+    short_message,
+)
 from scpformer.data.family import Field
 from scpformer.data.manifest import (
     MANIFEST_NAME,
@@ -185,15 +190,8 @@ def write_shard(
         for f in schema:
             _create(h5, f, columns[f.name])
     data = buffer.getvalue()
-    try:
+    with disk_full_as_error(f"{path.name} in {path.parent}", RESUME_HINT):
         write_bytes_atomic(path, data)
-    except OSError as err:
-        if is_disk_full(err):
-            raise DiskFullError(
-                f"disk full while writing {path.name} in {path.parent}; finished shards are "
-                "kept: free space and re-run the same command to resume"
-            ) from None
-        raise
     statuses = Counter(str(s) for s in columns["status"]) if "status" in columns else Counter()
     return ShardInfo(
         file=path.name,

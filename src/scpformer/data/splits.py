@@ -24,7 +24,7 @@ import h5py
 import numpy as np
 
 from scpformer.data import storage
-from scpformer.data.errors import DatasetError, DiskFullError, is_disk_full, short_message
+from scpformer.data.errors import DatasetError, disk_full_as_error, short_message
 from scpformer.data.storage import ShardedSamples
 from scpformer.files import write_bytes_atomic
 
@@ -267,14 +267,8 @@ def write_splits(folder: Path, splits: Splits) -> None:
         for name, stats in splits.stats.items():
             for key in ("mean", "std", "count"):
                 h5.create_dataset(f"stats/{name}/{key}", data=getattr(stats, key))
-    try:
+    with disk_full_as_error(path, "nothing was changed: free space and re-run"):
         write_bytes_atomic(path, buffer.getvalue())
-    except OSError as err:
-        if is_disk_full(err):
-            raise DiskFullError(
-                f"disk full while writing {path}; nothing was changed: free space and re-run"
-            ) from None
-        raise
 
 
 def load_splits(folder: Path | str) -> Splits:
