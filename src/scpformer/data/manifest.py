@@ -32,6 +32,17 @@ from scpformer.validation import check_int, check_type, known_fields
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 TMP_SUFFIX = ".tmp"
+# The fields a run must share with a folder to resume into it (and the source's content id).
+IDENTITY_FIELDS = (
+    "format_version",
+    "family",
+    "kind",
+    "seed",
+    "n",
+    "shard_size",
+    "config",
+    "transform",
+)
 SHARD_GLOB = "shard-*.h5"
 
 
@@ -163,17 +174,8 @@ class Manifest:
 
     def identity(self) -> dict[str, Any]:
         """What must match for a run to resume into this folder (JSON-normalized)."""
-        identity = {
-            "format_version": self.format_version,
-            "family": self.family,
-            "kind": self.kind,
-            "seed": self.seed,
-            "n": self.n,
-            "shard_size": self.shard_size,
-            "config": self.config,
-            "transform": self.transform,
-            "source": (self.source or {}).get("content_id"),
-        }
+        identity = {name: getattr(self, name) for name in IDENTITY_FIELDS}
+        identity["source"] = (self.source or {}).get("content_id")
         return json.loads(json.dumps(identity))
 
     # -- serialization -----------------------------------------------------------------------
