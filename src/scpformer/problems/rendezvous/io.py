@@ -95,8 +95,9 @@ def constants_record(instance: RendezvousInstance) -> dict[str, Any]:
     return record
 
 
-def save_solution(path: str | Path, solution: Solution, instance: RendezvousInstance) -> None:
-    """Write ``solution`` to ``path`` atomically (temporary name in the folder, then rename).
+def trajectory_arrays(solution: Solution, instance: RendezvousInstance) -> dict[str, Any]:
+    """The fields both rendezvous families write: ``t``, ``roe``, ``rtn``, ``dv``, ``cost``,
+    ``status``, ``reward_to_go`` and ``target_oe`` (also for a robust instance).
 
     Raises
     ------
@@ -112,19 +113,29 @@ def save_solution(path: str | Path, solution: Solution, instance: RendezvousInst
         raise ValueError(
             f"solution shapes {roe.shape}, {dv.shape} do not match N = {n} of the instance"
         )
-    rtn = linear_model(instance).rtn(roe)
-    arrays = {
+    return {
         "t": instance.times(),
         "roe": roe,
-        "rtn": rtn,
+        "rtn": linear_model(instance).rtn(roe),
         "dv": dv,
         "cost": np.float64(np.linalg.norm(dv, axis=1).sum()),
         "status": np.str_(solution.status.value),
-        "constraint_to_go": constraint_to_go(rtn, instance.scenario),
         "reward_to_go": reward_to_go(dv),
         "target_oe": np.str_(json.dumps(target_record(instance))),
-        "constants": np.str_(json.dumps(constants_record(instance))),
     }
+
+
+def save_solution(path: str | Path, solution: Solution, instance: RendezvousInstance) -> None:
+    """Write ``solution`` to ``path`` atomically (temporary name in the folder, then rename).
+
+    Raises
+    ------
+    ValueError
+        If the solution has no trajectory or does not match the instance's node count.
+    """
+    arrays = trajectory_arrays(solution, instance)
+    arrays["constraint_to_go"] = constraint_to_go(arrays["rtn"], instance.scenario)
+    arrays["constants"] = np.str_(json.dumps(constants_record(instance)))
     save_npz_atomic(path, arrays)
 
 

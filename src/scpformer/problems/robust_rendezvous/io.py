@@ -27,8 +27,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.files import save_npz_atomic
-from scpformer.problems.rendezvous.io import load_solution, target_record
-from scpformer.problems.rendezvous.problem import reward_to_go
+from scpformer.problems.rendezvous.io import load_solution, trajectory_arrays
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.safety import (
     constraint_violation_budget,
@@ -71,13 +70,8 @@ def save_solution(
 
     ``constraint_to_go`` is the Eq. 7 budget in ``mode`` (deterministic: ``beta = 0``).
     """
-    if solution.trajectory is None:
-        raise ValueError(f"no trajectory to write: status {solution.status.value}")
-    x = np.asarray(solution.trajectory.x, dtype=float)
-    u = np.asarray(solution.trajectory.u, dtype=float)
-    n = instance.n_nodes
-    if x.shape != (n + 1, 6) or u.shape != (n, 3):
-        raise ValueError(f"solution shapes {x.shape}, {u.shape} do not match N = {n}")
+    arrays = trajectory_arrays(solution, instance)  # type: ignore[arg-type]
+    x, u = arrays["roe"], arrays["dv"]
     safety = safety_record(instance, x, u, solution.extras.get("dynamics", "nonlinear"))
     h = safety["safety"] if mode == "chance" else safety["safety_mean"]
     constants = {
@@ -90,19 +84,9 @@ def save_solution(
         "t_safety_s": instance.t_safety_s,
         "q": instance.uncertainty.q,
     }
-    arrays = {
-        "t": instance.times(),
-        "roe": x,
-        "rtn": linear_model(instance).rtn(x),
-        "dv": u,
-        "cost": np.float64(np.linalg.norm(u, axis=1).sum()),
-        "status": np.str_(solution.status.value),
-        "constraint_to_go": constraint_violation_budget(h),
-        "reward_to_go": reward_to_go(u),
-        "target_oe": np.str_(json.dumps(target_record(instance))),  # type: ignore[arg-type]
-        "constants": np.str_(json.dumps(constants)),
-        **safety,
-    }
+    arrays["constraint_to_go"] = constraint_violation_budget(h)
+    arrays["constants"] = np.str_(json.dumps(constants))
+    arrays.update(safety)
     save_npz_atomic(path, arrays)
 
 
