@@ -22,7 +22,7 @@ import socket
 import time
 import traceback
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -233,18 +233,11 @@ class LocalPool:
         return [failed_task(self.family, self.seed, index, WORKER_CRASHED, message, wall)]
 
     def _enforce_time_limit(self) -> list[TaskResult]:
-        results = []
-        now = time.perf_counter()
-        for number, slot in enumerate(self._slots):
-            if slot.index is None or now - slot.started <= self.time_limit:
-                continue
+        def stop(slot: _Slot) -> None:
             _stop(slot.process, grace=0.0)
             slot.conn.close()
-            index, wall = slot.index, now - slot.started
-            self._slots[number] = self._start()
-            message = f"exceeded the {self.time_limit:g} s time limit; worker restarted"
-            results.append(failed_task(self.family, self.seed, index, TIMEOUT, message, wall))
-        return results
+
+        return _time_out_overdue(self, self._slots, stop)
 
     def _dispatch(self) -> None:
         for slot in self._slots:
@@ -269,6 +262,24 @@ class LocalPool:
             _stop(slot.process, grace=2.0)
             slot.conn.close()
         self._slots = []
+
+
+def _time_out_overdue(
+    pool: Any, workers: list[Any], stop: Callable[[Any], None]
+) -> list[TaskResult]:
+    """Stop each of ``pool``'s ``workers`` (slots or actors) whose instance has run past
+    ``pool.time_limit``, start a fresh one in its place, and report the instance as timed out."""
+    results = []
+    now = time.perf_counter()
+    for number, worker in enumerate(workers):
+        if worker.index is None or now - worker.started <= pool.time_limit:
+            continue
+        stop(worker)
+        index, wall = worker.index, now - worker.started
+        workers[number] = pool._start()
+        message = f"exceeded the {pool.time_limit:g} s time limit; worker restarted"
+        results.append(failed_task(pool.family, pool.seed, index, TIMEOUT, message, wall))
+    return results
 
 
 def _stop(process: Any, grace: float) -> None:
@@ -450,17 +461,9 @@ class RayPool:
         return [failed_task(self.family, self.seed, index, WORKER_CRASHED, message, wall)]
 
     def _enforce_time_limit(self) -> list[TaskResult]:
-        results = []
-        now = time.perf_counter()
-        for number, actor in enumerate(self._actors):
-            if actor.index is None or now - actor.started <= self.time_limit:
-                continue
-            self._ray.kill(actor.handle, no_restart=True)
-            index, wall = actor.index, now - actor.started
-            self._actors[number] = self._start()
-            message = f"exceeded the {self.time_limit:g} s time limit; worker restarted"
-            results.append(failed_task(self.family, self.seed, index, TIMEOUT, message, wall))
-        return results
+        return _time_out_overdue(
+            self, self._actors, lambda actor: self._ray.kill(actor.handle, no_restart=True)
+        )
 
     def _dispatch(self) -> None:
         for actor in self._actors:
