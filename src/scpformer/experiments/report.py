@@ -62,6 +62,7 @@ from typing import Any
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from scpformer.files import atomic_path
 from scpformer.files import write_text_atomic as atomic_write_text
 
 REPORT_NAME = "report.md"
@@ -440,6 +441,11 @@ def new_figure(
 
 
 def save_figure(figure: Figure, path: Path) -> str:
-    """Save as PNG (small: 100 dpi) and return the file name for the report."""
-    figure.savefig(path, dpi=100)
+    """Save as PNG (small: 100 dpi) and return the file name for the report.
+
+    Written through a temporary file, so that a failed write (full disk) leaves an earlier
+    figure at ``path`` untouched.
+    """
+    with atomic_path(path, suffix=Path(path).suffix or ".png") as tmp:
+        figure.savefig(tmp, dpi=100)
     return Path(path).name

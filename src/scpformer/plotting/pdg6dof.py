@@ -34,6 +34,7 @@ from matplotlib.ticker import FormatStrFormatter
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from scpformer.dynamics import quaternion as quat
+from scpformer.files import atomic_path
 
 __all__ = ["REQUIRED_CONSTANTS", "plot_history", "plot_trajectory"]
 
@@ -94,9 +95,11 @@ def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained"
 
 
 def _save(fig: Figure, path: str | PathLike[str] | None) -> None:
+    """Write ``fig`` to ``path`` (format from the suffix) through a temporary file, so that a
+    failed write (full disk) leaves an earlier figure at ``path`` untouched."""
     if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=_DPI)  # format from the suffix
+        with atomic_path(path, suffix=Path(path).suffix or ".png") as tmp:
+            fig.savefig(tmp, dpi=_DPI)
 
 
 def _bound(ax, value: float, label: str | None) -> None:

@@ -18,11 +18,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from os import PathLike
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+
+from scpformer.files import atomic_path
 
 __all__ = ["REQUIRED_CONSTANTS", "plot_trajectory"]
 
@@ -253,6 +256,7 @@ def plot_trajectory(
     _draw_maneuvers(fig.add_subplot(grid[2, :]), t_orb, dv)
     cost = 1e3 * np.linalg.norm(dv, axis=1).sum()
     fig.suptitle(title or f"ISS rendezvous: N = {t.size - 1}, cost {cost:.1f} mm/s", fontsize=13)
-    if path is not None:
-        fig.savefig(path, dpi=_DPI)  # format from the suffix
+    if path is not None:  # through a temporary file: a failed write keeps an earlier figure
+        with atomic_path(path, suffix=Path(path).suffix or ".png") as tmp:
+            fig.savefig(tmp, dpi=_DPI)  # format from the suffix
     return fig

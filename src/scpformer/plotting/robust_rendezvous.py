@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Ellipse
 
+from scpformer.files import atomic_path
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.io import safety_record
 from scpformer.problems.robust_rendezvous.safety import (
@@ -106,8 +107,10 @@ def plot_solution(
     plot_drift_arcs(ax2, instance, x, u, every=2, zoom=2.0)
     plot_constraint_history(ax3, instance, x, u)
     fig.tight_layout()
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
+    if path is not None:  # through a temporary file: a failed write keeps an earlier figure
+        try:
+            with atomic_path(path, suffix=Path(path).suffix or ".png") as tmp:
+                fig.savefig(tmp, dpi=120)
+        finally:
+            plt.close(fig)
     return fig
