@@ -227,8 +227,9 @@ def export_run(
     ------
     ValueError
         Bad ``run`` or ``onnx_file``, a corrupt checkpoint (:class:`CheckpointError`), a kind
-        without an :data:`EXPORTS` entry, or an ONNX output farther than ``tolerance`` from
-        PyTorch's.
+        without an :data:`EXPORTS` entry, a network the ONNX checker refuses, or an ONNX output
+        farther than ``tolerance`` from PyTorch's. The file of a network that fails a check is
+        not written (an earlier one is kept).
     """
     onnx_file = Path(onnx_file)
     if not tolerance > 0.0:
@@ -240,13 +241,9 @@ def export_run(
     results = []
     for name, ckpt in checkpoints:
         path = output_path(onnx_file, name)
-        result = export_network(ckpt, path, name=name, opset=opset, seed=seed)
-        if not result.max_abs_diff <= tolerance:
-            raise ValueError(
-                f"{path}: onnxruntime differs from PyTorch by {result.max_abs_diff:.3g} "
-                f"(tolerance {tolerance:g})"
-            )
-        results.append(result)
+        results.append(
+            export_network(ckpt, path, name=name, opset=opset, seed=seed, tolerance=tolerance)
+        )
     return results
 
 
@@ -262,13 +259,27 @@ def load_for_export(path: Path) -> Checkpoint:
 
 
 def export_network(
-    ckpt: Checkpoint, path: Path, *, name: str = "", opset: int = DEFAULT_OPSET, seed: int = 0
+    ckpt: Checkpoint,
+    path: Path,
+    *,
+    name: str = "",
+    opset: int = DEFAULT_OPSET,
+    seed: int = 0,
+    tolerance: float | None = None,
 ) -> ExportResult:
     """Write ``ckpt``'s network to ``path`` (atomically) and compare onnxruntime with PyTorch.
 
     The check's inputs have another batch size (3) and length (the training sequences' N, or
     the context) than the traced ones (2 x :data:`EXPORT_STEPS`), so that a shape frozen
-    into the graph shows as a failure.
+    into the graph shows as a failure. Both checks (the ONNX checker, then onnxruntime
+    against PyTorch) run on the temporary file: ``path`` is written only when they pass, and
+    an earlier file there is kept otherwise.
+
+    Raises
+    ------
+    ValueError
+        Naming ``path`` when the ONNX checker refuses the network, or onnxruntime differs
+        from PyTorch by more than ``tolerance`` (``None``: no limit).
     """
     onnx, ort = _onnx_modules()
     spec = EXPORTS[ckpt.kind]
@@ -288,10 +299,21 @@ def export_network(
                 opset_version=opset,
                 dynamo=False,
             )
-        onnx.checker.check_model(str(tmp))
-    steps = ckpt.n_steps or getattr(ckpt.config, "context", EXPORT_STEPS)
-    check = spec.inputs(ckpt, 3, steps)
-    diff = max_abs_diff(module, ort.InferenceSession(str(path)), check)
+        try:
+            onnx.checker.check_model(str(tmp))
+        except onnx.checker.ValidationError as err:
+            raise ValueError(
+                f"{path}: the ONNX checker refused the exported network ({_first_line(err)}); "
+                "nothing was written"
+            ) from None
+        steps = ckpt.n_steps or getattr(ckpt.config, "context", EXPORT_STEPS)
+        check = spec.inputs(ckpt, 3, steps)
+        diff = max_abs_diff(module, ort.InferenceSession(str(tmp)), check)
+        if tolerance is not None and not diff <= tolerance:
+            raise ValueError(
+                f"{path}: onnxruntime differs from PyTorch by {diff:.3g} "
+                f"(tolerance {tolerance:g}); nothing was written"
+            )
     shapes = {k: tuple(v.shape) for k, v in check.items()}
     return ExportResult(name, ckpt.kind, path, shapes, diff)
 
@@ -304,6 +326,12 @@ def max_abs_diff(module: nn.Module, session: Any, inputs: Mapping[str, Tensor]) 
     got = session.run(None, {k: v.numpy() for k, v in inputs.items()})
     diffs = [np.max(np.abs(g - e.numpy()), initial=0.0) for g, e in zip(got, expected, strict=True)]
     return float(max(diffs))
+
+
+def _first_line(err: BaseException) -> str:
+    """The first line of ``err``'s message (at most 200 characters), or its class name."""
+    text = str(err).strip()
+    return text.splitlines()[0][:200] if text else type(err).__name__
 
 
 def _onnx_modules() -> tuple[Any, Any]:
