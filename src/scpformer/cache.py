@@ -6,7 +6,9 @@ cvxpy version and the source of the module that builds the object, so any code c
 the cache instead of loading a stale object. Only files this module wrote are read (pickle),
 written atomically (temporary name, then rename) inside an envelope ``(magic, key, object)``;
 an unreadable file, or one that unpickles to anything else, is a miss: rebuilt and replaced.
-A cache folder that cannot be used (a file, read-only) only costs rebuilding.
+A cache folder that cannot be used (a file, read-only) only costs rebuilding; when
+``$SCPFORMER_CACHE_DIR`` names a file (or lies under one), one warning line says so on stderr,
+once per process.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import contextlib
 import hashlib
 import os
 import pickle
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -55,7 +58,7 @@ def cached_pickle(key: str, build: Callable[[], T], source: str | None = None) -
         Path of the module whose code defines the object; its text is part of the digest.
     """
     folder = cache_dir()
-    if folder is None:
+    if folder is None or not _usable(folder):
         return build()
     path = folder / f"{key}-{_digest(source)}-{_MAGIC}.pkl"  # never read by older versions
     found = _load(path, key)
@@ -67,6 +70,30 @@ def cached_pickle(key: str, build: Callable[[], T], source: str | None = None) -
 
 
 _MISS = object()
+_warned: set[Path] = set()  # cache folders already reported unusable by this process
+
+
+def _usable(folder: Path) -> bool:
+    """Whether ``folder`` is, or can become, a folder: not a file, nor under one.
+
+    An unusable folder is reported once per process by one warning line on stderr (each
+    subproblem is then rebuilt on every run instead of loaded).
+    """
+    existing = next((p for p in (folder, *folder.parents) if p.exists()), None)
+    if existing is None or existing.is_dir():
+        return True
+    if folder not in _warned:
+        _warned.add(folder)
+        where = "is a file" if existing == folder else f"lies under the file {existing}"
+        print(
+            f"scpformer: warning: the cache folder {folder} (SCPFORMER_CACHE_DIR) {where}, "
+            "not a folder: nothing is cached (compiled subproblems are rebuilt every run)",
+            file=sys.stderr,
+            flush=True,
+        )
+    return False
+
+
 _MAGIC = "scpformer-cache-1"  # first item of every entry's envelope (magic, key, object)
 
 
