@@ -152,7 +152,10 @@ def test_an_existing_run_is_not_overwritten_and_resumes_only_as_itself(toy_rdv, 
         _train(toy_rdv, tmp_path / "run", 2)
     with pytest.raises(CheckpointError, match="kind 'art', not 'gru'"):
         _train(toy_rdv, tmp_path / "run", 2, kind="gru", resume=True)
-    result = _train(toy_rdv, tmp_path / "new", 1, resume=True)  # nothing to resume: starts
+    with pytest.raises(ValueError, match=r"--resume: .*new holds no training run to resume"):
+        _train(toy_rdv, tmp_path / "new", 1, resume=True)  # nothing to resume
+    assert not (tmp_path / "new").exists()
+    result = _train(toy_rdv, tmp_path / "new", 1)
     assert result.resumed_from == 0
     (tmp_path / "new" / "checkpoint.pt").unlink()  # a run that lost its checkpoint
     kept = {f.name: f.read_bytes() for f in (tmp_path / "new").iterdir() if f.is_file()}

@@ -50,6 +50,7 @@ from scpformer.data.tscvx_arrays import (
     solution_stats,
     unflatten_solution,
 )
+from scpformer.files import atomic_path, write_text_atomic
 
 LOOKUP_KINDS = ("kdtree", "interp")
 LOOKUP_NPZ = "lookup.npz"
@@ -204,7 +205,7 @@ class LookupPart:
 
 
 class LookupPredictor:
-    """A lookup table behind the T-SCvx predictor API (contract of issue 14).
+    """A lookup table behind the T-SCvx predictor API (as :mod:`scpformer.models.tscvx`).
 
     ``theta`` is raw (``theta_vector(instance)``), ``(16,)`` or ``(B, 16)``; ``k`` the 1-based
     SCvx iteration, an int or ``(B,)``. Outputs are unbatched for a ``(16,)`` theta with an
@@ -369,7 +370,7 @@ def save_lookup(predictor: LookupPredictor, run_dir: Path | str) -> Path:
         arrays[f"{name}_points"] = part.table.points
         arrays[f"{name}_values"] = part.table.values
     npz = run / LOOKUP_NPZ
-    with npz.open("wb") as fh:
+    with atomic_path(npz) as tmp, tmp.open("wb") as fh:  # a full disk keeps an earlier table
         np.savez_compressed(fh, **arrays)
     meta = {
         "format": LOOKUP_FORMAT,
@@ -381,7 +382,7 @@ def save_lookup(predictor: LookupPredictor, run_dir: Path | str) -> Path:
         "dataset_content_id": predictor.content_id,
         "npz_sha256": file_sha256(npz),
     }
-    (run / LOOKUP_JSON).write_text(json.dumps(meta, indent=2) + "\n")
+    write_text_atomic(run / LOOKUP_JSON, json.dumps(meta, indent=2) + "\n")
     return run
 
 
@@ -457,6 +458,12 @@ def train_lookup(
     Raises ``ValueError`` before fitting when ``out`` already holds a lookup table: it is not
     replaced unasked.
     """
+    for name, what in (("manifest.json", "a dataset"), ("checkpoint.pt", "a training run")):
+        if (Path(out) / name).exists() or any(Path(out).glob(f"*/{name}")):
+            raise ValueError(
+                f"--out {out} holds {what} ({name}): the lookup table would be written among "
+                "its files; give another --out"
+            )
     taken = [name for name in (LOOKUP_JSON, LOOKUP_NPZ) if (Path(out) / name).exists()]
     if taken:
         raise ValueError(

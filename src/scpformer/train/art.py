@@ -35,7 +35,7 @@ import torch
 from scpformer import __version__
 from scpformer.data.errors import DatasetError
 from scpformer.data.splits import SPLITS_NAME
-from scpformer.data.storage import file_sha256
+from scpformer.data.storage import MANIFEST_NAME, file_sha256
 from scpformer.data.torch_views import ArtSequenceDataset
 from scpformer.files import write_text_atomic
 from scpformer.train import distributed
@@ -233,7 +233,7 @@ def train_sequence_model(
     overrides
         :class:`TrainConfig` fields to change (None values ignored), e.g. ``epochs``, ``lr``.
     resume
-        Continue the run in ``out`` from its checkpoint (a new run when there is none yet).
+        Continue the run in ``out`` from its checkpoint (``ValueError`` when there is none).
         The stored model and training configuration are kept; only ``epochs`` and ``device``
         may change.
     models
@@ -245,8 +245,8 @@ def train_sequence_model(
     ------
     ValueError
         Bad arguments, a dataset that cannot be trained on (``DatasetError``), a run folder that
-        already holds a checkpoint without ``resume``, or a checkpoint that does not match
-        (``CheckpointError``).
+        already holds a checkpoint without ``resume`` or none with it, a folder of a dataset or
+        of a T-SCvx run, or a checkpoint that does not match (``CheckpointError``).
     """
     api = resolve(models)
     kinds = tuple(getattr(api, "MODEL_KINDS", ()))
@@ -279,8 +279,12 @@ def _previous_run(out: Path, kind: str, frame: str | None, resume: bool) -> dict
     if not exists:
         if resume:
             refuse_resume_without_checkpoint(out)
-        else:
-            _refuse_overwrite(out, kind)
+            raise ValueError(
+                f"--resume: {out} holds no training run to resume "
+                f"({'no such folder' if not out.exists() else f'no {CHECKPOINT_NAME}'}); "
+                "leave out --resume to start a new run"
+            )
+        _refuse_overwrite(out, kind)
         return None
     payload = read_checkpoint(out, kind=kind, frame=frame)
     payload["extra"] = from_plain(payload["extra"])
@@ -293,6 +297,15 @@ def _refuse_overwrite(out: Path, kind: str) -> None:
     A run writes its files beside its checkpoint, except the ``config.json`` of a start that
     stopped before its first epoch ended: that one (of a ``kind`` run) is the run's to rewrite.
     """
+    if (out / MANIFEST_NAME).exists():
+        raise ValueError(
+            f"--out {out} is a dataset folder (it holds {MANIFEST_NAME}): a training run "
+            "would write its files among the dataset's; give another --out"
+        )
+    if any((out / name / CHECKPOINT_NAME).exists() for name in ("tight", "solution")):
+        raise ValueError(
+            f"--out {out} holds a T-SCvx training run (tight/, solution/): give another --out"
+        )
     names = (CONFIG_NAME, BEST_NAME, METRICS_NAME, LOSS_PLOT_NAME)
     taken = [name for name in names if (out / name).exists()]
     if taken == [CONFIG_NAME] and _describes_a_run(out / CONFIG_NAME, kind):

@@ -349,7 +349,8 @@ def train_tscvx(
     model_overrides
         Fields of both network configurations (e.g. ``{"tokens": "inputs"}``).
     resume
-        Continue the networks' runs from their checkpoints (only epochs and device may change).
+        Continue the networks' runs from their checkpoints (only epochs and device may change);
+        ``ValueError`` when ``out`` holds nothing of them.
     report_split
         Split evaluated at the end (``validation`` or ``test``), written to RUN.
     threads
@@ -371,7 +372,8 @@ def train_tscvx(
     Raises
     ------
     ValueError
-        Bad arguments, unusable data (``DatasetError``), an existing run without ``resume``.
+        Bad arguments, unusable data (``DatasetError``: also a ``report_split`` without a
+        solved sample, checked before training), an existing run without ``resume``.
     """
     if preset_name not in TSCVX_PRESETS:
         raise ValueError(f"preset must be one of {tuple(TSCVX_PRESETS)}, got {preset_name!r}")
@@ -404,14 +406,31 @@ def train_tscvx(
     _check_run_folder(out)
     for name in networks:
         _check_new_or_resume(out / name, resume)
+    if resume and not any(path.is_file() for name in networks for path in (out / name).rglob("*")):
+        where = "no such folder" if not out.exists() else f"nothing in {'/, '.join(networks)}/"
+        raise ValueError(f"--resume: {out} holds no T-SCvx run to resume ({where}); leave out "
+                         "--resume to start a new run")  # fmt: skip
     world, device = distributed.start(configs["tight"].device)
     try:
         arrays, norm = read_tscvx(data, flags="tight" in networks)
+        others = [out / name / CHECKPOINT_NAME for name in NETWORKS if name not in networks]
+        may_report = not others or any(path.is_file() for path in others)
+        if may_report and not np.any(arrays.split == report_split):  # fail before training
+            raise DatasetError(
+                f"the {report_split} split of {data} holds no solved sample, and the run is "
+                f"evaluated on it at the end: pass --report-split "
+                f"{'test' if report_split == 'validation' else 'validation'}, or re-split the "
+                "dataset (scpformer dataset split --fractions ... --force)"
+            )
         if canonical:
             train = arrays.subset(arrays.split == "train")
             norm = TscvxNormalization.canonical_from_arrays(train.theta, train.x, train.u, train.tf)
         masks = fold_masks(arrays, folds, configs["tight"].validation_fraction,
                            configs["tight"].seed)  # fmt: skip
+        for fold, (train_mask, val_mask) in enumerate(masks, start=1):  # all before training
+            if not (train_mask.any() and val_mask.any()):
+                raise DatasetError(f"fold {fold} of {data} has {int(train_mask.sum())} training "
+                                   f"and {int(val_mask.sum())} validation samples")  # fmt: skip
         context = _RunContext(data=data, arrays=arrays, norm=norm, masks=masks,
                               preset=preset_name, model_overrides=dict(model_overrides or {}),
                               thrust_weight=float(thrust_weight),
