@@ -107,7 +107,7 @@ def test_batched_tight_flags_are_the_networks_flags_at_each_iteration():
     from scpformer.data.pdg6dof_family import theta_vector
     from scpformer.warmstart.tscvx import TIGHT_BATCH
 
-    provider = TscvxWarmStart.from_run(default_model("pdg6dof"))
+    provider = TscvxWarmStart.from_checkpoint(default_model("pdg6dof"))
     instance = PDGInstance()
     flags = provider.tight(instance)
     theta = theta_vector(instance)
@@ -125,3 +125,16 @@ def test_flags_of_the_wrong_size_are_refused():
     provider = TscvxWarmStart(WrongSize(None))
     with pytest.raises(ValueError, match=r"predict_tight gave flags of shape \(8, 7\)"):
         provider.tight(PDGInstance())(1)
+
+
+def test_from_run_is_a_deprecated_alias_of_from_checkpoint(monkeypatch):
+    calls = []
+
+    def from_checkpoint(cls, path, device="cpu", **kwargs):
+        calls.append((path, device, kwargs))
+        return "provider"
+
+    monkeypatch.setattr(TscvxWarmStart, "from_checkpoint", classmethod(from_checkpoint))
+    with pytest.warns(DeprecationWarning, match="use TscvxWarmStart.from_checkpoint"):
+        assert TscvxWarmStart.from_run("RUN", config=None) == "provider"
+    assert calls == [("RUN", "cpu", {"config": None})]

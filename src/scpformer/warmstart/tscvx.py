@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -57,12 +58,15 @@ class TscvxWarmStart:
     # predictor); ``solve`` uses the solve's configuration
 
     @classmethod
-    def from_run(cls, run_dir: str | Path, device: str = "cpu", **kwargs: Any) -> TscvxWarmStart:
-        """Load ``RUN`` with :func:`scpformer.models.tscvx.load_tscvx_predictor`.
+    def from_checkpoint(
+        cls, path: str | Path, device: str = "cpu", **kwargs: Any
+    ) -> TscvxWarmStart:
+        """Load a T-SCvx run folder with :func:`scpformer.models.tscvx.load_tscvx_predictor`
+        (named like :meth:`scpformer.warmstart.art.ArtWarmStart.from_checkpoint`).
 
         A missing or unreadable run is a ``ValueError`` naming it.
         """
-        path = require_model_path(run_dir)
+        path = require_model_path(path)
         try:
             from scpformer.models.tscvx import load_tscvx_predictor
         except ModuleNotFoundError as err:
@@ -72,6 +76,16 @@ class TscvxWarmStart:
         except Exception as err:  # a corrupt run raises whatever torch/pickle/zip raise
             raise ValueError(f"--model {path}: not a readable T-SCvx run ({err})") from err
         return cls(predictor, **kwargs)
+
+    @classmethod
+    def from_run(cls, run_dir: str | Path, device: str = "cpu", **kwargs: Any) -> TscvxWarmStart:
+        """Deprecated name of :meth:`from_checkpoint` (warns)."""
+        warnings.warn(
+            "TscvxWarmStart.from_run is deprecated; use TscvxWarmStart.from_checkpoint",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return cls.from_checkpoint(run_dir, device=device, **kwargs)
 
     def guess(self, instance: PDGInstance) -> WarmStartResult:
         config = self.config or PDGSolverConfig(n_nodes=int(self.predictor.n_nodes))
