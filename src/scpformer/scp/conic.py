@@ -31,9 +31,9 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import cvxpy as cp
 import numpy as np
@@ -41,6 +41,10 @@ import scipy.sparse as sp
 from cvxpy.cvxcore.python.canonInterface import get_parameter_vector
 from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import CLARABEL
 from numpy.typing import ArrayLike
+
+from scpformer.cache import cached_pickle
+
+_Sub = TypeVar("_Sub")
 
 SOLVERS: dict[str, str] = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
 SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)  # statuses with a usable primal solution
@@ -62,6 +66,21 @@ def check_solver(solver: str, what: str = "solver") -> str:
 def canonicalize(problem: cp.Problem, solver: str) -> None:
     """Compile ``problem`` for ``solver`` now, so that the first solve only maps parameters."""
     problem.get_problem_data(SOLVERS[check_solver(solver)], solver_opts={})
+
+
+def compiled(key: str, make: Callable[[], _Sub], solver: str, source: str) -> _Sub:
+    """A family's subproblem ``make()`` (an object with a cvxpy ``problem``), canonicalized for
+    ``solver`` and kept on disk (:func:`scpformer.cache.cached_pickle`) under ``key``, which
+    names the structure and the solver; ``source`` (the family module's file) is digested too,
+    so that a change of the module builds it again."""
+    check_solver(solver)
+
+    def build() -> _Sub:
+        sub = make()
+        canonicalize(sub.problem, solver)
+        return sub
+
+    return cached_pickle(key, build, source=source)
 
 
 @dataclass(frozen=True)

@@ -58,15 +58,13 @@ from typing import Any
 import cvxpy as cp
 import numpy as np
 
-from scpformer.cache import cached_pickle
 from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.scp.conic import (
     SubproblemSolution,
     VariableSlices,
     assign,
     batched_matvec,
-    canonicalize,
-    check_solver,
+    compiled,
     solve_timed,
     variable_slices,
 )
@@ -495,12 +493,5 @@ def _compiled_subproblem(n_nodes: int, fix_roll: bool, soft: bool, solver: str) 
     scpformer versions and this module's source, so that it is built once per machine rather
     than once per process.
     """
-    check_solver(solver)
     key = f"pdg6dof-subproblem-N{n_nodes}-roll{int(fix_roll)}-soft{int(soft)}-{solver}"
-
-    def build() -> PDGSubproblem:
-        sub = PDGSubproblem(n_nodes, fix_roll, soft)
-        canonicalize(sub.problem, solver)
-        return sub
-
-    return cached_pickle(key, build, source=__file__)
+    return compiled(key, lambda: PDGSubproblem(n_nodes, fix_roll, soft), solver, __file__)

@@ -31,13 +31,12 @@ import functools
 import cvxpy as cp
 import numpy as np
 
-from scpformer.cache import cached_pickle
 from scpformer.scp.conic import (
     SubproblemSolution,
     assign,
     batched_matvec,
-    canonicalize,
     check_solver,
+    compiled,
     solve_timed,
 )
 
@@ -158,10 +157,4 @@ def compiled_subproblem(
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
     key = f"rendezvous-{kind}-N{n_nodes}-wp{n_waypoint}-{solver}"
-
-    def build() -> RendezvousSubproblem:
-        sub = RendezvousSubproblem(kind, n_nodes, n_waypoint)
-        canonicalize(sub.problem, solver)
-        return sub
-
-    return cached_pickle(key, build, source=__file__)
+    return compiled(key, lambda: RendezvousSubproblem(kind, n_nodes, n_waypoint), solver, __file__)

@@ -45,13 +45,11 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from scpformer.cache import cached_pickle
 from scpformer.scp.conic import (
     SOLVED,
     assign,
     batched_matvec,
-    canonicalize,
-    check_solver,
+    compiled,
     solve_timed,
 )
 from scpformer.scp.scvx_star import PenaltyTerm
@@ -200,13 +198,5 @@ def compiled_safety_subproblem(
     n_nodes: int, solver: str = "clarabel", n_rows: int = 1
 ) -> SafetySubproblem:
     """The process-wide Eq. 17 subproblem per ``N``, ``K`` and solver (disk-cached)."""
-    check_solver(solver)
-
-    def build() -> SafetySubproblem:
-        sub = SafetySubproblem(n_nodes, n_rows)
-        canonicalize(sub.problem, solver)
-        return sub
-
-    return cached_pickle(
-        f"robust-rendezvous-eq17-N{n_nodes}-K{n_rows}-{solver}", build, source=__file__
-    )
+    key = f"robust-rendezvous-eq17-N{n_nodes}-K{n_rows}-{solver}"
+    return compiled(key, lambda: SafetySubproblem(n_nodes, n_rows), solver, __file__)
