@@ -377,7 +377,7 @@ class TaskFamily:
 
 
 @dataclass
-class Progress:
+class ProgressPrinter:
     """Counts printed (to stderr) while an experiment runs."""
 
     total: int
@@ -412,7 +412,7 @@ def run_tasks(
     todo = [i for i, task in enumerate(tasks) if int(task.index) not in done]
     if todo:
         executor = make_executor(TaskFamily(tuple(tasks), solver), options, len(todo))
-        progress = Progress(len(todo))
+        progress = ProgressPrinter(len(todo))
         try:
             executor.submit(todo)
             while executor.pending():
