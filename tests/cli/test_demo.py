@@ -20,22 +20,38 @@ def test_an_out_path_that_is_a_file_is_a_one_line_usage_error(tmp_path, capsys):
 def test_demo_solves_every_problem_verified_and_writes_the_figures(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out)]) == 0
-    table = capsys.readouterr().out.splitlines()
-    assert table[0].split()[:2] == ["problem", "warm"]
-    rows = [line for line in table[2:8]]
-    assert [row.split()[-1] for row in rows] == ["yes"] * 6
-    for name in ("CVX", "ART", "TPBVP", "ART", "cubic profile", "T-SCvx networks"):
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:3] == ["problem", "instance", "warm"]
+    rows = lines[2:10]
+    assert [row.split()[-1] for row in rows] == ["yes"] * 8
+    for name in ("CVX", "ART", "TPBVP", "cubic profile", "T-SCvx networks"):
         assert any(name in row for row in rows)
+    # the robust rows: one instance where the Eq. 8 check accepts ART's guess, one where
+    # it falls back to the TPBVP, each labelled
+    robust = [row for row in rows if row.startswith("robust")]
+    accepted = [row for row in robust if "check accepts" in row]
+    rejected = [row for row in robust if "check rejects it -> TPBVP" in row]
+    assert len(robust) == 4 and len(accepted) == 1 and len(rejected) == 1
+    assert "(check passes)" in accepted[0] and "(check fails)" in rejected[0]
+    # the legend names the units and what an iteration counts
+    legend = "\n".join(lines[10:])
+    for term in ("[mm/s]", "[U_M]", "U_M is", "iterations  convex subproblems", "time [s]"):
+        assert term in legend
+    total = [line for line in lines if line.startswith("total ")]
+    assert len(total) == 1 and "warm-up" in total[0]
     figures = sorted(path.name for path in out.glob("*.png"))
     assert figures == sorted(
         [
             "rendezvous_cvx.png",
             "rendezvous_art.png",
-            "robust_ps_cvx.png",
-            "robust_ps_art.png",
+            "robust_seed22_ps_cvx.png",
+            "robust_seed22_ps_art.png",
+            "robust_seed0_ps_cvx.png",
+            "robust_seed0_ps_art.png",
             "landing_scvx.png",
             "landing_scvx_history.png",
             "landing_t_scvx.png",
             "landing_t_scvx_history.png",
         ]
     )
+    assert all((out / name).stat().st_size > 0 for name in figures)
