@@ -126,3 +126,33 @@ def test_tracked_files_hold_no_absolute_path_of_this_machine() -> None:
     pattern = path_pattern(machine_paths())
     found = violations(tracked_text_files(), {"machine path": pattern}, PATH_ALLOWED)
     assert not found, "use a path relative to the repository or $DATA:\n" + "\n".join(found[:50])
+
+
+FACADES = ("scpformer.pdg6dof", "scpformer.rendezvous", "scpformer.robust_rendezvous")
+
+
+def test_the_api_reference_renders_every_family_facade() -> None:
+    """Each family's public module is rendered whole (``::: scpformer.<family>``), so every
+    function it exports (``solve``, ``sample_instances``, ...) is in the API reference."""
+    import importlib
+    import inspect
+
+    pages = "\n".join(p.read_text(encoding="utf-8") for p in (REPO / "docs" / "api").glob("*.md"))
+    directives = set(re.findall(r"^::: ([\w.]+)\s*$", pages, flags=re.MULTILINE))
+    for name in FACADES:
+        assert name in directives, f"docs/api/ has no '::: {name}'"
+        module = importlib.import_module(name)
+        functions = [n for n in module.__all__ if inspect.isfunction(getattr(module, n))]
+        assert "solve" in functions and "sample_instances" in functions, (name, functions)
+
+
+def test_the_changelog_has_a_dated_entry_for_the_current_version() -> None:
+    import tomllib
+
+    version = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))["project"][
+        "version"
+    ]
+    changelog = (REPO / "CHANGELOG.md").read_text(encoding="utf-8")
+    entries = re.findall(r"^## (\d+\.\d+\.\d+) - (\d{4}-\d{2}-\d{2})$", changelog, re.MULTILINE)
+    assert entries, "CHANGELOG.md has no '## X.Y.Z - YYYY-MM-DD' entry"
+    assert entries[0][0] == version, f"the newest entry is {entries[0][0]}, pyproject {version}"
