@@ -151,6 +151,7 @@ def summary_rows(solution: Solution) -> list[tuple[str, str]]:
         rows.append(("message", solution.message))
     if solution.trajectory is not None:
         rows.append(("cost sum |dv|", f"{solution.cost:.4f} m/s"))
+    rows += replay_rows(solution)
     ctg = math.nan
     if "violation_budget" in ex:
         ctg = int(ex["violation_budget"][0])
@@ -165,6 +166,16 @@ def summary_rows(solution: Solution) -> list[tuple[str, str]]:
             ("  linearization", f"{tm.discretization:.3f} s"),
         ]
     return rows
+
+
+def replay_rows(solution: Solution) -> list[tuple[str, str]]:
+    """The truth replay's miss of the waypoint, when the verification replayed the plan."""
+    ver = solution.verification
+    if ver is None or "position_m" not in ver.terminal_error:
+        return []
+    miss = ver.terminal_error
+    text = f"{miss['position_m']:.3f} m, {miss['velocity_m_s'] * 1e3:.3f} mm/s"
+    return [("truth replay miss", f"{text} ({'passed' if ver.passed else 'failed'})")]
 
 
 def run_solve(args: argparse.Namespace) -> int:
