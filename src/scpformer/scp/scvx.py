@@ -100,10 +100,9 @@ from scpformer.scp.solution import (
     IterationRecord,
     Solution,
     Status,
-    Timing,
     Trajectory,
     Verification,
-    verified_status,
+    finished_solution,
 )
 from scpformer.validation import check_in_range, check_int, check_positive
 
@@ -510,26 +509,15 @@ def _finish(
     start: float,
     clock: dict[str, float],
 ) -> Solution:
-    t_verify = time.perf_counter()
-    verification = problem.verify(z)
-    t_verify = time.perf_counter() - t_verify
-    status, message = verified_status(status, message, verification)
-    if status is Status.MAX_ITERATIONS:
-        message = f"no convergence in {len(history)} iterations (penalty {ev.penalty:.3g})"
-    timing = Timing(
-        total=time.perf_counter() - start,
+    return finished_solution(
+        problem,
+        z,
+        ev.cost,
+        status,
+        message,
+        history,
+        start=start,
         discretization=clock["discretization"],
         solver=clock["solver"],
-        verification=t_verify,
-    )
-    return Solution(
-        status=status,
-        trajectory=z,
-        t=problem.node_times(z),
-        cost=ev.cost,
-        iterations=len(history),
-        history=history,
-        verification=verification,
-        timing=timing,
-        message=message,
+        merit=f"penalty {ev.penalty:.3g}",
     )

@@ -83,10 +83,9 @@ from scpformer.scp.solution import (
     IterationRecord,
     Solution,
     Status,
-    Timing,
     Trajectory,
     Verification,
-    verified_status,
+    finished_solution,
 )
 from scpformer.validation import check_bool, check_finite, check_int, check_positive
 
@@ -523,26 +522,15 @@ def _finish(
     start: float,
     init_time: float,
 ) -> Solution:
-    t_verify = time.perf_counter()
-    verification = problem.verify(state.z)
-    t_verify = time.perf_counter() - t_verify
-    status, message = verified_status(status, message, verification)
-    if status is Status.MAX_ITERATIONS:
-        message = f"no convergence in {len(history)} iterations (chi {state.evaluation.chi:.3g})"
-    timing = Timing(
-        total=time.perf_counter() - start,
+    return finished_solution(
+        problem,
+        state.z,
+        state.evaluation.cost,
+        status,
+        message,
+        history,
+        start=start,
         discretization=init_time + sum(h.time_discretization for h in history),
         solver=sum(h.time_solver for h in history),
-        verification=t_verify,
-    )
-    return Solution(
-        status=status,
-        trajectory=state.z,
-        t=problem.node_times(state.z),
-        cost=state.evaluation.cost,
-        iterations=len(history),
-        history=history,
-        verification=verification,
-        timing=timing,
-        message=message,
+        merit=f"chi {state.evaluation.chi:.3g}",
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import asdict, dataclass, field
 from enum import Enum
 from typing import Any
@@ -135,3 +136,49 @@ class Solution:
         if not accepted:
             return np.zeros(0, dtype=bool)
         return accepted[-1].tight_flags
+
+
+def finished_solution(
+    problem: Any,
+    z: Trajectory,
+    cost: float,
+    status: Status,
+    message: str,
+    history: list[IterationRecord],
+    *,
+    start: float,
+    discretization: float,
+    solver: float,
+    merit: str,
+) -> Solution:
+    """The :class:`Solution` of an SCP loop that stopped at ``z`` with ``status``.
+
+    ``z`` is verified by ``problem.verify`` (timed), :func:`verified_status` decides the
+    status, and a run stopped at the iteration cap says so with ``merit`` (its last penalty or
+    constraint violation, e.g. ``"penalty 0.1"``). ``start`` is the loop's
+    ``time.perf_counter()`` at its start; ``discretization`` and ``solver`` its seconds in
+    each.
+    """
+    t_verify = time.perf_counter()
+    verification = problem.verify(z)
+    t_verify = time.perf_counter() - t_verify
+    status, message = verified_status(status, message, verification)
+    if status is Status.MAX_ITERATIONS:
+        message = f"no convergence in {len(history)} iterations ({merit})"
+    timing = Timing(
+        total=time.perf_counter() - start,
+        discretization=discretization,
+        solver=solver,
+        verification=t_verify,
+    )
+    return Solution(
+        status=status,
+        trajectory=z,
+        t=problem.node_times(z),
+        cost=cost,
+        iterations=len(history),
+        history=history,
+        verification=verification,
+        timing=timing,
+        message=message,
+    )
