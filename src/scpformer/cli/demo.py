@@ -181,9 +181,9 @@ def run_demo(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ValueError(f"--out {out}: cannot create the folder ({err.strerror})") from None
+    start = time.perf_counter()
     from scpformer.cli.warmstart import single_thread_inference
 
-    start = time.perf_counter()
     single_thread_inference()
     providers = _load()
     loaded = time.perf_counter()
@@ -204,9 +204,9 @@ def run_demo(args: argparse.Namespace) -> int:
     end = time.perf_counter()
     solves = sum(row.seconds for row in rows)
     print(
-        f"total {end - start:.1f} s: models loaded {loaded - start:.1f} s, warm-up "
+        f"total {end - start:.1f} s: imports and models {loaded - start:.1f} s, warm-up "
         f"{warmed - loaded:.1f} s, the rows {solves:.1f} s, the rest {end - warmed - solves:.1f} s "
-        "(figures, drawn beside the solves); Python start-up and imports come before. One "
+        "(figures, drawn beside the solves); Python's start-up and exit come outside it. One "
         "instance each: statistics over held-out draws are in docs/learned-warm-starts.md"
     )
     return 0 if all(row.verified for row in rows) else 1
