@@ -156,7 +156,7 @@ def _load() -> _Providers:
             config=roc,
             mode=roc.safety_mode,
         ),
-        tscvx=TscvxWarmStart.from_run(default_model("pdg6dof"), config=pc),
+        tscvx=TscvxWarmStart.from_checkpoint(default_model("pdg6dof"), config=pc),
     )
 
 
