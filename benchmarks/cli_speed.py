@@ -1,21 +1,29 @@
-"""The speed a user feels (issue 16, item 6): CLI start-up, solve overhead, replay check.
+"""The speed a user feels: CLI start-up, ``--help`` of every command, solve overhead, replay
+check.
 
-Measures, side by side in one run (interleaved, so that both see the same machine load):
+Measures, interleaved so that the trees compared see the same machine load:
 
-1. ``scpformer --help`` wall time of a process, for the source tree ``--before`` (default
-   ``/work/main/src``) and ``--after`` (default: this checkout's ``src``), median of
-   ``--help-runs``;
-2. ``scpformer solve rendezvous`` process wall time minus the solve time the command itself
-   reports (warm start + SCP wall time, the latter including the verification), median of
-   ``--solve-runs``;
-3. the rendezvous replay check (:func:`scpformer.problems.rendezvous.problem.verify_solution`)
-   per solve, run by each tree in a child process on the same ``--n`` SCP plans of sampled
-   instances (solved once, here), each instance verified once on a cold cache; median over
-   the instances, and the largest difference of the two trees' replayed RTN positions.
+1. ``--help`` of every command (``scpformer --help``, then every command and sub-command of
+   :data:`scpformer.cli.commands.COMMANDS` and of the parsers they build, e.g.
+   ``scpformer generate rendezvous --help``): process wall time, median of ``--help-runs``,
+   for the source tree ``--after`` (default: this checkout's ``src``) and, when given, the
+   source tree ``--before``; a command above ``--limit`` seconds (0.5) is flagged, and the
+   exit status is 1 when the ``--after`` tree has one;
+2. with ``--before``: ``scpformer solve rendezvous`` process wall time minus the solve time
+   the command itself reports (warm start + SCP wall time, the latter including the
+   verification), median of ``--solve-runs``;
+3. with ``--before``: the rendezvous replay check (``verify_solution`` of
+   :mod:`scpformer.problems.rendezvous.problem`) per solve, run by each tree in a child
+   process on the same ``--n`` SCP plans of sampled instances (solved once, here), each
+   instance verified once on a cold cache; median over the instances, and the largest
+   difference of the two trees' replayed RTN positions.
 
-The load average before and after is printed: timings on a shared machine are noisy.
+``--before`` is a source folder (``src`` of another checkout, e.g. one made by ``git
+worktree add``). The load average before and after is printed: timings on a shared machine
+are noisy.
 
-Usage: python benchmarks/cli_speed.py [--help-runs 10] [--solve-runs 5] [--n 20]
+Usage: python benchmarks/cli_speed.py [--before OTHER/src] [--help-runs 5] [--limit 0.5]
+       [--solve-runs 5] [--n 20] [--help-only]
 """
 
 from __future__ import annotations
@@ -44,7 +52,7 @@ def _children_cpu() -> float:
 
 def _process(src: Path, *args: str) -> tuple[float, float, str]:
     """Wall and CPU (user + system) time [s] and stdout of ``python -m scpformer.cli.main
-    ARGS`` importing ``src``."""
+    ARGS`` importing ``src`` (a ``RuntimeError`` when it fails)."""
     env = {**os.environ, "PYTHONPATH": str(src)}
     cpu = _children_cpu()
     start = time.perf_counter()
@@ -121,13 +129,13 @@ def replay_child(plans: Path, out: Path) -> None:
 
 def replay_times(trees: dict[str, Path], n: int, seed: int) -> None:
     """Replay check per solve of each tree on the same ``n`` SCP plans (solved here)."""
-    from scpformer.problems.rendezvous import problem
     from scpformer.problems.rendezvous.instance import sample_instances
+    from scpformer.rendezvous import solve
 
     plans: dict[str, np.ndarray] = {}
     kept = []
     for instance in sample_instances(np.random.default_rng(seed), n):
-        sol = problem.solve(instance, "scp", verify=False)
+        sol = solve(instance, method="scp", verify=False)
         if sol.trajectory is not None:
             plans[f"x{len(kept)}"], plans[f"dv{len(kept)}"] = sol.trajectory.x, sol.trajectory.u
             kept.append(instance.to_dict())
@@ -154,25 +162,103 @@ def replay_times(trees: dict[str, Path], n: int, seed: int) -> None:
     print(f"largest RTN position difference of the two replays {gap:.2e} m; verdicts equal: {same}")
 
 
+def command_paths() -> list[tuple[str, ...]]:
+    """Every command of the ``scpformer`` parser of this process (``--after``'s when run as
+    the script): ``()``, then the commands of ``COMMANDS`` and the sub-commands of their
+    parsers, in the order ``--help`` lists them."""
+    from scpformer.cli.main import build_parser
+
+    paths: list[tuple[str, ...]] = []
+
+    def walk(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> None:
+        paths.append(path)
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name in list(action.choices):
+                    walk(action.choices[name], (*path, name))
+
+    walk(build_parser(), ())
+    return paths
+
+
+def _list_commands(src: Path) -> list[tuple[str, ...]]:
+    """:func:`command_paths` of the tree ``src`` (in a child process that imports it)."""
+    env = {**os.environ, "PYTHONPATH": str(src)}
+    done = subprocess.run([sys.executable, __file__, "--list-commands"], env=env,
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    return [tuple(json.loads(line)) for line in done.stdout.splitlines()]
+
+
+def help_times(trees: dict[str, Path], runs: int, limit: float) -> bool:
+    """Print the median ``--help`` wall time of every command per tree; True when a command
+    of the last tree (``after``) is above ``limit`` seconds."""
+    paths = _list_commands(trees["after"])
+    times: dict[tuple[str, ...], dict[str, list[float]]] = {
+        p: {n: [] for n in trees} for p in paths
+    }
+    failed: dict[tuple[str, ...], set[str]] = {p: set() for p in paths}
+    for _ in range(runs):
+        for path in paths:
+            for name, src in trees.items():
+                if name in failed[path]:
+                    continue
+                try:
+                    times[path][name].append(_process(src, *path, "--help")[0])
+                except RuntimeError:
+                    failed[path].add(name)  # e.g. a command the before tree lacks
+    width = max(len(" ".join(p)) for p in paths) + len("scpformer  --help")
+    header = "  ".join(f"{name:>8s}" for name in trees)
+    print(f"--help wall time [s], median of {runs} (flag: above {limit} s)")
+    print(f"{'command':<{width}}  {header}")
+    slow = False
+    for path in paths:
+        cells = []
+        for name in trees:
+            if name in failed[path]:
+                cells.append(f"{'fails':>8s}")
+                continue
+            median = statistics.median(times[path][name])
+            flag = " *" if median > limit else "  "
+            cells.append(f"{median:6.3f}{flag}")
+            slow |= name == "after" and median > limit
+        command = " ".join(("scpformer", *path, "--help"))
+        print(f"{command:<{width}}  {'  '.join(cells)}")
+    print(f"commands above {limit} s (after): {'yes' if slow else 'none'}")
+    return slow
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--before", type=Path, default=Path("/work/main/src"))
+    parser.add_argument("--before", type=Path, help="source folder of the tree compared with")
     parser.add_argument("--after", type=Path, default=HERE / "src")
-    parser.add_argument("--help-runs", type=int, default=10)
+    parser.add_argument("--help-runs", type=int, default=5)
+    parser.add_argument("--limit", type=float, default=0.5, help="flag --help above this [s]")
+    parser.add_argument("--help-only", action="store_true", help="time --help only")
     parser.add_argument("--solve-runs", type=int, default=5)
     parser.add_argument("--n", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--replay-child", nargs=2, type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--list-commands", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.replay_child:
         replay_child(*args.replay_child)
         return 0
-    trees = {"before": args.before, "after": args.after}
-    print(f"load average before: {os.getloadavg()[0]:.2f}")
-    process_times(trees, args.help_runs, args.solve_runs)
-    replay_times(trees, args.n, args.seed)
-    print(f"load average after: {os.getloadavg()[0]:.2f}")
-    return 0
+    if args.list_commands:
+        print("\n".join(json.dumps(path) for path in command_paths()))
+        return 0
+    trees = {"after": args.after}
+    if args.before is not None:
+        trees = {"before": args.before, "after": args.after}
+    for name, src in trees.items():
+        if not (src / "scpformer" / "__init__.py").is_file():
+            parser.error(f"--{name} {src}: not a source folder holding scpformer/")
+    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    slow = help_times(trees, args.help_runs, args.limit)
+    if args.before is not None and not args.help_only:
+        process_times(trees, args.help_runs, args.solve_runs)
+        replay_times(trees, args.n, args.seed)
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    return 1 if slow else 0
 
 
 if __name__ == "__main__":

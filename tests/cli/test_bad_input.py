@@ -1,6 +1,6 @@
 """Every bad input to ``scpformer solve|bench`` is one ``scpformer: error:`` line, nothing else.
 
-Each case is one probe of issue 11 (or the class it stands for). It asserts the exit status,
+Each case is one probe of a bad input (or the class it stands for). It asserts the exit status,
 that stderr is exactly one line naming the flag, field or path, and that no file that existed
 before is changed. Every case fails before any solve, so the suite runs in-process and fast.
 """
@@ -100,7 +100,7 @@ FLAG_CASES = {
     ),
     "bad-scvx-setting": (["solve", "pdg6dof", "--scvx-rho-1", "0.9"], "rho"),
     "scvx-iter-max-negative": (["solve", "pdg6dof", "--scvx-iter-max", "-1"], "iter_max"),
-    "constant-nan": (["solve", "pdg6dof", "--const-T-max", "nan"], "T_max"),
+    "constant-nan": (["solve", "pdg6dof", "--const-t-max", "nan"], "T_max"),
     "rendezvous-int-field-float": (["solve", "rendezvous", "--scenario-n-nodes", "2.5"], "n-nodes"),
     # output paths: checked before solving
     "out-existing-folder": (["solve", "pdg6dof", "--out", "{dir}"], "is a folder"),

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from scpformer.cli import main as cli_main
-from scpformer.cli.rendezvous import BENCH_FIELDS, add_bench_parser, add_solve_parser
+from scpformer.cli.parsers.rendezvous import add_bench_parser, add_solve_parser
+from scpformer.cli.rendezvous import BENCH_FIELDS
 from scpformer.plotting.rendezvous import plot_trajectory
 from scpformer.problems.rendezvous.io import NPZ_FIELDS
 
@@ -72,7 +73,7 @@ def test_bad_instance_file_ends_with_one_line_error(run, tmp_path, capsys, conte
 def test_missing_instance_file_and_bad_flags_are_clear_errors(run, tmp_path, capsys):
     assert run(["solve", "rendezvous", "--instance", str(tmp_path / "nope.json")]) == 2
     assert "instance file not found" in capsys.readouterr().err
-    assert run(["solve", "rendezvous", "--scp-zeta-K", "500"]) == 2
+    assert run(["solve", "rendezvous", "--scp-zeta-k", "500"]) == 2
     assert "scp.zeta_K (500.0) must not exceed" in capsys.readouterr().err
     assert run(["solve", "rendezvous", "--horizon-orbits", "0.2"]) == 2
     assert "horizon_orbits must lie in" in capsys.readouterr().err
@@ -81,7 +82,7 @@ def test_missing_instance_file_and_bad_flags_are_clear_errors(run, tmp_path, cap
 def test_problem_and_warmstart_flags_pick_what_is_solved(run, capsys):
     assert run(["solve", "rendezvous", "--problem", "tpbvp", "--no-verify"]) == 0
     out = capsys.readouterr().out
-    assert "Problem 1 (tpbvp): optimal" in out and "verified" not in out
+    assert "Problem 1 (tpbvp): optimal" in out and "not verified" in out
     assert run(["solve", "rendezvous", "--seed", "0", "--warmstart", "tpbvp", "--no-verify"]) == 0
     out = capsys.readouterr().out
     assert "warm start (tpbvp): converged" in out and "Eq. 19 met" in out
@@ -106,7 +107,8 @@ def test_help_documents_table_1_defaults(run, capsys):
     assert run(["solve", "rendezvous", "--help"]) == 0
     out = " ".join(capsys.readouterr().out.split())  # undo argparse's line wrapping
     assert "initial (maximum) trust region radius [m] (default: 200.0)" in out
-    assert "--scp-J-tol" in out and "--target-a-m" in out and "--scenario-n-nodes" in out
+    assert "--scp-j-tol" in out  # the scenario and target constants: in --print-config
+    assert "--target-a-m" not in out and "--scenario-n-nodes" not in out
 
 
 def test_bench_writes_a_csv_row_per_instance_and_a_summary(run, tmp_path, capsys):

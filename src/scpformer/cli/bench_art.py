@@ -36,55 +36,15 @@ import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from scpformer.cli.argtypes import count
-from scpformer.cli.commands import command_help
 from scpformer.files import require_model_path
 
 MODES = ("cached", "cached, 2 calls", "cached, bf16", "cached, int8", "no cache")
 FORMATS = {"cached, bf16": "bf16", "cached, int8": "int8"}  # mode -> start() keyword
 R_T1 = -0.2  # R(t_1) [m/s] of the random-weight runs: a typical -J_CVX of Table 1 instances
-
-
-def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "art",
-        help=command_help("bench", "art"),
-        description="Generate ART trajectories with the rendezvous dynamics in the loop "
-        "(Algorithm 2) and time them: batch 1 with the key-value cache, and without it (full "
-        "forward at every step), and the batched throughput with the cache. Random weights of "
-        "a preset unless --model gives a trained run.",
-    )
-    parser.add_argument(
-        "--preset", choices=("small", "paper"), default="small", help="model size (small)"
-    )
-    parser.add_argument("--model", type=Path, help="trained run folder or checkpoint.pt")
-    parser.add_argument("--batch", type=int, default=64, help="batch of the throughput run (64)")
-    parser.add_argument("--steps", type=int, default=100, help="time steps N (100)")
-    parser.add_argument("--repeats", type=int, default=5, help="timed runs per mode (5)")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (1)")
-    parser.add_argument("--seed", type=count, default=0, help="instance and weight seed (0)")
-    parser.add_argument(
-        "--target", action="store_true", help="random weights with the target token (robust ART)"
-    )
-    parser.add_argument(
-        "--skip-uncached", action="store_true", help="skip the (slow) run without the cache"
-    )
-    parser.add_argument(
-        "--bf16",
-        action="store_true",
-        help="also time generation with bfloat16 weights (where this CPU runs them)",
-    )
-    parser.add_argument(
-        "--int8",
-        action="store_true",
-        help="also time generation with int8 weights (where this CPU runs them)",
-    )
-    parser.set_defaults(handler=run_bench)
 
 
 # ======================================================================================

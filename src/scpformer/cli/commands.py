@@ -1,17 +1,18 @@
 """Every ``scpformer`` command: its name, one-line help and where its parser is built.
 
-A command's parser (and with it its module, which imports cvxpy, torch, h5py, ...) is built
-only when the command is used: ``scpformer --help`` and ``scpformer solve --help`` list the
-commands from this table alone, and ``scpformer solve rendezvous`` builds (and imports) the
-rendezvous module only. The modules take their ``help=`` from :func:`command_help`, so the
-text lives here once.
+A command's parser is built only when the command is used: ``scpformer --help`` and
+``scpformer solve --help`` list the commands from this table alone, and ``scpformer solve
+rendezvous`` builds the rendezvous parser only. The parsers (:mod:`scpformer.cli.parsers`)
+import no part of the library; a command's handler, and with it cvxpy, torch, h5py, ..., is
+imported when the command runs (:func:`lazy_handler`). The parsers take their ``help=`` from
+:func:`command_help`, so the text lives here once.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
 #: ``(parent, name) -> (help, "module:function")``; the function adds the parser of ``name``
@@ -19,35 +20,35 @@ from typing import Any
 COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
     ("solve", "pdg6dof"): (
         "6-DoF free-final-time Mars powered descent with SCvx",
-        "scpformer.cli.pdg6dof:add_solve_parser",
+        "scpformer.cli.parsers.pdg6dof:add_solve_parser",
     ),
     ("solve", "rendezvous"): (
         "ISS rendezvous in relative orbital elements (ART paper, Problems 1-3)",
-        "scpformer.cli.rendezvous:add_solve_parser",
+        "scpformer.cli.parsers.rendezvous:add_solve_parser",
     ),
     ("solve", "robust-rendezvous"): (
         "passively safe, chance-constrained LEO rendezvous (robust ART, SCvx*)",
-        "scpformer.cli.robust_rendezvous:add_solve_parser",
+        "scpformer.cli.parsers.robust_rendezvous:add_solve_parser",
     ),
     ("bench", "pdg6dof"): (
         "benchmark SCvx on a seeded set of 6-DoF instances",
-        "scpformer.cli.pdg6dof:add_bench_parser",
+        "scpformer.cli.parsers.pdg6dof:add_bench_parser",
     ),
     ("bench", "rendezvous"): (
         "benchmark Problems 1-3 on seeded Table 1 instances",
-        "scpformer.cli.rendezvous:add_bench_parser",
+        "scpformer.cli.parsers.rendezvous:add_bench_parser",
     ),
     ("bench", "robust-rendezvous"): (
         "benchmark SCvx* (deterministic and chance) from the convex warm start",
-        "scpformer.cli.robust_rendezvous:add_bench_parser",
+        "scpformer.cli.parsers.robust_rendezvous:add_bench_parser",
     ),
     ("bench", "art"): (
         "time ART trajectory generation (dynamics in the loop), cached vs uncached",
-        "scpformer.cli.bench_art:add_bench_parser",
+        "scpformer.cli.parsers.bench:add_bench_art_parser",
     ),
     ("bench", "tscvx"): (
         "time T-SCvx network inference (tight flags and solution) at batch 1",
-        "scpformer.cli.bench_tscvx:add_bench_parser",
+        "scpformer.cli.parsers.bench:add_bench_tscvx_parser",
     ),
     ("", "generate"): (
         "sample, solve and store a dataset of a problem family",
@@ -60,7 +61,7 @@ COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
     ("", "train"): ("train a model on a dataset", "scpformer.cli.train:add_train_parser"),
     ("", "experiment"): (
         "reproduce a paper table or figure",
-        "scpformer.cli.experiment:add_experiment_parser",
+        "scpformer.cli.parsers.experiment:add_experiment_parser",
     ),
     ("", "report"): (
         "gather docs/results/*/results.json into docs/RESULTS.md",
@@ -68,7 +69,7 @@ COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
     ),
     ("", "demo"): (
         "solve three problems with classical and pretrained learned warm starts, in a minute",
-        "scpformer.cli.demo:add_demo_parser",
+        "scpformer.cli.parsers.demo:add_demo_parser",
     ),
     ("", "export"): (
         "export a run's networks to ONNX and check them against PyTorch",
@@ -80,6 +81,17 @@ COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
 def command_help(parent: str, name: str) -> str:
     """The one-line help of command ``name`` under ``parent`` (``""``: top level)."""
     return COMMANDS[parent, name][0]
+
+
+def lazy_handler(target: str) -> Callable[[argparse.Namespace], int]:
+    """A command handler named ``"module:function"``, imported when the command runs."""
+
+    def handler(args: argparse.Namespace) -> int:
+        module, function = target.split(":")
+        return getattr(importlib.import_module(module), function)(args)
+
+    handler.target = target  # type: ignore[attr-defined]
+    return handler
 
 
 class _Names(Mapping):

@@ -13,33 +13,18 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-
-from tqdm import tqdm
+from typing import TYPE_CHECKING, Any
 
 from scpformer.cli.argtypes import count, positive
 from scpformer.cli.commands import command_help
-from scpformer.cli.errors import OneLineParser, Terminated, run_command
-from scpformer.data.errors import DatasetError
-from scpformer.data.executors import check_ray_address
-from scpformer.data.family import (
-    ERROR,
-    TIMEOUT,
-    WORKER_CRASHED,
-    DatasetFamily,
-    build_family,
-    check_family_name,
-    family_names,
-    get_family_spec,
-)
-from scpformer.data.generate import GenerateConfig, GenerationReport, Progress, generate
-from scpformer.data.storage import (
-    MANIFEST_NAME,
-    Manifest,
-    read_manifest,
-    shard_damage,
-    verify_dataset,
-)
-from scpformer.files import check_output_folder
+from scpformer.cli.config_file import ConfigParser, add_config_file_arguments
+from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
+from scpformer.cli.errors import Terminated, run_command
+
+if TYPE_CHECKING:  # the parsers import none of the library (``--help`` stays fast)
+    from scpformer.data.family import DatasetFamily
+    from scpformer.data.generate import GenerationReport, Progress
+    from scpformer.data.storage import Manifest
 
 
 @dataclass(frozen=True)
@@ -63,12 +48,11 @@ def register_family_arguments(
 
 
 def _add_pdg6dof_arguments(parser: argparse.ArgumentParser) -> None:
-    from scpformer.cli.pdg6dof import add_config_arguments
-    from scpformer.data.pdg6dof_family import RANGE_PRESETS
+    from scpformer.cli.parsers.pdg6dof import add_config_arguments
 
     parser.add_argument(
         "--ranges",
-        choices=sorted(RANGE_PRESETS),
+        choices=constant("pdg6dof.ranges"),
         default="feasible",
         help="sampling ranges of theta: Table 2's parameters drawn consistently with the "
         "constraints (feasible), Table 2 as an independent box (table2), or the nominal "
@@ -94,14 +78,11 @@ register_family_arguments("pdg6dof", _add_pdg6dof_arguments, _build_pdg6dof)
 
 
 def _add_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
-    from scpformer.cli.dataclass_args import add_dataclass_arguments
-    from scpformer.cli.rendezvous import add_config_arguments
-    from scpformer.problems.rendezvous.instance import SampleRanges
-    from scpformer.problems.rendezvous.problem import WARMSTARTS
+    from scpformer.cli.parsers.rendezvous import add_config_arguments
 
     parser.add_argument(
         "--warmstart",
-        choices=WARMSTARTS,
+        choices=constant("rendezvous.warmstarts"),
         default="convex",
         help="initial reference of Problem 3 (default: convex, the stored convex twin)",
     )
@@ -117,7 +98,7 @@ def _add_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
         help="store the Problem 2 and 3 twins only, not the Problem 1 (TPBVP) twin of Table 2",
     )
     add_dataclass_arguments(
-        parser, SampleRanges, prefix="range", title="sampling ranges of theta (Table 1)"
+        parser, "rendezvous.ranges", prefix="range", title="sampling ranges of theta (Table 1)"
     )
     add_config_arguments(parser)
 
@@ -145,14 +126,11 @@ register_family_arguments("rendezvous", _add_rendezvous_arguments, _build_rendez
 
 
 def _add_robust_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
-    from scpformer.cli.dataclass_args import add_dataclass_arguments
-    from scpformer.cli.robust_rendezvous import add_config_arguments
-    from scpformer.problems.robust_rendezvous.instance import RobustSampleRanges
-    from scpformer.problems.robust_rendezvous.scenario import MODES
+    from scpformer.cli.parsers.robust_rendezvous import add_config_arguments
 
     parser.add_argument(
         "--mode",
-        choices=MODES,
+        choices=constant("robust.modes"),
         default="chance",
         help="passive safety of the last stage: deterministic (X = 0) or chance (default)",
     )
@@ -162,7 +140,7 @@ def _add_robust_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
         help="skip the final check of each stage (statuses then rest on SCvx* alone)",
     )
     add_dataclass_arguments(
-        parser, RobustSampleRanges, prefix="range", title="sampling ranges of theta (Table 1)"
+        parser, "robust.ranges", prefix="range", title="sampling ranges of theta (Table 1)"
     )
     add_config_arguments(parser)
 
@@ -199,16 +177,32 @@ def add_generate_parser(subparsers: argparse._SubParsersAction) -> None:
         "manifest. Re-running the same command resumes an interrupted run.",
     )
     families = parser.add_subparsers(dest="family", required=True, metavar="FAMILY")
-    for name in family_names():
-        try:
-            summary = get_family_spec(name).summary
-        except DatasetError:
-            summary = "(not available yet)"
+    for name, summary in _family_summaries().items():
         sub = families.add_parser(name, help=summary, description=summary)
         _add_common_generate_arguments(sub)
         if name in FAMILY_ARGUMENTS:
             FAMILY_ARGUMENTS[name].add(sub)
+        else:
+            add_config_file_arguments(sub)
         sub.set_defaults(handler=run_generate, family_name=name)
+
+
+def _family_summaries() -> dict[str, str]:
+    """``name -> summary`` of every family: the built-in ones from the snapshot
+    (:mod:`scpformer.cli.schema`, without importing them), and those registered at run time
+    when the registry is loaded."""
+    summaries = dict(constant("families"))
+    registry = sys.modules.get("scpformer.data.family")
+    if registry is not None:
+        from scpformer.data.errors import DatasetError
+
+        for name in registry.family_names():
+            if name not in summaries:
+                try:
+                    summaries[name] = registry.get_family_spec(name).summary
+                except DatasetError:
+                    summaries[name] = "(not available yet)"
+    return summaries
 
 
 def _add_common_generate_arguments(parser: argparse.ArgumentParser) -> None:
@@ -220,7 +214,8 @@ def _add_common_generate_arguments(parser: argparse.ArgumentParser) -> None:
         help="number of instances; a larger --n on an existing dataset grows it",
     )
     group.add_argument("--out", type=Path, required=True, help="dataset folder")
-    group.add_argument("--seed", type=count, default=0, help="root seed of the dataset (0)")
+    group.add_argument("--seed", type=count, default=0,
+                       help=with_default("root seed of the dataset", 0))  # fmt: skip
     group.add_argument(
         "--workers", type=positive, help="worker processes or Ray actors (default: every CPU)"
     )
@@ -229,14 +224,18 @@ def _add_common_generate_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="ADDRESS",
         help="run on the Ray cluster at ADDRESS ('auto', 'ray://host:port'; 'local' starts one)",
     )
-    group.add_argument("--shard-size", type=positive, default=64, help="instances per shard (64)")
+    group.add_argument("--shard-size", type=positive, default=64,
+                       help=with_default("instances per shard", 64))  # fmt: skip
     group.add_argument(
         "--time-limit",
         type=float,
         default=300.0,
         metavar="SECONDS",
-        help="per-instance limit; past it the worker is restarted and the instance stored "
-        "with status timeout (300)",
+        help=with_default(
+            "per-instance limit; past it the worker is restarted and the instance "
+            "stored with status timeout",
+            300.0,
+        ),
     )
     group.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -246,10 +245,14 @@ class _ProgressBar:
 
     def __init__(self, desc: str, disable: bool) -> None:
         self.desc, self.disable = desc, disable
-        self.bar: tqdm | None = None
+        self.bar = None
 
     def __call__(self, progress: Progress) -> None:
+        from scpformer.data.family import ERROR, TIMEOUT, WORKER_CRASHED
+
         if self.bar is None:
+            from tqdm import tqdm
+
             self.bar = tqdm(
                 total=progress.total,
                 initial=progress.done,
@@ -267,6 +270,8 @@ class _ProgressBar:
             self.write(f"instance {result.index}: {result.status}: {result.message}")
 
     def write(self, text: str) -> None:
+        from tqdm import tqdm
+
         tqdm.write(f"scpformer: {text}", file=sys.stderr)
 
     def close(self) -> None:
@@ -276,6 +281,11 @@ class _ProgressBar:
 
 def run_generate(args: argparse.Namespace) -> int:
     """Handler of ``generate FAMILY``."""
+    from scpformer.data.executors import check_ray_address
+    from scpformer.data.family import build_family, get_family_spec
+    from scpformer.data.generate import GenerateConfig, generate
+    from scpformer.files import check_output_folder
+
     name = args.family_name
     check_output_folder(args.out, "--out")
     if args.ray:
@@ -359,8 +369,6 @@ def add_dataset_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _add_augment_parser(commands: argparse._SubParsersAction) -> None:
-    from scpformer.data.augment import ROTATION_ANGLES_DEG
-
     parser = commands.add_parser(
         "augment",
         help="rotate a pdg6dof dataset about Up (T-SCvx augmentation)",
@@ -373,7 +381,7 @@ def _add_augment_parser(commands: argparse._SubParsersAction) -> None:
         "--angles",
         type=float,
         nargs="+",
-        default=list(ROTATION_ANGLES_DEG),
+        default=list(constant("rotation_angles")),
         help="rotation angles about Up in degrees (0 45 ... 315)",
     )
     parser.add_argument("--no-verify", action="store_true", help="skip the nonlinear check")
@@ -409,13 +417,23 @@ def _add_split_parser(commands: argparse._SubParsersAction) -> None:
         help="shares of the groups (0.8 0 0.2)",
     )
     parser.add_argument("--seed", type=count, default=0, help="seed of the group permutation (0)")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace existing splits made with other settings (runs trained on them then "
+        "no longer match their data)",
+    )
     parser.set_defaults(handler=run_split)
 
 
 def run_info(args: argparse.Namespace) -> int:
     """Handler of ``dataset info DIR [--table2]``."""
+    from scpformer.data.family import check_family_name
+    from scpformer.data.storage import MANIFEST_NAME, read_manifest, require_consistent
+
     manifest = read_manifest(args.dir)
     check_family_name(manifest.family, f"{Path(args.dir) / MANIFEST_NAME}: ")
+    require_consistent(args.dir, manifest)
     lines = info_lines(args.dir, manifest)
     if args.table2:
         from scpformer.data.pdg6dof_family import dataset_table2_lines
@@ -427,7 +445,9 @@ def run_info(args: argparse.Namespace) -> int:
 
 def info_lines(folder: Path, manifest: Manifest) -> list[str]:
     """A human-readable summary of a dataset."""
+    from scpformer.data.errors import DatasetError
     from scpformer.data.splits import SPLITS_NAME, load_splits
+    from scpformer.data.storage import shard_damage
 
     counts = manifest.counts()
     kind = manifest.kind
@@ -468,6 +488,7 @@ def info_lines(folder: Path, manifest: Manifest) -> list[str]:
 def run_verify(args: argparse.Namespace) -> int:
     """Handler of ``dataset verify DIR``: exit 0 when clean, 1 with one line per problem."""
     from scpformer.data.splits import check_splits
+    from scpformer.data.storage import read_manifest, verify_dataset
 
     manifest = read_manifest(args.dir)
     problems = verify_dataset(args.dir) + check_splits(args.dir)
@@ -499,7 +520,10 @@ def run_repair(args: argparse.Namespace) -> int:
 
 def run_augment(args: argparse.Namespace) -> int:
     """Handler of ``dataset augment SRC --out DST``."""
+    from tqdm import tqdm
+
     from scpformer.data.augment import RotationAugmentation, augment_dataset
+    from scpformer.files import check_output_folder
 
     check_output_folder(args.out, "--out")
     transform = RotationAugmentation(
@@ -507,7 +531,7 @@ def run_augment(args: argparse.Namespace) -> int:
         converged_only=not args.all_statuses,
         verify=not args.no_verify,
     )
-    bars: list[tqdm] = []  # made at the first shard: an early error stays one line
+    bars: list[Any] = []  # made at the first shard: an early error stays one line
 
     def on_shard(done: int, total: int) -> None:
         if not bars:
@@ -536,7 +560,8 @@ def run_split(args: argparse.Namespace) -> int:
     """Handler of ``dataset split DIR``."""
     from scpformer.data.splits import SplitConfig, make_splits
 
-    splits = make_splits(args.dir, SplitConfig(fractions=tuple(args.fractions), seed=args.seed))
+    config = SplitConfig(fractions=tuple(args.fractions), seed=args.seed)
+    splits = make_splits(args.dir, config, force=args.force)
     sizes = ", ".join(f"{k} {len(v)}" for k, v in splits.indices.items())
     print(f"wrote {args.dir}/splits.h5: {sizes} samples; statistics of {sorted(splits.stats)}")
     return 0
@@ -545,7 +570,7 @@ def run_split(args: argparse.Namespace) -> int:
 # -- standalone entry point --------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     """A parser with only ``generate`` and ``dataset`` (what ``scpformer`` adds them to)."""
-    parser = OneLineParser(prog="scpformer", description="scpformer datasets")
+    parser = ConfigParser(prog="scpformer", description="scpformer datasets")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_generate_parser(commands)
     add_dataset_parser(commands)

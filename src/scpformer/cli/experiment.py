@@ -1,4 +1,5 @@
-"""``scpformer experiment list|run``: the papers' tables and figures (issue 13)."""
+"""``scpformer experiment list|run``: the papers' tables and figures (handlers; the flags
+are in :mod:`scpformer.cli.parsers.experiment`)."""
 
 from __future__ import annotations
 
@@ -7,42 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from scpformer.cli.argtypes import count, positive
-from scpformer.cli.commands import command_help
 from scpformer.experiments import EXPERIMENTS, RunOptions, run_experiment
-
-
-def add_experiment_parser(commands: argparse._SubParsersAction) -> None:
-    """Register ``experiment list`` and ``experiment run NAME`` on the top-level subparsers."""
-    experiment = commands.add_parser("experiment", help=command_help("", "experiment"))
-    actions = experiment.add_subparsers(dest="action", required=True, metavar="ACTION")
-    listing = actions.add_parser("list", help="name every experiment and what it reproduces")
-    listing.set_defaults(handler=run_list)
-    run = actions.add_parser(
-        "run",
-        help="run one experiment into a folder (CSV, PNG, report.md)",
-        description="Run one experiment; an interrupted run resumes where it stopped.",
-    )
-    run.add_argument("name", metavar="NAME", help="experiment name (see `experiment list`)")
-    run.add_argument(
-        "--model",
-        type=Path,
-        action="append",
-        default=[],
-        metavar="RUN",
-        help="training run folder or checkpoint (repeat for several models)",
-    )
-    run.add_argument("--data", type=Path, metavar="DIR", help="dataset folder (split)")
-    run.add_argument("--n", type=positive, help="test instances (default: the experiment's)")
-    run.add_argument("--workers", type=positive, help="local worker processes (default: every CPU)")
-    run.add_argument(
-        "--ray",
-        metavar="ADDRESS",
-        help="run on a Ray cluster ('local' starts one) instead of local processes",
-    )
-    run.add_argument("--out", type=Path, help="output folder (default: docs/results/NAME)")
-    run.add_argument("--seed", type=count, default=0, help="seed of the instance selection (0)")
-    run.set_defaults(handler=run_run)
 
 
 def run_list(args: argparse.Namespace) -> int:

@@ -1,4 +1,5 @@
-"""``scpformer solve pdg6dof`` and ``scpformer bench pdg6dof``."""
+"""``scpformer solve pdg6dof`` and ``scpformer bench pdg6dof``: the handlers; the flags are in
+:mod:`scpformer.cli.parsers.pdg6dof`."""
 
 from __future__ import annotations
 
@@ -9,34 +10,18 @@ from pathlib import Path
 
 import numpy as np
 
-from scpformer.cli.argtypes import count
-from scpformer.cli.commands import command_help
-from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
+from scpformer.cli.dataclass_args import overrides
 from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.files import check_output_file
+from scpformer.problems.pdg6dof.adapter import conic_solves
+from scpformer.problems.pdg6dof.api import solve
+from scpformer.problems.pdg6dof.config import PDGSolverConfig
 from scpformer.problems.pdg6dof.constants import VehicleConstants
-from scpformer.problems.pdg6dof.instance import (
-    PDGInstance,
-    SampleRanges,
-    constants_from_dict,
-    sample_instances,
-)
-from scpformer.problems.pdg6dof.problem import (
-    PDGSolverConfig,
-    conic_solves,
-    propellant_gap,
-    solve,
-    solve_reference,
-)
+from scpformer.problems.pdg6dof.instance import PDGInstance, constants_from_dict
+from scpformer.problems.pdg6dof.metrics import propellant_gap, solve_reference
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 from scpformer.scp.scvx import SCvxParameters
 from scpformer.scp.solution import Solution
-
-
-def add_config_arguments(parser: argparse.ArgumentParser) -> None:
-    """Flags for every solver setting and model constant (Table 1 defaults)."""
-    add_dataclass_arguments(parser, PDGSolverConfig, title="formulation (PDGSolverConfig)")
-    add_dataclass_arguments(parser, SCvxParameters, prefix="scvx", title="SCvx (Table 1)")
-    add_dataclass_arguments(parser, VehicleConstants, prefix="const", title="model (Table 1)")
 
 
 def config_from_args(args: argparse.Namespace) -> PDGSolverConfig:
@@ -55,43 +40,6 @@ def instance_from_args(args: argparse.Namespace) -> PDGInstance:
     return instance
 
 
-def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "pdg6dof",
-        help=command_help("solve", "pdg6dof"),
-        description="Solve the 6-DoF minimum-fuel powered descent problem (T-SCvx paper, "
-        "Eqs. 2-6, Table 1) with SCvx and verify it by nonlinear propagation.",
-    )
-    parser.add_argument(
-        "--instance",
-        type=Path,
-        help="instance JSON (r0, v0, q0, omega0_deg, m0, "
-        "gamma_gs_deg, theta_max_deg[, constants]); default: the nominal instance",
-    )
-    parser.add_argument("--out", type=Path, help="write the solution to this .npz file")
-    parser.add_argument(
-        "--plot", type=Path, help="write a trajectory figure to this .png, .pdf or .svg file"
-    )
-    group = parser.add_argument_group("warm start")
-    group.add_argument(
-        "--warmstart",
-        choices=("cubic_profile", "straight_line", "tscvx", "kdtree", "interp"),
-        default="cubic_profile",
-        help="cubic_profile or straight_line (analytic guesses), or T-SCvx (Algorithm 2) with "
-        "the predictor of --model: tscvx (the networks), kdtree or interp (the lookup tables "
-        "of `scpformer train kdtree|interp`) (default: cubic_profile)",
-    )
-    group.add_argument(
-        "--model",
-        type=Path,
-        metavar="RUN",
-        help="predictor run folder; for tscvx also 'default': the pretrained networks shipped "
-        "with scpformer (default for tscvx: default; kdtree and interp need a run)",
-    )
-    add_config_arguments(parser)
-    parser.set_defaults(handler=run_solve)
-
-
 def warmstart_from_args(args: argparse.Namespace) -> object:
     """An analytic guess's name or the T-SCvx provider of ``--warmstart tscvx|kdtree|interp
     [--model RUN]`` (tscvx without ``--model``, or with ``default``: the shipped,
@@ -107,7 +55,7 @@ def warmstart_from_args(args: argparse.Namespace) -> object:
 
     if args.warmstart == "tscvx":
         single_thread_inference()
-        return TscvxWarmStart.from_run(resolve_model(args.model, "pdg6dof"))
+        return TscvxWarmStart.from_checkpoint(resolve_model(args.model, "pdg6dof"))
     if args.model is None:
         raise ValueError(f"--warmstart {args.warmstart} needs --model RUN "
                          f"(made by `scpformer train {args.warmstart}`)")  # fmt: skip
@@ -140,6 +88,8 @@ def print_summary(solution: Solution, instance: PDGInstance) -> None:
         rows.append(("max node defect (propagated)", f"{ver.max_defect:.2e}"))
         worst = max(ver.path_violations.items(), key=lambda kv: kv[1], default=("-", 0.0))
         rows.append(("worst path violation", f"{worst[0]} {worst[1]:.2e}"))
+    elif solution.trajectory is not None:
+        rows.append(("verified", "not verified"))
     if solution.timing is not None:
         tm = solution.timing
         rows += [
@@ -178,7 +128,8 @@ def run_solve(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     history = history_plot_path(args.plot) if args.plot else None
     check_solve_outputs(args.out, args.plot, history)
-    solution = solve(instance, config, guess=warmstart_from_args(args))
+    method = "scvx" if args.warmstart in ("cubic_profile", "straight_line") else "tscvx"
+    solution = solve(instance, config, method=method, warmstart=warmstart_from_args(args))
     print_summary(solution, instance)
     if solution.trajectory is not None:
         if args.out:
@@ -203,33 +154,6 @@ def write_figures(plot: Path, solution: Solution, instance: PDGInstance) -> None
     restart_after = solution.extras.get("restart", {}).get("after")
     rows = [rec.summary() for rec in solution.history]
     plot_history(rows, path=history_plot_path(plot), restart_after=restart_after)
-
-
-def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "pdg6dof",
-        help=command_help("bench", "pdg6dof"),
-        description="Solve a fixed, seeded set of instances from the nominal sub-range and "
-        "from Table 2; report wall time, iterations, converged rate and the share of time "
-        "inside the conic solver.",
-    )
-    parser.add_argument("--n-nominal", type=count, default=20, help="nominal instances (20)")
-    parser.add_argument("--n-table2", type=count, default=10, help="Table 2 instances (10)")
-    parser.add_argument("--seed", type=count, default=0, help="sampling seed (0)")
-    parser.add_argument(
-        "--optimality",
-        action="store_true",
-        help="also continue every solve to full convergence (200 solves, stationarity "
-        "tolerance 1e-6; untimed) and report the propellant gap to it",
-    )
-    parser.add_argument(
-        "--csv",
-        type=Path,
-        default=Path("bench_pdg6dof.csv"),
-        help="per-instance CSV (bench_pdg6dof.csv)",
-    )
-    add_config_arguments(parser)
-    parser.set_defaults(handler=run_bench)
 
 
 BENCH_FIELDS = (
@@ -342,8 +266,8 @@ def run_bench(args: argparse.Namespace) -> int:
     check_output_file(args.csv, "--csv")
     rng = np.random.default_rng(args.seed)
     sets = [
-        ("nominal", sample_instances(rng, args.n_nominal, SampleRanges.nominal())),
-        ("table2", sample_instances(rng, args.n_table2, SampleRanges.table2())),
+        ("nominal", sample_instances(rng, args.n_nominal, PDGSampleRanges.nominal())),
+        ("table2", sample_instances(rng, args.n_table2, PDGSampleRanges.table2())),
     ]
     start = time.perf_counter()
     solve(PDGInstance(), config)  # canonicalize the parametric subproblem once, untimed

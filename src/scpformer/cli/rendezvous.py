@@ -1,4 +1,5 @@
-"""``scpformer solve rendezvous`` and ``scpformer bench rendezvous`` (ART paper, Sec. 4-5)."""
+"""``scpformer solve rendezvous`` and ``scpformer bench rendezvous`` (ART paper, Sec. 4-5): the
+handlers; the flags are in :mod:`scpformer.cli.parsers.rendezvous`."""
 
 from __future__ import annotations
 
@@ -11,25 +12,18 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.cli.argtypes import count, positive
-from scpformer.cli.commands import command_help
-from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
+from scpformer.cli.dataclass_args import overrides, with_overrides
 from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.cli.warmstart import (
-    add_warmstart_arguments,
     art_provider,
     comparison_rows,
     warmstart_line,
 )
 from scpformer.files import check_output_file
+from scpformer.problems.rendezvous.api import METHODS, solve
+from scpformer.problems.rendezvous.constraints import constraint_to_go
 from scpformer.problems.rendezvous.instance import RendezvousInstance, sample_instances
-from scpformer.problems.rendezvous.problem import (
-    PROBLEMS,
-    WARMSTARTS,
-    constraint_to_go,
-    linear_model,
-    solve,
-)
+from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.problems.rendezvous.scenario import (
     RendezvousScenario,
     RendezvousSolverConfig,
@@ -42,19 +36,8 @@ from scpformer.warmstart import RendezvousConvexWarmStart, WarmStartResult
 
 
 # ======================================================================================
-# shared flags
+# configuration from the flags
 # ======================================================================================
-def add_config_arguments(parser: argparse.ArgumentParser) -> None:
-    """Flags for every solver setting and scenario constant (Table 1 defaults)."""
-    add_dataclass_arguments(parser, RendezvousSolverConfig, title="formulation")
-    add_dataclass_arguments(parser, SCPParameters, prefix="scp", title="SCP (Table 1, Eqs. 17-19)")
-    add_dataclass_arguments(
-        parser, VerificationTolerances, prefix="verify", title="verification (nonlinear replay)"
-    )
-    add_dataclass_arguments(parser, RendezvousScenario, prefix="scenario", title="OCP (Table 1)")
-    add_dataclass_arguments(parser, TargetOrbit, prefix="target", title="target orbit (Table 1)")
-
-
 def config_from_args(args: argparse.Namespace) -> RendezvousSolverConfig:
     """The solver configuration with the command-line overrides applied."""
     return RendezvousSolverConfig(
@@ -78,50 +61,6 @@ def scenario_from_args(
 # ======================================================================================
 # solve
 # ======================================================================================
-def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "rendezvous",
-        help=command_help("solve", "rendezvous"),
-        description="Solve Problem 1 (two-point boundary value), 2 (convex: waypoint and "
-        "approach cone) or 3 (keep-out ellipsoid, SCP of Section 4) of the ART paper for an "
-        "ISS rendezvous (Table 1), and verify it by replaying the impulses through a "
-        "two-body + J2 propagator.",
-    )
-    parser.add_argument(
-        "--problem",
-        choices=PROBLEMS,
-        default="scp",
-        help="which OCP: tpbvp (1), convex (2) or scp (3) (default: scp)",
-    )
-    add_warmstart_arguments(
-        parser, WARMSTARTS, "convex", "initial guess of Problem 3: Problem 1 (tpbvp), 2 (convex)"
-    )
-    source = parser.add_mutually_exclusive_group()
-    source.add_argument(
-        "--instance", type=Path, help="instance JSON (roe0_m, horizon_orbits[, target, scenario])"
-    )
-    source.add_argument(
-        "--seed", type=count, help="sample the instance from Table 1's last column with this seed"
-    )
-    parser.add_argument(
-        "--roe0",
-        type=float,
-        nargs=6,
-        metavar="M",
-        help="initial mean ROE a*dalpha (da, dlambda, dex, dey, dix, diy) [m]",
-    )
-    parser.add_argument("--horizon-orbits", type=float, help="OCP horizon [orbits]")
-    parser.add_argument("--out", type=Path, help="write the solution to this .npz file")
-    parser.add_argument(
-        "--plot", type=Path, help="write Figs. 7-8 style plots to this .png, .pdf or .svg"
-    )
-    parser.add_argument(
-        "--no-verify", action="store_true", help="skip the nonlinear replay of the impulses"
-    )
-    add_config_arguments(parser)
-    parser.set_defaults(handler=run_solve)
-
-
 def instance_from_args(args: argparse.Namespace) -> RendezvousInstance:
     """``--instance FILE``, ``--seed S`` or the default instance, with overrides applied."""
     base = RendezvousInstance.from_json(args.instance) if args.instance else None
@@ -166,6 +105,8 @@ def summary_rows(solution: Solution, instance: RendezvousInstance) -> list[tuple
                 ("max linear-vs-truth gap", f"{ver.max_defect:.3f} m"),
             ]
         rows += [(f"node {k}", f"{v:.3g}") for k, v in ver.node_violations.items()]
+    elif solution.trajectory is not None:
+        rows.append(("verified (replay)", "not verified"))
     if solution.timing is not None:
         tm = solution.timing
         rows += [
@@ -197,9 +138,9 @@ def run_solve(args: argparse.Namespace) -> int:
         provider = provider or RendezvousConvexWarmStart(args.warmstart, config)
         warm = provider.guess(instance)  # the SCP always runs after it
         print(warmstart_line(warm.record, warm.solution))
-        solution = solve(instance, "scp", warm, config=config, verify=verify)
+        solution = solve(instance, config, method="scp", warmstart=warm, verify=verify)
     else:
-        solution = solve(instance, args.problem, config=config, verify=verify)
+        solution = solve(instance, config, method=args.problem, verify=verify)
     print_rows(summary_rows(solution, instance))
     if solution.trajectory is not None:
         if args.out:
@@ -241,35 +182,6 @@ def write_figure(
 # ======================================================================================
 # bench
 # ======================================================================================
-def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "rendezvous",
-        help=command_help("bench", "rendezvous"),
-        description="Solve Problems 1, 2 and 3 (the SCP warm-started from Problem 1 or 2) on a "
-        "seeded set of instances sampled from Table 1; report wall time (median, p95), SCP "
-        "iterations, failure rate, the share of time inside the conic solver and C_CVX(t_1), "
-        "the constraint-to-go of the convex solution. Wall times exclude the verification.",
-    )
-    parser.add_argument("--n", type=positive, default=20, help="number of instances (20)")
-    parser.add_argument("--seed", type=count, default=0, help="sampling seed (0)")
-    parser.add_argument(
-        "--warmstart", choices=WARMSTARTS, default="convex", help="warm start of Problem 3 (convex)"
-    )
-    parser.add_argument(
-        "--csv",
-        type=Path,
-        default=Path("bench_rendezvous.csv"),
-        help="per-instance CSV (bench_rendezvous.csv)",
-    )
-    parser.add_argument(
-        "--no-verify",
-        action="store_true",
-        help="skip the nonlinear replay (the default replays every solution)",
-    )
-    add_config_arguments(parser)
-    parser.set_defaults(handler=run_bench)
-
-
 BENCH_FIELDS = (
     "index",
     "horizon_orbits",
@@ -380,8 +292,8 @@ def summarize(rows: list[dict[str, Any]]) -> list[str]:
 def _warm_up(config: RendezvousSolverConfig, instance: RendezvousInstance) -> float:
     """Canonicalize (or load) the three parametric subproblems, untimed by the bench."""
     start = time.perf_counter()
-    for problem in PROBLEMS:
-        solve(instance, problem, config=config, verify=False)
+    for method in METHODS:
+        solve(instance, config, method=method, verify=False)
     return time.perf_counter() - start
 
 
@@ -401,10 +313,10 @@ def run_bench(args: argparse.Namespace) -> int:
 
     with tqdm(total=len(instances), desc="rendezvous", unit="instance") as bar:
         for index, instance in enumerate(instances):
-            p1 = solve(instance, "tpbvp", config=config, verify=verify)
-            p2 = solve(instance, "convex", config=config, verify=verify)
+            p1 = solve(instance, config, method="tpbvp", verify=verify)
+            p2 = solve(instance, config, method="convex", verify=verify)
             warm = p2 if args.warmstart == "convex" else p1
-            p3 = solve(instance, "scp", warm, config=config, verify=verify)
+            p3 = solve(instance, config, method="scp", warmstart=warm, verify=verify)
             rows.append(bench_row(index, instance, p1, p2, p3, warm))
             bar.set_postfix(status=p3.status.value, it=p3.iterations)
             bar.update()

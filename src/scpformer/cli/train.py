@@ -11,9 +11,11 @@ from pathlib import Path
 
 from scpformer.cli.argtypes import count
 from scpformer.cli.commands import command_help
-from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides
-from scpformer.files import check_output_folder
-from scpformer.train.config import TRAIN_PRESETS, TrainConfig
+from scpformer.cli.config_file import add_config_file_arguments
+from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, overrides
+
+#: the training flags' defaults are the preset's (``--print-config`` writes given values only)
+TRAINING_TITLE = "training (default: the preset's values)"
 
 SEQUENCE_MODELS = ("art", "gru", "lstm")
 _HELP = {
@@ -41,7 +43,7 @@ def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="run folder RUN")
     parser.add_argument(
         "--preset",
-        choices=tuple(TRAIN_PRESETS),
+        choices=constant("train.presets"),
         default=None,
         help="model and training preset: 'paper' (Table 4) or 'small' (two CPU cores) "
         "(default: small; a resumed run keeps its own)",
@@ -55,6 +57,7 @@ def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--twin",
         action="append",
+        choices=("cvx", "scp", "tpbvp", "ps"),
         default=None,
         metavar="TWIN",
         help="trajectory twin to learn from, repeatable: cvx (Problem 2), scp (Problem 3), "
@@ -65,15 +68,32 @@ def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
         "--resume", action="store_true", help="continue the run in --out from its checkpoint"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_dataclass_arguments(
-        parser, TrainConfig, title="training (default: the preset's values; paper values shown)"
-    )
+    add_training_arguments(parser)
+
+
+def add_training_arguments(parser: argparse.ArgumentParser) -> None:
+    """Every ``TrainConfig`` field as a flag (default: the preset's) and ``--config``."""
+    add_dataclass_arguments(parser, "train", title=TRAINING_TITLE, print_defaults=False,
+                            default_note="default: the preset's")  # fmt: skip
+    add_config_file_arguments(parser)
+
+
+def _check_output_folder(path: Path) -> None:
+    from scpformer.files import check_output_folder
+
+    check_output_folder(path, "--out")
+
+
+def _training_overrides(args: argparse.Namespace) -> dict:
+    from scpformer.train.config import TrainConfig
+
+    return overrides(args, TrainConfig)
 
 
 def run_train(args: argparse.Namespace) -> int:
     from scpformer.train.art import train_sequence_model
 
-    check_output_folder(args.out, "--out")
+    _check_output_folder(args.out)
     result = train_sequence_model(
         args.kind,
         data=args.data,
@@ -81,7 +101,7 @@ def run_train(args: argparse.Namespace) -> int:
         preset=args.preset,
         frame=args.frame,
         twins=args.twin,
-        overrides=overrides(args, TrainConfig),
+        overrides=_training_overrides(args),
         resume=args.resume,
         progress=not args.no_progress,
     )
@@ -180,9 +200,7 @@ def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
         "--resume", action="store_true", help="continue the run in --out from its checkpoints"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_dataclass_arguments(
-        parser, TrainConfig, title="training (default: the preset's values; paper values shown)"
-    )
+    add_training_arguments(parser)
     parser.set_defaults(handler=run_train_tscvx)
 
 
@@ -191,14 +209,14 @@ def run_train_tscvx(args: argparse.Namespace) -> int:
 
     if args.solution_epochs is not None and args.solution_epochs < 1:
         raise ValueError(f"--solution-epochs must be positive, got {args.solution_epochs}")
-    check_output_folder(args.out, "--out")
+    _check_output_folder(args.out)
     result = train_tscvx(
         data=args.data,
         out=args.out,
         preset_name=args.preset,
         networks=tuple(args.networks),
         folds=args.folds,
-        overrides=overrides(args, TrainConfig),
+        overrides=_training_overrides(args),
         solution_epochs=args.solution_epochs,
         model_overrides={"tokens": args.tokens} if args.tokens else None,
         resume=args.resume,
@@ -234,10 +252,8 @@ LOOKUP_HELP = {
 
 def add_lookup_parsers(models: argparse._SubParsersAction) -> None:
     """``train kdtree|interp --data DIR --out RUN``: fit a lookup table on the training split."""
-    from scpformer.models.lookup import LOOKUP_PRESETS
-
     for kind, help_text in LOOKUP_HELP.items():
-        preset = LOOKUP_PRESETS[kind]
+        preset = argparse.Namespace(**constant("lookup")[kind])
         parser = models.add_parser(kind, help=help_text, description=help_text)
         parser.add_argument("--data", type=Path, required=True, help="dataset folder (split)")
         parser.add_argument("--out", type=Path, required=True, help="run folder RUN")
@@ -263,6 +279,7 @@ def add_lookup_parsers(models: argparse._SubParsersAction) -> None:
             default=preset.threshold,
             help=f"probability from which a row is predicted tight (default: {preset.threshold})",
         )
+        add_config_file_arguments(parser)
         parser.set_defaults(handler=run_train_lookup, kind=kind)
 
 
@@ -271,7 +288,7 @@ def run_train_lookup(args: argparse.Namespace) -> int:
 
     from scpformer.models.lookup import LOOKUP_PRESETS, train_lookup
 
-    check_output_folder(args.out, "--out")
+    _check_output_folder(args.out)
     config = dataclasses.replace(
         LOOKUP_PRESETS[args.kind],
         n_components=args.n_components,

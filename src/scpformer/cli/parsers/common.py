@@ -1,0 +1,56 @@
+"""Flags shared by several commands: output files, warm starts, configuration sections."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from scpformer.cli.dataclass_args import constant, with_default
+
+#: the usage line of the commands with many flags: the groups below list them
+USAGE = "%(prog)s [options]"
+
+
+def add_output_arguments(
+    parser: argparse.ArgumentParser,
+    plot_help: str = "write Figs. 7-8 style plots to this .png, .pdf or .svg file",
+) -> argparse._ArgumentGroup:
+    """``--out FILE.npz`` and ``--plot FIGURE`` of the solve commands, in group ``output``."""
+    group = parser.add_argument_group("output")
+    group.add_argument("--out", type=Path, help="write the solution to this .npz file")
+    group.add_argument("--plot", type=Path, help=plot_help)
+    return group
+
+
+def add_warmstart_arguments(
+    parser: argparse.ArgumentParser, names: tuple[str, ...], default: str, help_names: str
+) -> None:
+    """``--warmstart`` (the family's ``names`` or ``art``) and the ART flags."""
+    group = parser.add_argument_group("warm start")
+    group.add_argument(
+        "--warmstart",
+        choices=(*names, "art"),
+        default=default,
+        help=with_default(f"{help_names}, or art: the transformer of --model", default),
+    )
+    group.add_argument(
+        "--model",
+        type=Path,
+        metavar="RUN",
+        help=with_default(
+            "ART training run folder or checkpoint file, or 'default': the "
+            "pretrained model shipped with scpformer",
+            "default",
+        ),
+    )
+    group.add_argument(
+        "--art-mode",
+        choices=constant("art.modes"),
+        help=with_default(
+            "ART inference: dynamics in the loop (Algorithm 2) or transformer only (Algorithm 1)",
+            "dynamics",
+        ),
+    )
+    group.add_argument("--rtg", type=float, metavar="R",
+                       help=with_default("R(t_1) [m/s], <= 0", "-J_CVX"))  # fmt: skip
+    group.add_argument("--ctg", type=float, metavar="C", help=with_default("C(t_1)", 0))

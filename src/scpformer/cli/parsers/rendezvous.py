@@ -1,0 +1,120 @@
+"""Flags of ``scpformer solve rendezvous`` and ``scpformer bench rendezvous`` (handlers:
+:mod:`scpformer.cli.rendezvous`)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from scpformer.cli.argtypes import count, positive
+from scpformer.cli.commands import command_help, lazy_handler
+from scpformer.cli.config_file import add_config_file_arguments
+from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
+from scpformer.cli.parsers.common import USAGE, add_output_arguments, add_warmstart_arguments
+
+CONSTANTS_NOTE = (
+    "Table 1's scenario and target-orbit constants are flags --scenario-NAME and "
+    "--target-NAME too, kept out of this list: --print-config writes them with their values, "
+    "and --config FILE or the flags set them."
+)
+
+
+def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+    """Flags for every solver setting and scenario constant (Table 1 defaults)."""
+    add_dataclass_arguments(parser, "rendezvous.solver", title="formulation")
+    add_dataclass_arguments(
+        parser, "scp", prefix="scp", title="SCP parameters (Table 1, Eqs. 17-19)",
+        renames={"stop_test": "stopping"},
+    )  # fmt: skip
+    add_dataclass_arguments(parser, "rendezvous.verification", prefix="verify",
+                            title="verification (nonlinear replay)")  # fmt: skip
+    add_dataclass_arguments(parser, "rendezvous.scenario", prefix="scenario",
+                            title="OCP (Table 1)", hidden=True,
+                            defaults_unless="instance")  # fmt: skip
+    add_dataclass_arguments(parser, "rendezvous.target", prefix="target",
+                            title="target orbit (Table 1)", hidden=True,
+                            defaults_unless="instance")  # fmt: skip
+    add_config_file_arguments(parser)
+
+
+def add_solve_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "rendezvous",
+        help=command_help("solve", "rendezvous"),
+        description="Solve Problem 1 (two-point boundary value), 2 (convex: waypoint and "
+        "approach cone) or 3 (keep-out ellipsoid, SCP of Section 4) of the ART paper for an "
+        "ISS rendezvous (Table 1), and verify it by replaying the impulses through a "
+        "two-body + J2 propagator.",
+        usage=USAGE,
+        epilog=CONSTANTS_NOTE,
+    )
+    parser.add_argument(
+        "--problem",
+        choices=constant("rendezvous.problems"),
+        default="scp",
+        help=with_default("which OCP: tpbvp (1), convex (2) or scp (3)", "scp"),
+    )
+    add_warmstart_arguments(
+        parser,
+        constant("rendezvous.warmstarts"),
+        "convex",
+        "initial guess of Problem 3: Problem 1 (tpbvp), 2 (convex)",
+    )
+    group = parser.add_argument_group("instance")
+    source = group.add_mutually_exclusive_group()
+    source.add_argument(
+        "--instance",
+        type=Path,
+        help="instance JSON (roe0_m, horizon_orbits[, target, scenario]) (default: Table 1's)",
+    )
+    source.add_argument(
+        "--seed", type=count, help="sample the instance from Table 1's last column with this seed"
+    )
+    group.add_argument(
+        "--roe0",
+        type=float,
+        nargs=6,
+        metavar="M",
+        help="initial mean ROE a*dalpha (da, dlambda, dex, dey, dix, diy) [m] (default: the "
+        "instance's)",
+    )
+    group.add_argument("--horizon-orbits", type=float,
+                       help="OCP horizon [orbits] (default: the instance's)")  # fmt: skip
+    output = add_output_arguments(parser)
+    output.add_argument(
+        "--no-verify", action="store_true", help="skip the nonlinear replay of the impulses"
+    )
+    add_config_arguments(parser)
+    parser.set_defaults(handler=lazy_handler("scpformer.cli.rendezvous:run_solve"))
+
+
+def add_bench_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "rendezvous",
+        help=command_help("bench", "rendezvous"),
+        description="Solve Problems 1, 2 and 3 (the SCP warm-started from Problem 1 or 2) on a "
+        "seeded set of instances sampled from Table 1; report wall time (median, p95), SCP "
+        "iterations, failure rate, the share of time inside the conic solver and C_CVX(t_1), "
+        "the constraint-to-go of the convex solution. Wall times exclude the verification.",
+        usage=USAGE,
+        epilog=CONSTANTS_NOTE,
+    )
+    group = parser.add_argument_group("benchmark")
+    group.add_argument("--n", type=positive, default=20,
+                       help=with_default("number of instances", 20))  # fmt: skip
+    group.add_argument("--seed", type=count, default=0, help=with_default("sampling seed", 0))
+    group.add_argument(
+        "--warmstart",
+        choices=constant("rendezvous.warmstarts"),
+        default="convex",
+        help=with_default("warm start of Problem 3", "convex"),
+    )
+    group.add_argument("--csv", type=Path, default=Path("bench_rendezvous.csv"),
+                       help=with_default("per-instance CSV", "bench_rendezvous.csv"))  # fmt: skip
+    group.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="skip the nonlinear replay (the default replays every solution)",
+    )
+    add_config_arguments(parser)
+    parser.set_defaults(handler=lazy_handler("scpformer.cli.rendezvous:run_bench"))

@@ -1,0 +1,118 @@
+"""Flags of ``scpformer solve robust-rendezvous`` and ``scpformer bench robust-rendezvous``
+(handlers: :mod:`scpformer.cli.robust_rendezvous`)."""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+from scpformer.cli.argtypes import count, positive
+from scpformer.cli.commands import command_help, lazy_handler
+from scpformer.cli.config_file import add_config_file_arguments
+from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
+from scpformer.cli.parsers.common import USAGE, add_output_arguments, add_warmstart_arguments
+
+CONSTANTS_NOTE = (
+    "Tables 1-2's scenario and target-orbit constants are flags --scenario-NAME and "
+    "--target-NAME too, kept out of this list: --print-config writes them with their values, "
+    "and --config FILE or the flags set them. SCvx* flags are --scvx-star-NAME (the former "
+    "--scvx-NAME spellings still work, with a warning)."
+)
+
+
+def add_config_arguments(parser: argparse.ArgumentParser, unless: str | None = None) -> None:
+    """Flags for every solver setting and scenario constant (robust Tables 1-2 defaults);
+    ``unless``: the flag (dest) of an instance file whose values replace the defaults.
+
+    The waypoints ``-T`` and ``-R`` are values (``--waypoint -T``, ``--range-waypoints +T -T``),
+    not options: ``parser`` reads them as it reads negative numbers.
+    """
+    parser._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+|[A-Z])$")
+    add_dataclass_arguments(parser, "robust.solver", title="formulation")
+    add_dataclass_arguments(parser, "scvx_star", prefix="scvx-star", legacy_prefix="scvx",
+                            title="SCvx* parameters (Table 1)")  # fmt: skip
+    add_dataclass_arguments(parser, "robust.verification", prefix="verify", title="verification")
+    add_dataclass_arguments(parser, "robust.scenario", prefix="scenario", title="OCP (Table 1)",
+                            hidden=True, defaults_unless=unless)  # fmt: skip
+    add_dataclass_arguments(parser, "robust.target", prefix="target",
+                            title="target orbit (Table 1)", hidden=True,
+                            defaults_unless=unless)  # fmt: skip
+    delta = parser.add_argument(
+        "--delta",
+        type=float,
+        help=with_default("Delta: chance-constraint level", constant("robust.delta")),
+    )
+    delta.config_default = constant("robust.delta")
+    delta.config_default_unless = unless
+    add_config_file_arguments(parser)
+
+
+def add_solve_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "robust-rendezvous",
+        help=command_help("solve", "robust-rendezvous"),
+        description="Solve the passively safe rendezvous of the robust ART paper (Table 1) "
+        "with the three-stage procedure (convex TPBVP -> deterministic collision avoidance -> "
+        "passive safety, deterministic or chance-constrained) and SCvx*; optionally verify "
+        "the chance constraint by Monte Carlo through a two-body + J2 propagator.",
+        usage=USAGE,
+        epilog=CONSTANTS_NOTE,
+    )
+    parser.add_argument(
+        "--mode",
+        choices=constant("robust.modes"),
+        default="chance",
+        help=with_default("passive safety: deterministic or chance-constrained", "chance"),
+    )
+    add_warmstart_arguments(
+        parser,
+        constant("robust.warmstarts"),
+        "three_stage",
+        "three_stage (dataset procedure), tpbvp (PS-CVX)",
+    )
+    group = parser.add_argument_group("instance")
+    source = group.add_mutually_exclusive_group()
+    source.add_argument(
+        "--instance", type=Path, help="instance JSON (x0_rtn, waypoint, ...) (default: Table 1's)"
+    )
+    source.add_argument("--seed", type=count, help="sample the instance (Table 1) with this seed")
+    group.add_argument(
+        "--waypoint",
+        choices=constant("robust.waypoints"),
+        help="pre-docking state (default: the instance's)",
+    )
+    output = add_output_arguments(parser)
+    output.add_argument(
+        "--monte-carlo", type=count, default=0, metavar="N",
+        help=with_default("Monte Carlo draws per node through the two-body + J2 propagator "
+                          "(0: skip)", 0),
+    )  # fmt: skip
+    output.add_argument(
+        "--mc-seed", type=count, default=0, help=with_default("Monte Carlo seed", 0)
+    )
+    add_config_arguments(parser, unless="instance")
+    parser.set_defaults(handler=lazy_handler("scpformer.cli.robust_rendezvous:run_solve"))
+
+
+def add_bench_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "robust-rendezvous",
+        help=command_help("bench", "robust-rendezvous"),
+        description="On a seeded set of Table 1 instances, solve the convex TPBVP and, from "
+        "it, the passive-safety problem with SCvx* in both modes (PS-CVX-D, PS-CVX-C); report "
+        "wall time (median, p95), iterations, infeasibility rate (not converged) and the share "
+        "of time in the conic solver. Wall times exclude the final verification.",
+        usage=USAGE,
+        epilog=CONSTANTS_NOTE,
+    )
+    group = parser.add_argument_group("benchmark")
+    group.add_argument("--n", type=positive, default=20,
+                       help=with_default("number of instances", 20))  # fmt: skip
+    group.add_argument("--seed", type=count, default=0, help=with_default("sampling seed", 0))
+    group.add_argument(
+        "--csv", type=Path, default=Path("bench_robust_rendezvous.csv"),
+        help=with_default("per-instance CSV", "bench_robust_rendezvous.csv"),
+    )  # fmt: skip
+    add_config_arguments(parser)
+    parser.set_defaults(handler=lazy_handler("scpformer.cli.robust_rendezvous:run_bench"))
