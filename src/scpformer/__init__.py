@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 
 @functools.cache
@@ -15,8 +16,22 @@ def _installed_version() -> str:
         return "0.0.0+unknown"
 
 
-def __getattr__(name: str) -> str:
-    """``scpformer.__version__``, read from the installed metadata on first use (PEP 562)."""
+#: the public entry points, one module per problem family, each with ``solve``
+FAMILIES = ("pdg6dof", "rendezvous", "robust_rendezvous")
+
+
+def __getattr__(name: str) -> Any:
+    """``scpformer.__version__`` (read from the installed metadata) and the family modules
+    ``scpformer.pdg6dof``, ``scpformer.rendezvous``, ``scpformer.robust_rendezvous``,
+    imported on first use (PEP 562), so that ``import scpformer`` stays light."""
     if name == "__version__":
         return _installed_version()
+    if name in FAMILIES:
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module 'scpformer' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), "__version__", *FAMILIES})
