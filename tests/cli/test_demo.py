@@ -16,6 +16,19 @@ def test_an_out_path_that_is_a_file_is_a_one_line_usage_error(tmp_path, capsys):
     assert blocker.read_text() == ""
 
 
+def test_figures_are_drawn_only_when_asked_for(tmp_path, capsys):
+    from scpformer.cli.demo import FigureWriter
+    from scpformer.cli.main import build_parser
+
+    assert build_parser().parse_args(["demo"]).out is None  # the quick default: no figures
+    none = FigureWriter(None)
+    none.submit("scpformer.cli.demo:print_table", [])  # would print the table's header
+    none.wait()
+    assert none.path("a.png") is None
+    assert capsys.readouterr().out == ""
+    assert FigureWriter(tmp_path).path("a.png") == tmp_path / "a.png"
+
+
 @pytest.mark.slow
 # the demo shows the current API: a deprecated spelling in it fails the test
 @pytest.mark.filterwarnings("error::DeprecationWarning:scpformer.cli.demo")

@@ -13,13 +13,14 @@ pretrained models of :mod:`scpformer.pretrained`), through the families' ``solve
 
 A warm-up (other instances, untimed) runs first, so that no row pays for first-call costs.
 It prints one table (problem, instance, warm start, cost, iterations, wall time of warm start
-plus solve plus nonlinear verification, verified), a legend of its columns and units, and
-writes one figure per solve into ``--out``.
+plus solve plus nonlinear verification, verified) and a legend of its columns and units;
+with ``--out DIR`` it also writes one figure per solve into ``DIR``, drawn beside the solves.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
 import multiprocessing
 import sys
@@ -68,7 +69,7 @@ class DemoRow:
     iterations: int
     seconds: float  # warm start + solve + verification wall time
     verified: bool
-    figure: Path
+    figure: Path | None  # None without --out
 
 
 def _row(
@@ -78,7 +79,7 @@ def _row(
     cost: str,
     solution: Any,
     seconds: float,
-    figure: Path,
+    figure: Path | None,
 ) -> DemoRow:
     return DemoRow(
         problem,
@@ -92,25 +93,39 @@ def _row(
     )
 
 
-class FigureWriter:
-    """Draws the figures in one forked worker process while the next solves run (Linux), or
-    in this process where ``fork`` is not the platform's safe default; :meth:`wait` re-raises
-    a failed drawing."""
+def _draw(target: str, *args: Any) -> None:
+    """Import ``module:function`` and call it with ``args``."""
+    module, function = target.split(":")
+    getattr(importlib.import_module(module), function)(*args)
 
-    def __init__(self) -> None:
+
+class FigureWriter:
+    """Draws the figures into ``folder`` (none when it is None) in one forked worker process
+    while the next solves run (Linux), or in this process where ``fork`` is not the
+    platform's safe default; :meth:`wait` re-raises a failed drawing."""
+
+    def __init__(self, folder: Path | None) -> None:
+        self.folder = folder
         use_fork = sys.platform.startswith("linux") and (
             "fork" in multiprocessing.get_all_start_methods()
         )
-        context = multiprocessing.get_context("fork") if use_fork else None
+        context = multiprocessing.get_context("fork") if use_fork and folder else None
         self._pool = ProcessPoolExecutor(1, mp_context=context) if context else None
         self._futures: list[Future[Any]] = []
 
-    def submit(self, draw: Callable[..., Any], *args: Any) -> None:
-        """Draw ``draw(*args)`` (a module-level function, its arguments picklable)."""
+    def path(self, name: str) -> Path | None:
+        """Where the figure ``name`` goes (None: no figures)."""
+        return None if self.folder is None else self.folder / name
+
+    def submit(self, draw: str, *args: Any) -> None:
+        """Draw ``module:function(*args)`` (its arguments picklable), imported where it runs,
+        so that the solving process does not import matplotlib; nothing without a folder."""
+        if self.folder is None:
+            return
         if self._pool is None:
-            draw(*args)
+            _draw(draw, *args)
         else:
-            self._futures.append(self._pool.submit(draw, *args))
+            self._futures.append(self._pool.submit(_draw, draw, *args))
 
     def wait(self) -> None:
         """Block until every figure is written."""
@@ -176,11 +191,13 @@ def warm_up(providers: _Providers) -> None:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    out = check_output_folder(args.out, "--out")  # a file or a read-only place, named as such
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise ValueError(f"--out {out}: cannot create the folder ({err.strerror})") from None
+    out = None
+    if args.out is not None:
+        out = check_output_folder(args.out, "--out")  # a file or a read-only place, named so
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ValueError(f"--out {out}: cannot create the folder ({err.strerror})") from None
     start = time.perf_counter()
     from scpformer.cli.warmstart import single_thread_inference
 
@@ -190,23 +207,27 @@ def run_demo(args: argparse.Namespace) -> int:
     warm_up(providers)
     warmed = time.perf_counter()
     rows: list[DemoRow] = []
-    figures = FigureWriter()
+    figures = FigureWriter(out)
     try:
         for section in (rendezvous_rows, robust_rows, landing_rows):
-            rows += section(out, providers, figures)
+            rows += section(providers, figures)
     finally:
         figures.wait()
     print_table(rows)
     print()
     print(LEGEND)
-    names = sorted(path.name for path in out.glob("*.png"))
-    print(f"figures in {out}/: {', '.join(names)}")
+    if out is None:
+        print("figures: none (scpformer demo --out DIR draws one per solve)")
+    else:
+        names = sorted(path.name for path in out.glob("*.png"))
+        print(f"figures in {out}/: {', '.join(names)}")
     end = time.perf_counter()
     solves = sum(row.seconds for row in rows)
     print(
         f"total {end - start:.1f} s: imports and models {loaded - start:.1f} s, warm-up "
         f"{warmed - loaded:.1f} s, the rows {solves:.1f} s, the rest {end - warmed - solves:.1f} s "
-        "(figures, drawn beside the solves); Python's start-up and exit come outside it. One "
+        "(with --out, figures drawn beside the solves); Python's start-up and exit come outside "
+        "it. One "
         "instance each: statistics over held-out draws are in docs/learned-warm-starts.md"
     )
     return 0 if all(row.verified for row in rows) else 1
@@ -240,10 +261,9 @@ def _timed(solve: Callable[[], Any]) -> tuple[Any, float]:
     return result, time.perf_counter() - start
 
 
-def rendezvous_rows(out: Path, providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
+def rendezvous_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
     """The ISS rendezvous from CVX and from ART (pretrained), with their figures."""
     from scpformer import rendezvous
-    from scpformer.cli.rendezvous import write_figure
     from scpformer.problems.rendezvous.warmstart import RendezvousConvexWarmStart
 
     instance = rendezvous.sample_instances(np.random.default_rng(RENDEZVOUS_SEED), 1)[0]
@@ -257,8 +277,8 @@ def rendezvous_rows(out: Path, providers: _Providers, figures: FigureWriter) -> 
             return warm, rendezvous.solve(instance, config, method="scp", warmstart=warm)
 
         (warm, solution), seconds = _timed(run)
-        figure = out / f"rendezvous_{label.lower()}.png"
-        figures.submit(write_figure, figure, solution, instance, warm)
+        figure = figures.path(f"rendezvous_{label.lower()}.png")
+        figures.submit("scpformer.cli.rendezvous:write_figure", figure, solution, instance, warm)
         cost = f"{1e3 * solution.cost:.1f} mm/s"
         rows.append(
             _row(
@@ -274,11 +294,10 @@ def rendezvous_rows(out: Path, providers: _Providers, figures: FigureWriter) -> 
     return rows
 
 
-def robust_rows(out: Path, providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
+def robust_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
     """The chance-constrained rendezvous from the TPBVP (PS-CVX) and from ART (PS-ART), on an
     instance where the Eq. 8 check accepts ART's guess and on one where it falls back."""
     from scpformer import robust_rendezvous
-    from scpformer.plotting.robust_rendezvous import plot_solution
 
     config = providers.robust_config
     rows = []
@@ -303,10 +322,12 @@ def robust_rows(out: Path, providers: _Providers, figures: FigureWriter) -> list
                     else f"ART, Eq. 8 check rejects it -> {record.used.upper()}"
                 )
             stem = label.lower().replace("-", "_")
-            figure = out / f"robust_seed{seed}_{stem}.png"
+            figure = figures.path(f"robust_seed{seed}_{stem}.png")
             if solution.trajectory is not None:
                 x, u = solution.trajectory.x, solution.trajectory.u
-                figures.submit(plot_solution, instance, x, u, figure)
+                figures.submit(
+                    "scpformer.plotting.robust_rendezvous:plot_solution", instance, x, u, figure
+                )
             cost = f"{1e3 * solution.cost:.1f} mm/s"
             rows.append(
                 _row(
@@ -322,10 +343,9 @@ def robust_rows(out: Path, providers: _Providers, figures: FigureWriter) -> list
     return rows
 
 
-def landing_rows(out: Path, providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
+def landing_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
     """The nominal 6-DoF landing with SCvx (cubic-profile guess) and T-SCvx (pretrained)."""
     from scpformer import pdg6dof
-    from scpformer.cli.pdg6dof import write_figures
 
     instance, config = pdg6dof.PDGInstance(), providers.landing_config
     rows = []
@@ -339,10 +359,10 @@ def landing_rows(out: Path, providers: _Providers, figures: FigureWriter) -> lis
             return pdg6dof.solve(instance, config, method=method, warmstart=warmstart)
 
         solution, seconds = _timed(run)
-        figure = out / name
+        figure = figures.path(name)
         fuel = math.nan
         if solution.trajectory is not None:
-            figures.submit(write_figures, figure, solution, instance)
+            figures.submit("scpformer.cli.pdg6dof:write_figures", figure, solution, instance)
             fuel = instance.m0 - solution.trajectory.x[-1, 13]
         cost = f"{fuel:.4f} U_M fuel"
         rows.append(_row("6-DoF Mars landing", "nominal", label, cost, solution, seconds, figure))
