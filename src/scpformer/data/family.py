@@ -258,12 +258,18 @@ def dataclass_from_dict(cls: type, data: Mapping[str, Any]) -> Any:
     ``ValueError`` naming them, so a hand-edited manifest fails clearly.
     """
     if not isinstance(data, Mapping):
-        raise ValueError(f"{cls.__name__}: expected a JSON object, got {type(data).__name__}")
+        raise ValueError(
+            f"the dataset's configuration holds a JSON {type(data).__name__} where an object "
+            "belongs (an edited manifest?)"
+        )
     hints = typing.get_type_hints(cls)
     known = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise ValueError(f"{cls.__name__}: unknown field(s) {', '.join(unknown)}")
+        raise ValueError(
+            f"the dataset's configuration has field(s) {', '.join(unknown)} that "
+            f"{cls.__name__} does not know (data of another family, or an edited manifest?)"
+        )
     kwargs = {}
     for name, value in data.items():
         kind = _dataclass_in(hints[name])

@@ -65,7 +65,7 @@ class ShardInfo:
     status_counts: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        # a manifest names its shards; a name that leaves the folder ("../x.h5", "/tmp/x")
+        # a manifest names its shards; a name that leaves the folder ("../x.h5", an absolute path)
         # would let a regeneration delete a file outside the dataset
         if not isinstance(self.file, str) or Path(self.file).name != self.file:
             raise ValueError(f"shard file {self.file!r} is not a file name inside the folder")

@@ -48,35 +48,24 @@ from scpformer.data.family import (
     package_versions,
 )
 from scpformer.data.storage import ShardedSamples
+from scpformer.problems.pdg6dof.api import solve
+from scpformer.problems.pdg6dof.config import PDGSolverConfig
 from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES
 from scpformer.problems.pdg6dof.guess import cubic_profile_guess
-from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
-from scpformer.problems.pdg6dof.problem import PDGSolverConfig, solve
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
+from scpformer.problems.pdg6dof.theta import (  # noqa: F401 (also imported from here)
+    THETA_NAMES,
+    instance_from_theta,
+    theta_vector,
+)
 from scpformer.scp.solution import Solution, Status, Trajectory
 
-THETA_NAMES: tuple[str, ...] = (
-    "gamma_gs_deg",
-    "theta_max_deg",
-    "r0_up",
-    "r0_east",
-    "r0_north",
-    "v0_up",
-    "v0_east",
-    "v0_north",
-    "q0_w",
-    "q0_x",
-    "q0_y",
-    "q0_z",
-    "omega0_x_deg",
-    "omega0_y_deg",
-    "omega0_z_deg",
-    "m0",
-)
 RANGE_PRESETS = {
-    "feasible": SampleRanges.feasible,
-    "table2": SampleRanges.table2,
-    "nominal": SampleRanges.nominal,
+    "feasible": PDGSampleRanges.feasible,
+    "table2": PDGSampleRanges.table2,
+    "nominal": PDGSampleRanges.nominal,
 }
 
 
@@ -84,7 +73,7 @@ RANGE_PRESETS = {
 class PDG6DoFDataConfig:
     """What a 6-DoF dataset samples and how it solves; defaults: Table 1, Table 2 made feasible."""
 
-    ranges: SampleRanges = field(default_factory=SampleRanges.feasible)  # consistent Table 2
+    ranges: PDGSampleRanges = field(default_factory=PDGSampleRanges.feasible)  # consistent Table 2
     constants: VehicleConstants = field(default_factory=VehicleConstants)  # model (Table 1)
     solver: PDGSolverConfig = field(default_factory=PDGSolverConfig)  # SCvx settings (Table 1)
 
@@ -92,36 +81,6 @@ class PDG6DoFDataConfig:
     def from_dict(cls, data: Mapping[str, Any]) -> PDG6DoFDataConfig:
         """Rebuild from :func:`dataclasses.asdict` output (e.g. a manifest's ``config``)."""
         return dataclass_from_dict(cls, data)
-
-
-def theta_vector(instance: PDGInstance) -> np.ndarray:
-    """theta (16,) of ``instance`` in the order of :data:`THETA_NAMES`."""
-    return np.array(
-        [
-            instance.gamma_gs_deg,
-            instance.theta_max_deg,
-            *instance.r0,
-            *instance.v0,
-            *instance.q0,
-            *instance.omega0_deg,
-            instance.m0,
-        ]
-    )
-
-
-def instance_from_theta(theta: np.ndarray, constants: VehicleConstants) -> PDGInstance:
-    """Inverse of :func:`theta_vector` (validated by :class:`PDGInstance`)."""
-    theta = np.asarray(theta, dtype=float)
-    return PDGInstance(
-        gamma_gs_deg=float(theta[0]),
-        theta_max_deg=float(theta[1]),
-        r0=tuple(theta[2:5]),
-        v0=tuple(theta[5:8]),
-        q0=tuple(theta[8:12]),
-        omega0_deg=tuple(theta[12:15]),
-        m0=float(theta[15]),
-        constants=constants,
-    )
 
 
 @dataclass(frozen=True)
@@ -184,7 +143,7 @@ class PDG6DoFFamily:
         x_g, u_g, tf_g = cubic_profile_guess(instance, self.n_nodes)
         guess = Trajectory(x=x_g, u=u_g, p=np.array([tf_g]))
         start = time.perf_counter()
-        solution = solve(instance, self.config.solver, guess=guess)
+        solution = solve(instance, self.config.solver, warmstart=guess)
         solve_time = time.perf_counter() - start
         fields = {
             **self.encode_instance(instance),

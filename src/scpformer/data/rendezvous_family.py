@@ -61,25 +61,21 @@ from scpformer.data.family import (
     family_from_config,
     package_versions,
 )
+from scpformer.problems.rendezvous.api import solve
+from scpformer.problems.rendezvous.constraints import constraint_to_go, reward_to_go
 from scpformer.problems.rendezvous.instance import (
     RendezvousInstance,
     SampleRanges,
     sample_instances,
 )
-from scpformer.problems.rendezvous.problem import (
-    WARMSTARTS,
-    LinearModel,
-    constraint_to_go,
-    linear_model,
-    reward_to_go,
-    solve,
-)
+from scpformer.problems.rendezvous.linear_model import LinearModel, linear_model
 from scpformer.problems.rendezvous.scenario import (
     RendezvousScenario,
     RendezvousSolverConfig,
     TargetOrbit,
 )
 from scpformer.problems.rendezvous.subproblems import compiled_subproblem
+from scpformer.problems.rendezvous.warmstart import RENDEZVOUS_CONVEX as WARMSTARTS
 from scpformer.scp.solution import Solution, Status
 
 THETA_NAMES: tuple[str, ...] = (
@@ -328,8 +324,8 @@ class RendezvousFamily:
     ) -> tuple[Solution, float]:
         start = time.perf_counter()
         c = self.config
-        warmstart = warm if warm is not None else c.warmstart
-        solution = solve(instance, problem, warmstart, c.solver, verify=c.verify)
+        warmstart = None if problem != "scp" else warm if warm is not None else c.warmstart
+        solution = solve(instance, c.solver, method=problem, warmstart=warmstart, verify=c.verify)
         return solution, time.perf_counter() - start
 
     def _warm_start(
@@ -344,7 +340,7 @@ class RendezvousFamily:
         if tpbvp is not None:  # the stored Problem 1 twin is the warm start
             return tpbvp
         start = time.perf_counter()
-        warm = solve(instance, "tpbvp", config=self.config.solver, verify=False)
+        warm = solve(instance, self.config.solver, method="tpbvp", verify=False)
         return warm, time.perf_counter() - start
 
     def _warm_fields(self, warm: Solution) -> dict[str, Any]:

@@ -60,6 +60,7 @@ from scpformer.data.rendezvous_family import TARGET_KEYS, twin_fields, twin_sche
 from scpformer.dynamics.uncertainty import UncertaintyModel
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.rendezvous.subproblems import compiled_subproblem
+from scpformer.problems.robust_rendezvous.api import solve
 from scpformer.problems.robust_rendezvous.instance import (
     RobustInstance,
     RobustSampleRanges,
@@ -68,7 +69,6 @@ from scpformer.problems.robust_rendezvous.instance import (
 from scpformer.problems.robust_rendezvous.problem import (
     STAGES,
     passive_safety_iterations,
-    solve,
     solve_tpbvp,
 )
 from scpformer.problems.robust_rendezvous.safety import linear_model, trajectory_violations
@@ -240,7 +240,7 @@ class RobustRendezvousFamily:
         start = time.perf_counter()
         cvx = solve_tpbvp(instance, c.solver)
         cvx_time = time.perf_counter() - start
-        result = solve(instance, c.solver, c.mode, verify=c.verify)
+        result = solve(instance, dataclasses.replace(c.solver, safety_mode=c.mode), verify=c.verify)
         solve_time = time.perf_counter() - start
         model = linear_model(instance)
         budget = result.extras.get("violation_budget")

@@ -7,8 +7,8 @@ items of :class:`~scpformer.data.torch_views.SolutionDataset` (one per solved sa
 ``k = 1..iterations``), read shard by shard so that the ``(iter_max, 7 N)`` flag column is
 never held whole.
 
-The solution of a sample is flattened as the solution network predicts it (contract of
-issue 14): ``[x.ravel(), u.ravel(), t_f]``, ``N * 17 + 1`` values.
+The solution of a sample is flattened as the solution network predicts it (the solution
+network's contract): ``[x.ravel(), u.ravel(), t_f]``, ``N * 17 + 1`` values.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""PyTorch models of the learning layer: ART and its GRU/LSTM baselines (issue 12).
+"""PyTorch models of the learning layer: ART and its GRU/LSTM baselines.
 
 Every kind reads the same token sequence and has the same interface
 (:class:`scpformer.models.sequence.TokenSequenceModel`): ``model(batch) -> (predictions,

@@ -52,6 +52,7 @@ import torch
 from torch import Tensor, nn
 
 from scpformer.data.splits import Splits
+from scpformer.models.checkpoint import load_checkpoint
 from scpformer.models.normalization import _floored, _per_step_floor
 from scpformer.problems.pdg6dof import symmetry as sym
 from scpformer.validation import check_int, shown, shown_as
@@ -623,8 +624,6 @@ def load_tscvx_predictor(
         (a ValueError) when a checkpoint is missing, unreadable, or of another model kind or
         family.
     """
-    from scpformer.train.checkpoint import load_checkpoint
-
     if checkpoint not in CHECKPOINT_CHOICES:
         raise ValueError(
             f"checkpoint must be one of {tuple(CHECKPOINT_CHOICES)}, got {checkpoint!r}"

@@ -71,7 +71,7 @@ accepted steps").
 Defaults that differ from Table 1, measured on the 6-DoF problem (README, "A soft trust
 region"): ``lambda_ = 2`` instead of 500, and ``iter_max = 100`` instead of 20 (a safeguard: a
 converged 6-DoF run needs a median of 9 conic solves, p95 11, on the bench's nominal instances
-of seed 0 (session 25); harder instances of Table 2's ranges need more). The L1 penalty of Eq.
+of seed 0; harder instances of Table 2's ranges need more). The L1 penalty of Eq.
 16 is exact once lambda exceeds the largest multiplier of the linearized dynamics; with the
 cost ``-m_N`` the final mass row's multiplier is 1 (measured at a converged nominal solution:
 the largest |y| is 1.00003), so 2 keeps a factor of two of margin and the virtual control still

@@ -13,7 +13,7 @@ the desired reward-to-go ``R(t_1)`` and constraint-to-go ``C(t_1)``; at each ste
    the family's exact STM and control input matrix) or the model's prediction at the ``u_k``
    token (Algorithm 1, transformer only).
 
-Signs follow the dataset (:func:`scpformer.problems.rendezvous.problem.reward_to_go`):
+Signs follow the dataset (:func:`scpformer.problems.rendezvous.constraints.reward_to_go`):
 ``R(t_k) = -sum_{j >= k} |dv_j|_2 <= 0``, so the update adds ``|u_k|`` and the default
 ``R(t_1) = -J_CVX`` (the cost of the convex warm start: Problem 2 for the rendezvous, the
 TPBVP for the robust family) is negative; ``C(t_1) = 0`` by default (both papers).
@@ -41,8 +41,8 @@ from typing import Any, Literal
 import numpy as np
 
 from scpformer.scp.solution import Trajectory
+from scpformer.scp.warmstart import WarmStart, WarmStartRecord, WarmStartResult, trajectory_cost
 from scpformer.validation import shown
-from scpformer.warmstart.base import WarmStart, WarmStartRecord, WarmStartResult, trajectory_cost
 from scpformer.warmstart.families import ART_FRAMES, Batch, art_family
 
 ArtMode = Literal["dynamics", "transformer"]
@@ -319,16 +319,14 @@ class ArtWarmStart:
     ) -> ArtWarmStart:
         """Wrap the model of ``RUN/checkpoint.pt``, the file, or a loaded ``Checkpoint``.
 
-        A path goes through :func:`scpformer.train.checkpoint.load_checkpoint`, which checks
+        A path goes through :func:`scpformer.models.checkpoint.load_checkpoint`, which checks
         ``family`` / ``frame`` when given; a loaded checkpoint is checked here. The other
         keyword arguments are those of the constructor.
         """
         ckpt = path
         if isinstance(path, str | Path):
-            try:
-                from scpformer.train.checkpoint import load_checkpoint
-            except ModuleNotFoundError as err:  # pragma: no cover - until scpformer.train lands
-                raise ValueError(f"{path}: loading ART checkpoints needs {err.name}") from err
+            from scpformer.models.checkpoint import load_checkpoint
+
             ckpt = load_checkpoint(path, family=family, frame=frame, device=device)
         for name, wanted in (("family", family), ("frame", frame)):
             if wanted is not None and getattr(ckpt, name) != wanted:

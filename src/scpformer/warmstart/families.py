@@ -2,7 +2,7 @@
 
 For each family: the exact discrete dynamics ``x_{k+1} = Phi_k (x_k + B_k u_k)`` in scaled
 mean ROE (the STM and control input matrix of the family's
-:class:`~scpformer.problems.rendezvous.problem.LinearModel`, ART paper Eq. 10, robust paper
+:class:`~scpformer.problems.rendezvous.linear_model.LinearModel`, ART paper Eq. 10, robust paper
 Eq. 1), the map ``Psi_k`` to the RTN frame (ART paper Eq. 9), the instantaneous constraint
 violation ``C_k`` that decreases the constraint-to-go (ART paper Eqs. 5, 21: keep-out zone;
 robust paper Eq. 7: passive safety with the chance margin), the target-state token of the
@@ -21,20 +21,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from scpformer.problems.rendezvous.constraints import CTG_TOL, constraint_to_go, keep_out_slack
 from scpformer.problems.rendezvous.instance import RendezvousInstance
-from scpformer.problems.rendezvous.problem import (
-    CTG_TOL,
-    LinearModel,
-    constraint_to_go,
-    keep_out_slack,
-    linear_model,
-)
-from scpformer.warmstart.base import WarmStart
-from scpformer.warmstart.convex import (
-    RendezvousConvexWarmStart,
-    RobustTpbvpWarmStart,
-    check_instance,
-)
+from scpformer.problems.rendezvous.linear_model import LinearModel, linear_model
+from scpformer.problems.rendezvous.warmstart import RendezvousConvexWarmStart
+from scpformer.scp.warmstart import WarmStart, check_instance
 
 if TYPE_CHECKING:  # the robust family is imported when used: a rendezvous solve needs none of it
     from scpformer.problems.robust_rendezvous.instance import RobustInstance
@@ -166,13 +157,12 @@ class RobustArtFamily:
 
     def batch(self, instances: Sequence[RobustInstance]) -> Batch:
         from scpformer.problems.robust_rendezvous.instance import RobustInstance
-        from scpformer.problems.robust_rendezvous.problem import boundary
         from scpformer.problems.robust_rendezvous.safety import drift_geometry
-        from scpformer.problems.robust_rendezvous.safety import linear_model as robust_linear_model
+        from scpformer.problems.robust_rendezvous.tpbvp import boundary
 
         for instance in instances:
             check_instance(instance, RobustInstance, self.name)
-        models = [robust_linear_model(instance) for instance in instances]
+        models = [linear_model(instance) for instance in instances]
         bounds = [boundary(instance, model) for instance, model in zip(instances, models,
                                                                           strict=True)]  # fmt: skip
         geometry = [drift_geometry(instance) for instance in instances]
@@ -216,6 +206,8 @@ class RobustArtFamily:
 
     def fallback(self, config: Any = None) -> WarmStart:
         """The convex TPBVP (the robust paper's CVX warm start and ``J_CVX``)."""
+        from scpformer.problems.robust_rendezvous.warmstart import RobustTpbvpWarmStart
+
         return RobustTpbvpWarmStart(config, self.mode)
 
 

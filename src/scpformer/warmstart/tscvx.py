@@ -8,9 +8,10 @@ cost J (Eq. 16) is above ``guess_factor`` times the straight line's, ``max(|J|, 
 (:class:`~scpformer.problems.pdg6dof.tscvx.TscvxParameters`); as that bound is at least
 ``guess_factor``, the straight line is evaluated only when the prediction's J exceeds
 ``guess_factor`` (one discretization, ~6 ms, saved on nearly every solve). Handed to
-:func:`scpformer.problems.pdg6dof.problem.solve` as ``guess=``, the provider also supplies
-the predicted tight rows, and the solve runs T-SCvx
-(:func:`~scpformer.problems.pdg6dof.tscvx.solve_tscvx`) instead of cold SCvx.
+``scpformer.pdg6dof.solve(..., method="tscvx", warmstart=provider)``, the provider also
+supplies the predicted tight rows of T-SCvx
+(:func:`~scpformer.problems.pdg6dof.tscvx.solve_tscvx`); with ``method="scvx"`` only its
+guess is used.
 """
 
 from __future__ import annotations
@@ -25,25 +26,21 @@ from typing import Any
 import numpy as np
 
 from scpformer.files import require_model_path
+from scpformer.problems.pdg6dof.adapter import PDGProblem, final_mass_cost, penalty
+from scpformer.problems.pdg6dof.api import solve
+from scpformer.problems.pdg6dof.config import PDGSolverConfig
 from scpformer.problems.pdg6dof.constraints import CONSTRAINT_NAMES, constraint_values
 from scpformer.problems.pdg6dof.guess import cubic_profile_trajectory, straight_line_trajectory
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.problems.pdg6dof.problem import (
-    PDGProblem,
-    PDGSolverConfig,
-    final_mass_cost,
-    penalty,
-)
+from scpformer.problems.pdg6dof.theta import theta_vector
 from scpformer.problems.pdg6dof.tscvx import (
     TscvxParameters,
     TscvxPredictor,
     consistent_guess,
     convex_excess,
-    solve_tscvx,
 )
 from scpformer.scp.solution import Solution, Trajectory
-from scpformer.warmstart.base import WarmStartRecord, WarmStartResult, timed
-from scpformer.warmstart.convex import check_instance
+from scpformer.scp.warmstart import WarmStartRecord, WarmStartResult, check_instance, timed
 
 TIGHT_BATCH = 8  # iterations whose tight flags are predicted per forward pass (median run: 6-7)
 
@@ -96,7 +93,6 @@ class TscvxWarmStart:
         check_instance(instance, PDGInstance, "pdg6dof")
         self._check_nodes(config)
         start = time.perf_counter()
-        from scpformer.data.pdg6dof_family import theta_vector
 
         def fallback() -> Trajectory:  # the default cold start, built only when it is used
             return cubic_profile_trajectory(instance, config.n_nodes)
@@ -126,8 +122,6 @@ class TscvxWarmStart:
         batch-1 pass then takes about 0.9 ms against 0.17 ms when warm (measured in T-SCvx
         runs, one torch thread), so one pass of 8 costs about what two single ones do.
         """
-        from scpformer.data.pdg6dof_family import theta_vector
-
         theta = theta_vector(instance)
         rows = len(CONSTRAINT_NAMES) * int(self.predictor.n_nodes)
         known: dict[int, np.ndarray] = {}
@@ -150,13 +144,13 @@ class TscvxWarmStart:
     def solve(
         self, instance: PDGInstance, config: PDGSolverConfig, eta_init: float | None = None
     ) -> Solution:
-        """T-SCvx (Algorithm 2) from this provider's guess; ``extras`` hold both records."""
-        self._check_nodes(config)
-        params = self.params if eta_init is None else replace(self.params, eta_init=eta_init)
-        result = self.guess_for(instance, config)
-        solution = solve_tscvx(instance, config, result.trajectory, self.tight(instance), params)
-        return replace(solution, extras={**solution.extras,
-                                         "warmstart": result.record.to_dict()})  # fmt: skip
+        """T-SCvx (Algorithm 2) with this provider:
+        ``scpformer.pdg6dof.solve(instance, config, method="tscvx", warmstart=self)``;
+        ``eta_init`` overrides the initial trust radius of its parameters."""
+        provider = self
+        if eta_init is not None:
+            provider = replace(self, params=replace(self.params, eta_init=eta_init))
+        return solve(instance, config, method="tscvx", warmstart=provider)
 
     def _check_nodes(self, config: PDGSolverConfig) -> None:
         """Refuse a solve on another node count than the model predicts (its rows and nodes

@@ -28,8 +28,10 @@ subproblem with ``nu``.
 Fallbacks: after ``max_repairs`` repairs in one iteration, or ``stall_rejections`` rejected
 steps in a row, the loop switches to the full subproblem for the rest of the run
 (``extras["tscvx"]["fallback"] = "full"``); a run that still ends unconverged is replaced by
-a cold SCvx solve from the straight-line guess (``"cold"``), so T-SCvx never reports a
-trajectory that the full problem's verification rejects and converges at least as often.
+a cold SCvx solve from the default cold start, the cubic profile (``"cold"``; its iterations
+and time are added to the run's, and ``extras["warmstart"]["used"]`` names it), so T-SCvx never
+reports a trajectory that the full problem's verification rejects and converges at least as
+often.
 """
 
 from __future__ import annotations
@@ -37,19 +39,16 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from scpformer.problems.pdg6dof import constraints as con
+from scpformer.problems.pdg6dof.adapter import LEAST_CHANGE, PDGProblem, candidate
+from scpformer.problems.pdg6dof.config import PDGSolverConfig
 from scpformer.problems.pdg6dof.instance import PDGInstance
-from scpformer.problems.pdg6dof.problem import (
-    LEAST_CHANGE,
-    PDGProblem,
-    PDGSolverConfig,
-    candidate,
-)
 from scpformer.problems.pdg6dof.reduced import ReducedSubproblem, cached_layout
+from scpformer.problems.pdg6dof.restart import concatenated, solve_with_restart
 from scpformer.scp.conic import SubproblemSolution
 from scpformer.scp.scvx import Candidate, Evaluation, SCvxParameters, solve_scvx
 from scpformer.scp.solution import Solution, Trajectory
@@ -67,6 +66,20 @@ class TscvxPredictor(Protocol):
 
     def predict_solution(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """Predicted ``(x (N, 14), u (N, 3), t_f)``."""
+
+
+@runtime_checkable
+class TscvxProvider(Protocol):
+    """A warm start that can drive Algorithm 2: its guess under a configuration and the
+    predicted tight rows (``scpformer.warmstart.tscvx.TscvxWarmStart``)."""
+
+    params: TscvxParameters
+
+    def guess_for(self, instance: PDGInstance, config: PDGSolverConfig) -> Any:
+        """The ``WarmStartResult`` of ``instance`` under ``config``."""
+
+    def tight(self, instance: PDGInstance) -> Any:
+        """``k -> flags (7N,)`` of the rows predicted tight at iteration ``k``."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -131,7 +144,7 @@ class TscvxParameters:
     ``g / scale >= -margin`` (scales of :func:`row_scales`: 30% of the constraint's range by
     default), so that a step of the trust region's size rarely crosses a left-out row (with
     5%, the repairs of crossed rows cost 10-20% more wall time on the same 24 instances).
-    30% rather than 20% since session 31, when the compiled dynamics made everything around
+    30% rather than 20% since the compiled dynamics made everything around
     the conic solves cheaper. Alternating per draw on the 423 rotated validation samples of
     ``generate pdg6dof --n 60 --seed 26`` (even and odd ones, 212 and 211 draws), 0.3
     against 0.2 took the mean T-SCvx run from 149.9 to 148.4 ms and from 151.3 to 148.8 ms
@@ -442,14 +455,17 @@ def solve_tscvx(
     guess: Trajectory,
     tight: Any,
     params: TscvxParameters | None = None,
+    *,
+    verify: bool = True,
 ) -> Solution:
     """Algorithm 2 from ``guess`` with the predicted flags ``tight(k)`` (see module docstring).
 
     The returned solution's ``extras["tscvx"]`` is the :class:`TscvxLog` of the run (of the
-    T-SCvx run, also when the cold fallback replaced its result).
+    T-SCvx run, also when the cold fallback replaced its result). After a cold fallback the
+    solution covers the whole path: its iterations, history and timing are those of the
+    T-SCvx run followed by the cold run (``extras["tscvx_iterations"]``: the T-SCvx run's).
+    ``verify=False`` skips the nonlinear check (``verification`` None).
     """
-    from scpformer.problems.pdg6dof.problem import solve
-
     params = params or TscvxParameters()
     problem = TscvxProblem(instance, config, tight, params)
     scvx = dataclasses.replace(  # T-SCvx's own trust radii: TscvxParameters
@@ -458,15 +474,26 @@ def solve_tscvx(
         eta_ub=params.eta_ub,
         eta_lb=min(config.scvx.eta_lb, params.eta_init),
     )
+    if not verify:
+        problem.verify = _not_verified  # type: ignore[method-assign]
     solution = solve_scvx(problem, guess, scvx, radius_update=problem.update_radius)
     log = problem.log
     if not solution.converged and params.cold_fallback:
         log.fallback = "cold"
         log.fallback_reason = f"T-SCvx ended {solution.status.value}: {solution.message}"
-        cold = solve(instance, config)
+        cold_problem = PDGProblem(instance, config)
+        if not verify:
+            cold_problem.verify = _not_verified  # type: ignore[method-assign]
+        cold = solve_with_restart(cold_problem, cold_problem.initial_guess())
         extras = {"tscvx": log.to_dict(), "tscvx_iterations": solution.iterations}
-        return dataclasses.replace(cold, extras={**cold.extras, **extras})
+        path = concatenated(dataclasses.replace(solution, extras={}), cold)
+        return dataclasses.replace(path, extras={**cold.extras, **extras})
     return dataclasses.replace(solution, extras={**solution.extras, "tscvx": log.to_dict()})
+
+
+def _not_verified(z: Trajectory) -> None:
+    """The verification of a solve asked not to verify: none (never a passed one)."""
+    return None
 
 
 def consistent_guess(

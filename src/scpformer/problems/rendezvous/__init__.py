@@ -5,18 +5,14 @@ Problem 3 (keep-out ellipsoid, solved by the SCP of Section 4), with the fuel co
 ``sum |dv|_2``; reward- and constraint-to-go; verification by nonlinear replay.
 """
 
+from scpformer.problems.rendezvous.constraints import constraint_to_go, reward_to_go
 from scpformer.problems.rendezvous.instance import (
     RendezvousInstance,
     SampleRanges,
     sample_instances,
 )
-from scpformer.problems.rendezvous.problem import (
-    constraint_to_go,
-    linear_model,
-    reward_to_go,
-    solve,
-    verify_solution,
-)
+from scpformer.problems.rendezvous.linear_model import linear_model
+from scpformer.problems.rendezvous.problem import solve  # the old spelling, deprecated
 from scpformer.problems.rendezvous.scenario import (
     RendezvousScenario,
     RendezvousSolverConfig,
@@ -24,6 +20,7 @@ from scpformer.problems.rendezvous.scenario import (
     TargetOrbit,
     VerificationTolerances,
 )
+from scpformer.problems.rendezvous.verification import verify_solution
 
 __all__ = [
     "RendezvousInstance",

@@ -1,6 +1,6 @@
 """Self-describing ``.npz`` output of a rendezvous solution, replayable without the package.
 
-Fields (issue 3; N impulses, N + 1 nodes):
+Fields (N impulses, N + 1 nodes):
 
 * ``t`` (N+1,): node times [s] from ``t_0 = 0``; ``dv[k]`` is applied at ``t[k]``.
 * ``roe`` (N+1, 6): scaled mean ROE ``a dalpha`` [m], (a da, a dlambda, a dex, a dey, a dix,
@@ -28,13 +28,10 @@ import numpy as np
 
 from scpformer.dynamics.orbits import R_EARTH
 from scpformer.files import save_npz_atomic
+from scpformer.problems.rendezvous.constraints import constraint_to_go, reward_to_go
 from scpformer.problems.rendezvous.instance import RendezvousInstance
-from scpformer.problems.rendezvous.problem import (
-    constraint_to_go,
-    linear_model,
-    osculating_initial_state,
-    reward_to_go,
-)
+from scpformer.problems.rendezvous.linear_model import linear_model
+from scpformer.problems.rendezvous.verification import osculating_initial_state
 from scpformer.scp.solution import Solution
 
 NPZ_FIELDS = (

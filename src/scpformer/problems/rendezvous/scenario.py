@@ -154,7 +154,7 @@ class RendezvousScenario:
     # instance). We therefore keep the vertex 5 m behind the port. The ART paper's public
     # code (art-aeroconf24) does not: it puts the vertex at the port itself. On 20 instances
     # from that code's own sampler, moving its vertex to ours lowers its costs by a median of
-    # 2.8%, almost all of the cost difference between the two programs (issue 13). The later
+    # 2.8%, almost all of the cost difference between the two programs. The later
     # transformermpc-ral24 code sets the vertex 5 m back, as we do
     # (benchmarks/rendezvous_vs_public_art.py checks that its scenario matches ours).
 

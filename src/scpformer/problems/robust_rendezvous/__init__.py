@@ -3,20 +3,22 @@
 Public API (used by the dataset engine):
 
 * :class:`RobustInstance`, :func:`sample_instances` (robust Table 1);
-* :func:`solve` (three-stage: TPBVP -> collision avoidance -> passive safety; the stage that
-  produced the trajectory is ``solution.extras["stage"]``), :func:`solve_tpbvp`,
-  :func:`solve_safety`;
+* :func:`~scpformer.problems.robust_rendezvous.api.solve` (``scpformer.robust_rendezvous.solve``:
+  the three-stage procedure TPBVP -> collision avoidance -> passive safety, or passive safety
+  straight from a warm start; the stage that produced the trajectory is
+  ``solution.extras["stage"]``), :func:`solve_tpbvp`, :func:`solve_safety`;
 * :func:`trajectory_violations` / :func:`constraint_violation_budget` (Eq. 7);
 * :func:`monte_carlo` (verification of the chance constraint).
 """
 
+from scpformer.problems.robust_rendezvous.api import legacy_solve as solve  # deprecated spelling
 from scpformer.problems.robust_rendezvous.instance import (
     RobustInstance,
     RobustSampleRanges,
     sample_instances,
 )
 from scpformer.problems.robust_rendezvous.montecarlo import MonteCarloConfig, monte_carlo
-from scpformer.problems.robust_rendezvous.problem import solve, solve_safety, solve_tpbvp
+from scpformer.problems.robust_rendezvous.problem import solve_safety, solve_tpbvp
 from scpformer.problems.robust_rendezvous.safety import (
     constraint_violation_budget,
     trajectory_violations,

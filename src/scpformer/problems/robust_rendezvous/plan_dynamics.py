@@ -23,7 +23,8 @@ from scpformer.dynamics.roe import (
     roe_to_qns_offset,
 )
 from scpformer.dynamics.truth import propagate_relative
-from scpformer.problems.rendezvous.problem import LinearModel, osculating_initial_state
+from scpformer.problems.rendezvous.linear_model import LinearModel
+from scpformer.problems.rendezvous.verification import osculating_initial_state
 from scpformer.problems.robust_rendezvous.instance import X0_RTN_TABLE1, RobustInstance
 
 

@@ -29,20 +29,18 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from scpformer.dynamics.mean_elements import rtn_to_mean_roe
 from scpformer.dynamics.truth import TruthResult, propagate_relative
-from scpformer.problems.rendezvous.problem import LinearModel, osculating_initial_state
-from scpformer.problems.rendezvous.subproblems import compiled_subproblem
+from scpformer.problems.rendezvous.linear_model import LinearModel
+from scpformer.problems.rendezvous.verification import osculating_initial_state
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.plan_dynamics import (
     DynamicsLinearization,
     linearize_dynamics,
-    target_mean_osc_map,
 )
 from scpformer.problems.robust_rendezvous.safety import (
     DriftGeometry,
@@ -58,107 +56,27 @@ from scpformer.problems.robust_rendezvous.scenario import (
     check_mode,
 )
 from scpformer.problems.robust_rendezvous.subproblem import compiled_safety_subproblem
+from scpformer.problems.robust_rendezvous.tpbvp import (  # noqa: F401 (old import spelling)
+    TPBVP_DEFECT_M,
+    TPBVP_MAX_SOLVES,
+    Boundary,
+    boundary,
+    solve_tpbvp,
+)
 from scpformer.scp.conic import start_cold
 from scpformer.scp.scvx_star import NonlinearEvaluation, SCvxStar, SubproblemResult
 from scpformer.scp.solution import (
     IterationRecord,
     Solution,
-    Status,
-    Timing,
     Trajectory,
     Verification,
 )
-from scpformer.validation import check_type
+from scpformer.scp.warmstart import WarmStartResult
 
 STAGES = ("tpbvp", "collision_avoidance", "passive_safety")
-WARMSTARTS = ("three_stage", "tpbvp")
 
 
-@dataclass(frozen=True)
-class Boundary:
-    """Boundary states of the instance in scaled mean ROE [m]."""
-
-    x_init: np.ndarray  # (6,) Psi(t_0)^-1 x_0,rtn
-    x_final: np.ndarray  # (6,) Psi(t_N)^-1 x_f,rtn
-
-
-def boundary(instance: RobustInstance, model: LinearModel, dynamics: str = "stm") -> Boundary:
-    """``x = Psi^{-1} x_rtn`` at both ends (see :mod:`.instance`).
-
-    With the nonlinear dynamics the waypoint is reached in the truth model's OSCULATING
-    relative state: ``x_final`` is the mean ROE of the deputy whose osculating RTN state is
-    ``x_f`` (:func:`scpformer.dynamics.mean_elements.rtn_to_mean_roe`; it differs from
-    ``Psi^{-1} x_f`` by the J2 short-period relative motion, metres at the waypoints' ROE of
-    kilometres). The initial state stays the instance's mean ``roe0``, from which the replay
-    builds its consistent osculating start.
-    """
-    x_final = np.linalg.solve(model.Psi[-1], instance.xf_rtn)
-    if dynamics != "stm":
-        mo = target_mean_osc_map(instance).take(slice(-1, None))
-        x_final = model.oe[-1, 0] * rtn_to_mean_roe(mo, instance.xf_rtn[None, :])[0]
-    return Boundary(
-        x_init=np.linalg.solve(model.Psi[0], np.asarray(instance.x0_rtn)), x_final=x_final
-    )
-
-
-# ======================================================================================
-# stage 1: convex TPBVP (the rendezvous family's compiled Problem 1)
-# ======================================================================================
 DEFECT_SCALE_M = 10.0  # g = dynamics defect / this: chi <= eps_feas bounds it by 1 cm [m]
-TPBVP_DEFECT_M = 1e-4  # nonlinear TPBVP: stop relinearizing below this dynamics defect [m]
-TPBVP_MAX_SOLVES = 4  # nonlinear TPBVP: at most this many convex solves
-
-
-def solve_tpbvp(instance: RobustInstance, config: RobustSolverConfig | None = None) -> Solution:
-    """The convex TPBVP ("CVX" of the paper): lower bound of the cost, no safety constraint.
-
-    With the STM (``config.dynamics = "stm"``) one convex solve. With the nonlinear mean
-    dynamics the TPBVP is re-solved about its own solution, the dynamics linearized as
-    ``x_{k+1} = Phi_k x_k + Gamma_k u_k + f_k`` (:func:`linearize_dynamics`); the affine terms
-    are absorbed by ``x = z + c``, ``c_{k+1} = Phi_k c_k + f_k``, ``c_0 = 0``, so the compiled
-    Problem 1 solves for ``z`` with the final state shifted by ``c_N``. Until the defect is
-    below ``TPBVP_DEFECT_M`` (two or three solves): the warm start of SCvx* then obeys the plan's
-    dynamics (an STM warm start costs SCvx* several iterations to repair its defects).
-    """
-    config = config or RobustSolverConfig()
-    start = time.perf_counter()
-    model = linear_model(instance)
-    bnd = boundary(instance, model, config.dynamics)
-    n, solver = instance.n_nodes, config.scvx.solver
-    sub = compiled_subproblem("tpbvp", n, max(1, n - 2), solver)
-    Phi, Gamma, c = model.Phi, model.Phi @ model.B, np.zeros((n + 1, 6))
-    t_setup, t_solver, solves = time.perf_counter() - start, 0.0, 0
-    while True:
-        sub.set_dynamics(Phi, Gamma, bnd.x_init, bnd.x_final - c[-1])
-        sol = sub.solve(solver)
-        t_solver, solves = t_solver + sol.solver_time, solves + 1
-        if not sol.ok or config.dynamics == "stm" or solves >= TPBVP_MAX_SOLVES:
-            break
-        x = sol.x + c
-        lin = linearize_dynamics(instance, model, x, sol.u, config.dynamics)
-        if solves > 1 and float(np.abs(lin.defect).max()) < TPBVP_DEFECT_M:
-            break
-        Phi, Gamma = lin.Phi, lin.Gamma
-        for k in range(n):  # the affine part of the linearized dynamics, a recursion
-            c[k + 1] = Phi[k] @ c[k] + lin.f[k]
-    if sol.ok:
-        x = sol.x + c
-        status, traj = Status.CONVERGED, Trajectory(x=x, u=sol.u, p=np.zeros(0))
-    else:
-        infeasible = sol.status.startswith("infeasible")
-        status = Status.INFEASIBLE_INSTANCE if infeasible else Status.SOLVER_FAILED
-        traj = None
-    timing = Timing(time.perf_counter() - start, t_setup, t_solver, 0.0)
-    return Solution(
-        status=status,
-        trajectory=traj,
-        t=model.t,
-        cost=sol.cost,
-        iterations=solves,
-        timing=timing,
-        message=f"convex TPBVP: {sol.status}",
-        extras={"stage": "tpbvp", "dynamics": config.dynamics},
-    )
 
 
 # ======================================================================================
@@ -346,7 +264,7 @@ class PassiveSafetyProblem:
 def replay(instance: RobustInstance, u: np.ndarray) -> TruthResult:
     """Impulses through the two-body + J2 propagator from the consistent osculating state.
 
-    Uses :func:`scpformer.problems.rendezvous.problem.osculating_initial_state` (it reads only
+    Uses :func:`scpformer.problems.rendezvous.verification.osculating_initial_state` (it reads only
     ``target``, ``roe0`` and ``scenario.j2``). Outputs the pre-impulse state at every node.
     """
     oe_c, rtn0 = osculating_initial_state(instance)  # type: ignore[arg-type]
@@ -409,8 +327,7 @@ def solve_safety(
     """SCvx* (Table 1) on Eq. 17 from ``warm``; one stage of the procedure.
 
     ``collision_only`` gives stage 2 (``T_safety = 0``, ``X = 0``); otherwise passive safety in
-    ``mode``. ``verify=False`` skips the final check (it is then reported as passed=None-like:
-    the ``verification`` field holds only the SCvx* feasibility). Returns the SCvx*
+    ``mode``. ``verify=False`` skips the final check (``verification`` None). Returns the SCvx*
     :class:`Solution` with ``extras``: ``stage``, ``mode``, ``records`` (SCvx* per-iteration
     ``delta_J``, ``chi``, ``w``).
     """
@@ -431,91 +348,64 @@ def solve_safety(
     return replace(result.solution, extras=extras)
 
 
-def _skip_verify(z: Trajectory) -> Verification:
-    return Verification(True, {}, 0.0, {}, {}, "not verified")
+def _skip_verify(z: Trajectory) -> None:
+    """The verification of a solve asked not to verify: none (never a passed one)."""
+    return None
 
 
 # ======================================================================================
 # the three-stage solve
 # ======================================================================================
-def solve(
-    instance: RobustInstance,
-    config: RobustSolverConfig | None = None,
-    mode: str = "chance",
-    *,
-    warmstart: Any = "three_stage",
-    verify: bool = True,
+def three_stage(
+    instance: RobustInstance, config: RobustSolverConfig, result: WarmStartResult, verify: bool
 ) -> Solution:
-    """Solve the passively safe rendezvous (Eq. 1) and keep the final feasible solution.
-
-    Parameters
-    ----------
-    instance
-        The robust rendezvous instance.
-    config
-        SCvx* parameters (robust Table 1), conic solver and verification.
-    mode
-        ``"deterministic"`` (``X = 0``) or ``"chance"`` (margin of Eq. 16, ``Delta`` of the
-        instance's uncertainty model).
-    warmstart
-        ``"three_stage"`` (TPBVP -> collision avoidance -> passive safety, the dataset
-        procedure), ``"tpbvp"`` (passive safety straight from the TPBVP: PS-CVX of the paper),
-        a warm start provider (:mod:`scpformer.warmstart`, e.g. ``ArtWarmStart``: PS-ART) or
-        its precomputed ``WarmStartResult``, or a :class:`Solution` / :class:`Trajectory`.
-        The guess only starts SCvx*; it is never returned as the solution.
-    verify
-        Check the final trajectory (:meth:`PassiveSafetyProblem.verify`).
-
-    Returns
-    -------
-    Solution
-        ``trajectory.x`` (N+1, 6) [m], ``trajectory.u`` (N, 3) [m/s], ``cost = sum |u|``
-        [m/s]; ``status`` is that of the passive-safety problem; ``extras``: ``stage`` (which
-        stage produced the trajectory), ``dynamics`` (the model the trajectory obeys:
-        ``"nonlinear"`` mean-element flow or ``"stm"``; the TPBVP stage is always ``"stm"``),
-        ``stage_status``, ``stage_iterations``,
-        ``stage_wall_s``, ``mode``, ``retried_from_tpbvp`` (present when stage 3 ran twice),
-        ``violation_budget`` (Eq. 7, ``C(t_i)``, (N+1,)), ``warmstart`` (the warm start's
-        record, ``WarmStartRecord.to_dict``: source, time, cost, C(t_1), acceptance). A
-        failing conic solve is a status with the solver's reason, never an exception.
-    """
-    if not isinstance(instance, RobustInstance):
-        raise ValueError(f"instance must be a RobustInstance, got {type(instance).__name__}")
-    config = RobustSolverConfig() if config is None else config
-    check_type("config", config, RobustSolverConfig)
-    mode = check_mode(mode)
-    if isinstance(warmstart, str) and warmstart not in WARMSTARTS:
-        raise ValueError(f"warmstart must be one of {', '.join(WARMSTARTS)}, got {warmstart!r}")
+    """The three-stage procedure (the dataset's, module docstring) from the TPBVP's ``result``
+    (:class:`~scpformer.problems.robust_rendezvous.warmstart.RobustTpbvpWarmStart`)."""
     stages: dict[str, Solution] = {}
-    result = _warm_start(instance, warmstart, config, mode)
-    solved = result.solution if not isinstance(warmstart, Solution) else None
-    if solved is not None and solved.extras.get("stage") == "tpbvp":
-        stages["tpbvp"] = solved  # the provider's TPBVP, kept if passive safety fails
+    if result.solution is not None and result.solution.extras.get("stage") == "tpbvp":
+        stages["tpbvp"] = result.solution  # kept if passive safety fails
     if result.trajectory is None:
-        if "tpbvp" not in stages:
-            raise ValueError(f"warm start has no trajectory: {result.record.reason}")
-        return _with_record(
-            _assemble(instance, mode, stages, "passive_safety", config.dynamics), result
-        )
+        return _with_record(_assemble(instance, config, stages, "passive_safety"), result)
+    mode = config.safety_mode
     warm: Solution | Trajectory = result.trajectory
-    from_ca = False  # stage 3 starts from a converged stage 2
-    if warmstart == "three_stage":
-        ca = solve_safety(instance, warm, config, mode, collision_only=True, verify=verify)
-        stages["collision_avoidance"] = ca
-        from_ca = ca.converged
-        warm = ca if from_ca else warm
-        details = {"passive_safety_from": "collision_avoidance" if from_ca else "tpbvp"}
-        result = replace(result, record=replace(result.record, details=details))
-        config = _three_stage_config(config)  # stage 3 of the procedure gets more solves
+    ca = solve_safety(instance, warm, config, mode, collision_only=True, verify=verify)
+    stages["collision_avoidance"] = ca
+    from_ca = ca.converged
+    warm = ca if from_ca else warm
+    details = {"passive_safety_from": "collision_avoidance" if from_ca else "tpbvp"}
+    result = replace(result, record=replace(result.record, details=details))
+    config = _three_stage_config(config)  # stage 3 of the procedure gets more solves
     final = solve_safety(instance, warm, config, mode, verify=verify)
     if not final.converged and from_ca:
         retry = solve_safety(instance, stages["tpbvp"], config, mode, verify=verify)
         final = retry if retry.converged else final
         final.extras["retried_from_tpbvp"] = True
     stages["passive_safety"] = final
-    return _with_record(
-        _assemble(instance, mode, stages, "passive_safety", config.dynamics), result
-    )
+    return _with_record(_assemble(instance, config, stages, "passive_safety"), result)
+
+
+def passive_safety_from(
+    instance: RobustInstance,
+    config: RobustSolverConfig,
+    result: WarmStartResult,
+    verify: bool,
+    *,
+    given: bool = False,
+) -> Solution:
+    """Passive safety (stage 3 alone, SCvx* with Table 1's cap) straight from a warm start's
+    ``result``: PS-CVX from the TPBVP, PS-ART from ART. ``given``: the result wraps a solution
+    handed in by the caller (never reported as this solve's TPBVP stage)."""
+    stages: dict[str, Solution] = {}
+    solved = None if given else result.solution
+    if solved is not None and solved.extras.get("stage") == "tpbvp":
+        stages["tpbvp"] = solved  # the provider's TPBVP, kept if passive safety fails
+    if result.trajectory is None:
+        if "tpbvp" not in stages:
+            raise ValueError(f"warm start has no trajectory: {result.record.reason}")
+        return _with_record(_assemble(instance, config, stages, "passive_safety"), result)
+    final = solve_safety(instance, result.trajectory, config, config.safety_mode, verify=verify)
+    stages["passive_safety"] = final
+    return _with_record(_assemble(instance, config, stages, "passive_safety"), result)
 
 
 def passive_safety_iterations(solution: Solution, missing: int) -> int:
@@ -535,42 +425,23 @@ def _three_stage_config(config: RobustSolverConfig) -> RobustSolverConfig:
     return replace(config, scvx=replace(config.scvx, iter_max=iter_max))
 
 
-def _warm_start(instance: RobustInstance, warmstart: Any, config: RobustSolverConfig,
-                mode: str) -> Any:  # fmt: skip
-    """The warm start's result: names map onto the TPBVP provider (``three_stage`` starts
-    from it too), a Solution or Trajectory onto a fixed guess (:mod:`scpformer.warmstart`)."""
-    from scpformer.warmstart.base import as_provider
-    from scpformer.warmstart.convex import RobustTpbvpWarmStart
-
-    named = dict.fromkeys(WARMSTARTS, lambda: RobustTpbvpWarmStart(config, mode))
-    provider = as_provider(warmstart, named)
-    provider_mode = getattr(provider, "mode", mode)
-    if provider_mode != mode:
-        raise ValueError(f"warmstart: the provider's mode {provider_mode!r} differs from {mode!r}")
-    result = provider.guess(instance)
-    if isinstance(warmstart, str):
-        record = replace(result.record, source=warmstart)
-        result = replace(result, record=record)
-    return result
-
-
-def _with_record(solution: Solution, result: Any) -> Solution:
+def _with_record(solution: Solution, result: WarmStartResult) -> Solution:
     """``solution`` with the warm start's record in ``extras["warmstart"]``."""
     return replace(solution, extras={**solution.extras, "warmstart": result.record.to_dict()})
 
 
 def _assemble(
     instance: RobustInstance,
-    mode: str,
+    config: RobustSolverConfig,
     stages: dict[str, Solution],
     requested: str,
-    dynamics: str,
 ) -> Solution:
     """The final feasible stage's trajectory under the requested stage's status and solve count.
 
     ``iterations`` goes with ``status``: a passive-safety stage that ends at the cap reports its
     own SCvx* solves (e.g. 20), not those of the TPBVP whose trajectory it falls back to.
     """
+    mode = config.safety_mode
     final = stages.get(requested)
     kept = next(
         (name for name in reversed(STAGES) if name in stages and stages[name].converged), None

@@ -88,8 +88,7 @@ from scpformer.dynamics.roe import (
     stm_kepler,
 )
 from scpformer.dynamics.uncertainty import covariance_history, propagate_covariance
-from scpformer.problems.rendezvous.problem import LinearModel
-from scpformer.problems.rendezvous.problem import linear_model as _rendezvous_linear_model
+from scpformer.problems.rendezvous.linear_model import LinearModel, linear_model
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.plan_dynamics import (
     linearize_dynamics,
@@ -108,13 +107,9 @@ N_REFINED = 3  # local maxima of the sampled arc refined per node (one orbit has
 # ======================================================================================
 # linear model and drift geometry (depend on the instance only: built once per solve)
 # ======================================================================================
-def linear_model(instance: RobustInstance) -> LinearModel:
-    """STMs, input matrices and ``Psi`` at all nodes: the rendezvous family's builder.
-
-    :func:`scpformer.problems.rendezvous.problem.linear_model` reads only ``times()``,
-    ``target.oe`` and ``scenario.j2``, which a :class:`RobustInstance` provides.
-    """
-    return _rendezvous_linear_model(instance)  # type: ignore[arg-type]
+# linear_model is the rendezvous family's builder
+# (:func:`scpformer.problems.rendezvous.linear_model.linear_model`): it reads only ``times()``,
+# ``target.oe`` and ``scenario.j2``, which a :class:`RobustInstance` provides.
 
 
 def drift_offsets(t_safety_s: float, n_safety: int) -> np.ndarray:

@@ -189,7 +189,7 @@ class RobustSolverConfig:
     """How the robust rendezvous is solved: SCvx* (robust Table 1) and verification.
 
     ``three_stage_iter_max`` (not in the paper) caps the passive-safety stage of the
-    three-stage solve (:func:`~scpformer.problems.robust_rendezvous.problem.solve`, what
+    three-stage solve (:func:`~scpformer.problems.robust_rendezvous.api.solve`, what
     ``scpformer solve`` and ``generate`` run) instead of Table 1's 20, which
     ``scvx.iter_max`` keeps for every warm-started SCvx* run (PS-CVX and PS-ART, whose
     infeasibility rate at 20 solves is what the paper's Figs. 5-6 compare). Measured on the 44
@@ -198,6 +198,7 @@ class RobustSolverConfig:
     cap is not passively safe, so a user's plan should get the solves it needs.
     """
 
+    safety_mode: str = "chance"  # passive safety: chance-constrained (Eq. 16) or deterministic
     tight_tol: float = 1e-4  # a safety row is tight when h_i >= -tight_tol [-]
     u_trust_scale: float = 1.0  # trust region on u is r * u_trust_scale [m/s] (paper: same r)
     n_linearized: int = 3  # K: worst drift samples per node linearized in Eq. 17 (paper: 1)
@@ -208,6 +209,7 @@ class RobustSolverConfig:
     verification: RobustVerification = field(default_factory=RobustVerification)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "safety_mode", check_mode(self.safety_mode))
         object.__setattr__(self, "tight_tol", check_positive("tight_tol", self.tight_tol))
         object.__setattr__(
             self, "u_trust_scale", check_positive("u_trust_scale", self.u_trust_scale)
