@@ -15,8 +15,8 @@ unless ``--model`` gives a trained run. torch is imported when the command runs.
 The batch-1 cases are also timed with the per-core caches cold (:func:`cache_evictor` runs
 between the calls): inside a T-SCvx run each call comes after a conic solve that has pushed
 the weights out, and there a batch-1 ``predict_tight`` took about 0.9 ms against 0.17 ms in a
-warm loop (measured in session 29; T-SCvx therefore predicts several iterations per call,
-:data:`scpformer.warmstart.tscvx.TIGHT_BATCH`).
+warm loop (measured on the development machine; T-SCvx therefore predicts several
+iterations per call, :data:`scpformer.warmstart.tscvx.TIGHT_BATCH`).
 """
 
 from __future__ import annotations
@@ -26,38 +26,8 @@ import itertools
 import statistics
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
-
-from scpformer.cli.argtypes import int_at_least
-from scpformer.cli.commands import command_help
-
-
-def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "tscvx",
-        help=command_help("bench", "tscvx"),
-        description="Time the T-SCvx predictor's calls (raw theta in, numpy out) at batch 1 and "
-        "at --batch. Random weights of a preset unless --model gives a trained run.",
-    )
-    parser.add_argument(
-        "--preset", choices=("small", "paper"), default="small", help="sizes of random nets"
-    )
-    parser.add_argument("--tokens", choices=("single", "inputs"), default=None,
-                        help="tokenization of random nets (preset's)")  # fmt: skip
-    parser.add_argument(
-        "--model",
-        type=Path,
-        help="trained run folder (RUN/tight, RUN/solution), or 'default': the shipped networks",
-    )
-    count, at_least_one = int_at_least(0), int_at_least(1)
-    parser.add_argument("--repeats", type=at_least_one, default=500, help="timed calls per case")
-    parser.add_argument("--warmup", type=count, default=20, help="untimed calls first (20)")
-    parser.add_argument("--batch", type=at_least_one, default=64, help="throughput batch (64)")
-    parser.add_argument("--threads", type=at_least_one, default=1, help="torch threads (1)")
-    parser.add_argument("--seed", type=count, default=0, help="seed of theta and weights (0)")
-    parser.set_defaults(handler=run_bench)
 
 
 def random_predictor(preset_name: str, tokens: str | None, seed: int):

@@ -68,7 +68,7 @@ COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
         "scpformer.cli.report:add_report_parser",
     ),
     ("", "demo"): (
-        "solve three problems with classical and pretrained learned warm starts, in a minute",
+        "solve three problems with classical and pretrained learned warm starts",
         "scpformer.cli.parsers.demo:add_demo_parser",
     ),
     ("", "export"): (

@@ -1,71 +1,46 @@
-"""``scpformer solve robust-rendezvous`` and ``scpformer bench robust-rendezvous`` (robust ART)."""
+"""``scpformer solve robust-rendezvous`` and ``scpformer bench robust-rendezvous`` (robust ART):
+the handlers; the flags are in :mod:`scpformer.cli.parsers.robust_rendezvous`."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import math
-import re
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from scpformer.cli.argtypes import count, positive
-from scpformer.cli.commands import command_help
-from scpformer.cli.dataclass_args import add_dataclass_arguments, overrides, with_overrides
+from scpformer.cli.dataclass_args import overrides, with_overrides
 from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.cli.rendezvous import print_rows
 from scpformer.cli.warmstart import (
-    add_warmstart_arguments,
     art_provider,
     comparison_rows,
     warmstart_line,
 )
 from scpformer.files import check_output_file
 from scpformer.problems.rendezvous.scenario import TargetOrbit
+from scpformer.problems.robust_rendezvous.api import solve
 from scpformer.problems.robust_rendezvous.instance import RobustInstance, sample_instances
-from scpformer.problems.robust_rendezvous.problem import (
-    WARMSTARTS,
-    solve,
-    solve_safety,
-    solve_tpbvp,
-)
 from scpformer.problems.robust_rendezvous.scenario import (
-    MODES,
-    WAYPOINTS,
     RobustScenario,
     RobustSolverConfig,
     RobustVerification,
     robust_target,
 )
+from scpformer.problems.robust_rendezvous.tpbvp import solve_tpbvp
 from scpformer.scp.scvx_star import SCvxStarParameters
 from scpformer.scp.solution import Solution, Status
 
 
 # ======================================================================================
-# shared flags
+# configuration from the flags
 # ======================================================================================
-def add_config_arguments(parser: argparse.ArgumentParser) -> None:
-    """Flags for every solver setting and scenario constant (robust Tables 1-2 defaults).
-
-    The waypoints ``-T`` and ``-R`` are values (``--waypoint -T``, ``--range-waypoints +T -T``),
-    not options: ``parser`` reads them as it reads negative numbers.
-    """
-    parser._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+|[A-Z])$")
-    add_dataclass_arguments(parser, RobustSolverConfig, title="formulation")
-    add_dataclass_arguments(parser, SCvxStarParameters, prefix="scvx", title="SCvx* (Table 1)")
-    add_dataclass_arguments(parser, RobustVerification, prefix="verify", title="verification")
-    add_dataclass_arguments(parser, RobustScenario, prefix="scenario", title="OCP (Table 1)")
-    add_dataclass_arguments(parser, TargetOrbit, prefix="target", title="target orbit (Table 1)")
-    parser.add_argument("--delta", type=float, help="Delta: chance-constraint level (1e-3)")
-
-
 def config_from_args(args: argparse.Namespace) -> RobustSolverConfig:
     """The solver configuration with the command-line overrides applied."""
     return RobustSolverConfig(
-        scvx=SCvxStarParameters(**overrides(args, SCvxStarParameters, "scvx")),
+        scvx=SCvxStarParameters(**overrides(args, SCvxStarParameters, "scvx-star")),
         verification=RobustVerification(**overrides(args, RobustVerification, "verify")),
         **overrides(args, RobustSolverConfig),
     )
@@ -85,38 +60,6 @@ def common_from_args(args: argparse.Namespace, base: RobustInstance | None) -> d
 # ======================================================================================
 # solve
 # ======================================================================================
-def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "robust-rendezvous",
-        help=command_help("solve", "robust-rendezvous"),
-        description="Solve the passively safe rendezvous of the robust ART paper (Table 1) "
-        "with the three-stage procedure (convex TPBVP -> deterministic collision avoidance -> "
-        "passive safety, deterministic or chance-constrained) and SCvx*; optionally verify "
-        "the chance constraint by Monte Carlo through a two-body + J2 propagator.",
-    )
-    parser.add_argument("--mode", choices=MODES, default="chance", help="(default: chance)")
-    parser.add_argument(
-        "--waypoint", help=f"pre-docking state: {', '.join(WAYPOINTS)} (default: instance's)"
-    )
-    add_warmstart_arguments(
-        parser, WARMSTARTS, "three_stage", "three_stage (dataset procedure), tpbvp (PS-CVX)"
-    )
-    source = parser.add_mutually_exclusive_group()
-    source.add_argument("--instance", type=Path, help="instance JSON (x0_rtn, waypoint, ...)")
-    source.add_argument("--seed", type=count, help="sample the instance (Table 1) with this seed")
-    parser.add_argument("--out", type=Path, help="write the solution to this .npz file")
-    parser.add_argument(
-        "--plot", type=Path, help="write Figs. 7-8 style plots to this .png, .pdf or .svg"
-    )
-    parser.add_argument(
-        "--monte-carlo", type=count, default=0, metavar="N",
-        help="Monte Carlo draws per node through the two-body + J2 propagator (0: skip)",
-    )  # fmt: skip
-    parser.add_argument("--mc-seed", type=count, default=0, help="Monte Carlo seed (0)")
-    add_config_arguments(parser)
-    parser.set_defaults(handler=run_solve)
-
-
 def instance_from_args(args: argparse.Namespace) -> RobustInstance:
     """``--instance FILE``, ``--seed S`` or Table 1's nominal instance, with overrides."""
     base = RobustInstance.from_json(args.instance) if args.instance else None
@@ -158,6 +101,10 @@ def summary_rows(solution: Solution) -> list[tuple[str, str]]:
         rows.append(("violation budget C(t_0)", str(ctg)))
     if "warmstart" in ex:
         rows += comparison_rows(ex["warmstart"], solution, ctg)
+    ver = solution.verification
+    if solution.trajectory is not None:
+        verified = "not verified" if ver is None else "yes" if ver.passed else f"no ({ver.message})"
+        rows.append(("verified", verified))
     if solution.timing is not None:
         tm = solution.timing
         rows += [
@@ -180,14 +127,17 @@ def replay_rows(solution: Solution) -> list[tuple[str, str]]:
 
 def run_solve(args: argparse.Namespace) -> int:
     instance = instance_from_args(args)
-    config = config_from_args(args)
+    config = dataclasses.replace(config_from_args(args), safety_mode=args.mode)
     check_solve_outputs(args.out, args.plot)
     provider = art_provider(args, "robust-rendezvous", config=config, mode=args.mode)
-    warmstart: Any = args.warmstart
-    if provider is not None:  # PS-ART: the guess first, then SCvx* always runs
-        warmstart = provider.guess(instance)
-        print(warmstart_line(warmstart.record))
-    solution = solve(instance, config, args.mode, warmstart=warmstart)
+    if args.warmstart == "three_stage":
+        solution = solve(instance, config, method="three_stage")
+    else:
+        warmstart: Any = "tpbvp"
+        if provider is not None:  # PS-ART: the guess first, then SCvx* always runs
+            warmstart = provider.guess(instance)
+            print(warmstart_line(warmstart.record))
+        solution = solve(instance, config, method="passive_safety", warmstart=warmstart)
     print_rows(summary_rows(solution))
     if solution.trajectory is not None:
         x, u = solution.trajectory.x, solution.trajectory.u
@@ -225,25 +175,6 @@ def _monte_carlo(instance: RobustInstance, x: np.ndarray, u: np.ndarray, n: int,
 # ======================================================================================
 # bench
 # ======================================================================================
-def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "robust-rendezvous",
-        help=command_help("bench", "robust-rendezvous"),
-        description="On a seeded set of Table 1 instances, solve the convex TPBVP and, from "
-        "it, the passive-safety problem with SCvx* in both modes (PS-CVX-D, PS-CVX-C); report "
-        "wall time (median, p95), iterations, infeasibility rate (not converged) and the share "
-        "of time in the conic solver. Wall times exclude the final verification.",
-    )
-    parser.add_argument("--n", type=positive, default=20, help="number of instances (20)")
-    parser.add_argument("--seed", type=count, default=0, help="sampling seed (0)")
-    parser.add_argument(
-        "--csv", type=Path, default=Path("bench_robust_rendezvous.csv"),
-        help="per-instance CSV (bench_robust_rendezvous.csv)",
-    )  # fmt: skip
-    add_config_arguments(parser)
-    parser.set_defaults(handler=run_bench)
-
-
 BENCH_FIELDS = (
     "index", "waypoint", "cvx_status", "cvx_wall_s", "cvx_cost", "C_cvx_t1",
     *(f"{m}_{k}" for m in ("det", "cc")
@@ -299,13 +230,25 @@ def summarize(rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _passive_safety(
+    instance: RobustInstance,
+    cvx: Solution,
+    config: RobustSolverConfig,
+    mode: str,
+    verify: bool = True,
+) -> Solution:
+    """PS-CVX in ``mode`` from the TPBVP solution ``cvx`` (one TPBVP for both modes)."""
+    config = dataclasses.replace(config, safety_mode=mode)
+    return solve(instance, config, method="passive_safety", warmstart=cvx, verify=verify)
+
+
 def run_bench(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     check_output_file(args.csv, "--csv")
     instances = sample_instances(args.seed, args.n, **common_from_args(args, None))
     start = time.perf_counter()
     warm = solve_tpbvp(instances[0], config)  # compile or load the subproblems, untimed
-    solve_safety(instances[0], warm, config, "chance", verify=False)
+    _passive_safety(instances[0], warm, config, "chance", verify=False)
     print(f"compiled or loaded the subproblems in {time.perf_counter() - start:.1f} s")
     rows = []
     from tqdm import tqdm  # only the benchmark needs it
@@ -316,7 +259,7 @@ def run_bench(args: argparse.Namespace) -> int:
             runs = {}
             if cvx.trajectory is not None:
                 for key, mode in (("det", "deterministic"), ("cc", "chance")):
-                    runs[key] = solve_safety(instance, cvx, config, mode)
+                    runs[key] = _passive_safety(instance, cvx, config, mode)
             else:
                 runs = {"det": cvx, "cc": cvx}
             rows.append(bench_row(index, instance, cvx, runs))

@@ -1,44 +1,14 @@
-"""Warm-start flags of the solve commands (``--warmstart ... --model RUN``), summary rows."""
+"""Warm starts of the solve commands: the provider of ``--warmstart ... --model RUN`` and the
+summary rows (the flags are in :mod:`scpformer.cli.parsers.common`)."""
 
 from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 from typing import Any
 
 from scpformer.scp.solution import Solution
-from scpformer.warmstart import ART_MODES, ArtWarmStart, WarmStart, WarmStartRecord
-
-
-def add_warmstart_arguments(
-    parser: argparse.ArgumentParser, names: tuple[str, ...], default: str, help_names: str
-) -> None:
-    """``--warmstart`` (the family's ``names`` or ``art``) and the ART flags."""
-    group = parser.add_argument_group("warm start")
-    group.add_argument(
-        "--warmstart",
-        choices=(*names, "art"),
-        default=default,
-        help=f"{help_names}, or art: the transformer of --model (default: {default})",
-    )
-    group.add_argument(
-        "--model",
-        type=Path,
-        metavar="RUN",
-        help="ART training run folder or checkpoint file, or 'default': the pretrained model "
-        "shipped with scpformer (default: default)",
-    )
-    group.add_argument(
-        "--art-mode",
-        choices=ART_MODES,
-        help="ART inference: dynamics in the loop (Algorithm 2) or transformer only "
-        "(Algorithm 1) (default: dynamics)",
-    )
-    group.add_argument(
-        "--rtg", type=float, metavar="R", help="R(t_1) [m/s], <= 0 (default: -J_CVX)"
-    )
-    group.add_argument("--ctg", type=float, metavar="C", help="C(t_1) (default: 0)")
+from scpformer.warmstart import ArtWarmStart, WarmStart, WarmStartRecord
 
 
 def single_thread_inference() -> None:
