@@ -143,12 +143,15 @@ class RobustWarmstartSolver(ModelSolver):
 
     def scp(self, instance: Any, mode: str, guess: Any) -> Any:
         """SCvx* from ``guess`` (no final verification)."""
+        from dataclasses import replace
+
         from scpformer.data.robust_rendezvous_family import RobustDataConfig
-        from scpformer.problems.robust_rendezvous.problem import solve
+        from scpformer.robust_rendezvous import solve
         from scpformer.warmstart import PrecomputedWarmStart
 
-        solver = RobustDataConfig.from_dict(self.data_config).solver
-        return solve(instance, solver, mode, warmstart=PrecomputedWarmStart(guess), verify=False)
+        solver = replace(RobustDataConfig.from_dict(self.data_config).solver, safety_mode=mode)
+        warmstart = PrecomputedWarmStart(guess)
+        return solve(instance, solver, method="passive_safety", warmstart=warmstart, verify=False)
 
     def solve(self, task: InstanceTask) -> dict[str, Any]:
         instance = self.instance(task.theta)

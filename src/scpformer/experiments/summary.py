@@ -14,8 +14,9 @@ docstring), or the status an experiment recorded for a row.
 Stale: a result records the commit it was measured at (``results.json`` ``"run"``
 ``"commit"``). It is **stale** when a later commit changed a source path its registry entry
 declares (:attr:`scpformer.experiments.Experiment.depends_on`), i.e. when ``git log
---format=%H COMMIT..HEAD -- PATHS`` is non-empty in the checkout the package runs from. Any change counts, a comment as much as an algorithm: a stale result may still be
-right, but it was not measured with the code of today. Uncommitted changes do not count.
+--format=%H COMMIT..HEAD -- PATHS`` is non-empty in the checkout the package runs from. Any
+change counts, a comment as much as an algorithm: a stale result may still be right, but it
+was not measured with the code of today. Uncommitted changes do not count.
 When the commit is unknown or git cannot answer, the page says so ("stale: unknown").
 """
 
@@ -270,9 +271,9 @@ def write_summary(results_dir: Path, out: Path) -> Path:
     :class:`ResultsError`: its page would list every experiment as not run and replace the
     page at ``out``.
     """
-    from scpformer.files import write_text_atomic as atomic_write_text
     from scpformer.experiments import EXPERIMENTS
     from scpformer.files import check_output_file
+    from scpformer.files import write_text_atomic as atomic_write_text
 
     check_output_file(out, "--out")
     results = collect(results_dir)
