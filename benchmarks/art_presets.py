@@ -1,4 +1,4 @@
-"""Measure candidate ART sizes to choose the ``small`` preset (issue 12).
+"""Measure candidate ART sizes to choose the ``small`` preset.
 
 For each candidate: parameters; training seconds per epoch of 5000 random sequences of 100
 steps (forward + backward + AdamW at batch 32 on ``--train-threads`` threads, extrapolated

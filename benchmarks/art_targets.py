@@ -1,4 +1,4 @@
-"""Check the ART generation targets of issue 12 on this machine (one thread).
+"""Check the ART generation-time targets on this machine (one thread).
 
 100-step cached rollouts with the rendezvous dynamics in the loop (as ``scpformer bench
 art``), random weights: ``small`` at batch 1 <= 30 ms, ``paper`` at batch 1 <= 0.3 s,

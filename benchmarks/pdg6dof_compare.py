@@ -16,8 +16,8 @@ import sys
 
 import numpy as np
 
-from scpformer.problems.pdg6dof.instance import SampleRanges, sample_instances
 from scpformer.problems.pdg6dof.problem import propellant_gap
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 
 
 def read_nominal(path: str) -> list[dict[str, str]]:
@@ -35,7 +35,7 @@ def main() -> int:
     if len(before) != len(after):
         raise SystemExit(f"error: {len(before)} nominal rows before, {len(after)} after")
     instances = sample_instances(
-        np.random.default_rng(args.seed), len(after), SampleRanges.nominal()
+        np.random.default_rng(args.seed), len(after), PDGSampleRanges.nominal()
     )
     print(f"{'#':>3} {'before':<15} {'it':>3} {'gap':>7} | {'after':<15} {'it':>3} {'gap':>7}")
     gaps: dict[str, list[float]] = {"before": [], "after": []}

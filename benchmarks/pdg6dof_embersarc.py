@@ -20,8 +20,8 @@ the draws stay the same); the script prints one line per draw and exits 1 unless
 converged.
 
 Measured (docs/studies/embersarc-scenario.md; seed 0, 3 draws, single deterministic runs): with the
-stall test and restart (session 13) ours converges on draw 0 (68 solves, verified; 46 with
-session 24's restart of a creeping run, 42 with session 25's polish of accepted steps) and
+stall test and restart ours converges on draw 0 (68 solves, verified; 46 with the restart
+of a creeping run, 42 with the polish of accepted steps) and
 fails on draws 1 and 2 (stalled or at the cap) at velocity scale 1.0; before them it ended in
 max_iterations on all three. At velocity scale 0.8 it converges (verified) on draws 0 and 1.
 EmbersArc's own solver (its commit c2dbab6, K = 40, fixed t_f = 15 s, run verbatim outside
@@ -31,10 +31,10 @@ dynamics, miss the pad by 19, 147 and 284 m. Started from its draw-0 trajectory,
 to a verified landing (t_f = 15.65 s, m_f = 27123 kg, K = 40), so draw 0 is feasible and our
 failure there is the initial guess. Draws 1 and 2 stay unsolved by both (and by continuation
 in the velocity scale beyond 0.975 and 0.875): evidence, not proof, of infeasibility. IPOPT
-on the same transcription agrees (session 25, ``pdg6dof_viability.py``): draws 1 and 2 cannot
+on the same transcription agrees (``pdg6dof_viability.py``): draws 1 and 2 cannot
 stay inside the path constraints for longer than 5.98 and 4.53 s from any start it converged
 from, and its landing search ends with a terminal slack at those final times.
-What makes them hard is the initial attitude (session 23): with ``--attitude-scale 0.5`` or
+What makes them hard is the initial attitude: with ``--attitude-scale 0.5`` or
 0.6 all three draws converge from the default start, with 0.75 only draw 0 (at 300
 iterations) while draws 1 and 2 stall with the glideslope violated by about 1 m; continuation
 in the attitude scale finds verified landings up to 0.65 (draw 1) and 0.75 (draw 2).

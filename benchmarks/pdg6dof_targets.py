@@ -1,9 +1,9 @@
-"""Check the 6-DoF performance targets of the foundation issue on this machine.
+"""Check the 6-DoF performance targets on this machine.
 
 Runs ``scpformer bench pdg6dof`` (20 nominal + 10 Table 2 instances, seed 0) and compares
 the nominal set with the targets: median wall time under 1 s, at least 70% of the wall
 time inside the conic solver, every instance converged, and median / p95 subproblem solves
-at most 15 / 25 (issue 9). Prints the summary and PASS/FAIL per target; exit status 1 on a
+at most 15 / 25. Prints the summary and PASS/FAIL per target; exit status 1 on a
 miss. Timings depend on the machine and its load: run it on an otherwise idle machine.
 
 Usage: python benchmarks/pdg6dof_targets.py [--csv bench_pdg6dof.csv]

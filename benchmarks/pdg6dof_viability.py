@@ -1,4 +1,4 @@
-"""How long can EmbersArc's draws stay inside the 6-DoF path constraints? (issue 9, point 4)
+"""How long can EmbersArc's draws stay inside the 6-DoF path constraints?
 
 For each draw of ``benchmarks/pdg6dof_embersarc.py`` (the same instance and constants as its
 ``scpformer solve pdg6dof`` call) this solves, with IPOPT through casadi,
@@ -22,7 +22,7 @@ rate and tilt bounds on squared norms). The result of every start is verified by
 its thrust from ``x_0`` with DOP853 (:func:`scpformer.problems.pdg6dof.problem.propagate`)
 and evaluating the constraints there.
 
-Measured (session 25, seed 0, single runs; docs/studies/embersarc-scenario.md): with ``--n-nodes 30``
+Measured (seed 0, single runs; docs/studies/embersarc-scenario.md): with ``--n-nodes 30``
 draw 0 stays inside for the whole 60 s from all 4 starts, draw 1 for 5.98 s and draw 2 for
 4.53 s from the 2 shorter starts (IPOPT did not converge from the 2 longer ones); with
 ``--n-nodes 80`` draw 0 again 60 s and draw 1 5.98 s (2 starts). At that point the vehicle

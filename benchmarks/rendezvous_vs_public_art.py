@@ -1,4 +1,4 @@
-"""Our verified rendezvous SCP against the public ART code's ``solve_scp`` (issue 16, item 6).
+"""Our verified rendezvous SCP against the public ART code's ``solve_scp``.
 
 The public code is the rendezvous part (``rpod/``) of the repository of Celestini, Gammelli,
 Guffanti, D'Amico, Capello and Pavone, "Transformer-based model predictive control: trajectory
@@ -15,11 +15,11 @@ instances, this times
 
 * theirs: ``ocp_cvx`` (their Problem 2 warm start, as their ``warmstarting_analysis.py`` does)
   and then ``solve_scp`` from its states: the SCP alone and CVX + SCP;
-* ours, verified: ``problem.solve(instance, "scp")``, what ``scpformer solve rendezvous
-  --problem scp`` runs (our Problem 2 warm start, the SCP, and the nonlinear replay check
-  :func:`~scpformer.problems.rendezvous.problem.verify_solution`), with the replay's cache
-  cleared first so every timed solve pays the whole check; the SCP alone is the total minus
-  the warm start's time;
+* ours, verified: ``scpformer.rendezvous.solve(instance, config)`` (method ``"scp"``), what
+  ``scpformer solve rendezvous --problem scp`` runs (our Problem 2 warm start, the SCP, and
+  the nonlinear replay check :func:`~scpformer.problems.rendezvous.problem.verify_solution`),
+  with the replay's cache cleared first so every timed solve pays the whole check; the SCP
+  alone is the total minus the warm start's time;
 * ours without the check (``verify=False``), timed the same way.
 
 It reports per instance the medians over the repeats, both costs (sum of ``|dv|_2``), the
@@ -91,12 +91,13 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.problems.rendezvous import problem
+from scpformer.problems.rendezvous import problem, verification
 from scpformer.problems.rendezvous.instance import RendezvousInstance, sample_instances
 from scpformer.problems.rendezvous.scenario import RendezvousSolverConfig, SCPParameters
+from scpformer.rendezvous import solve
 from scpformer.scp.solution import Status
 
-DEFAULT_OUT = Path("/work/data/vs-public-art")
+DEFAULT_OUT = Path("vs-public-art")  # relative to the working folder
 OCP = Path("optimization") / "ocp.py"
 VARIANTS = ("theirs", "ours_check", "ours_nocheck")
 
@@ -280,10 +281,11 @@ def run_theirs(ocp: types.ModuleType, inp: PublicInputs) -> Run:
 
 
 def run_ours(instance: RendezvousInstance, config: RendezvousSolverConfig, verify: bool) -> Run:
-    """``problem.solve(instance, "scp")`` (what ``scpformer solve rendezvous`` runs)."""
-    problem._osculating_initial_state.cache_clear()  # each timed check pays the whole replay
+    """``scpformer.rendezvous.solve(instance, config)`` (what ``scpformer solve rendezvous``
+    runs)."""
+    verification._osculating_initial_state.cache_clear()  # each timed check pays the replay
     start = time.perf_counter()
-    sol = problem.solve(instance, "scp", config=config, verify=verify)
+    sol = solve(instance, config, method="scp", verify=verify)
     total = time.perf_counter() - start
     warm = sol.extras["warmstart"]["time_s"]
     return Run(

@@ -1,4 +1,4 @@
-"""Monte Carlo check of passive safety on a dense grid of every drift arc (issue 10, point 2).
+"""Monte Carlo check of passive safety on a dense grid of every drift arc.
 
 For each seed in ``--seeds`` and each waypoint, samples one Table 1 instance
 (``sample_instances(seed, 1)`` with the waypoint replaced), solves it with the three-stage
@@ -24,8 +24,8 @@ import numpy as np
 
 from scpformer.problems.robust_rendezvous.instance import sample_instances
 from scpformer.problems.robust_rendezvous.montecarlo import MonteCarloConfig, monte_carlo
-from scpformer.problems.robust_rendezvous.problem import solve
-from scpformer.problems.robust_rendezvous.scenario import WAYPOINTS
+from scpformer.problems.robust_rendezvous.scenario import WAYPOINTS, RobustSolverConfig
+from scpformer.robust_rendezvous import solve
 
 
 def _seeds(text: str) -> list[int]:
@@ -51,7 +51,7 @@ def main() -> int:
             instance = dataclasses.replace(base, waypoint=waypoint)
             for mode in args.modes:
                 start = time.perf_counter()
-                sol = solve(instance, mode=mode)
+                sol = solve(instance, RobustSolverConfig(safety_mode=mode), method="three_stage")
                 if sol.trajectory is None:
                     print(f"seed {seed:2d} {waypoint} {mode}: no trajectory", flush=True)
                     continue

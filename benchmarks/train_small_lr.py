@@ -1,4 +1,4 @@
-"""Learning-rate sweep of the ``small`` training preset (issue 12): same data, budget and seed.
+"""Learning-rate sweep of the ``small`` training preset: same data, budget and seed.
 
 Trains each model kind's ``small`` preset on a subset of a split rendezvous dataset for a few
 epochs at each learning rate (warm-up then cosine, as the preset) and prints the validation

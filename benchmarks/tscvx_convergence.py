@@ -96,11 +96,11 @@ def tolerance_column(tol: float) -> str:
 
 def run(args: Any) -> list[dict[str, Any]]:
     """Solve the selected instances with both methods (the issue experiment's
-    :class:`~scpformer.experiments.tscvx_studies.SolveTimeSolver`); the rows of
+    :class:`~scpformer.experiments.tscvx.common.SolveTimeSolver`); the rows of
     :func:`instance_rows`."""
     from scpformer.data.storage import read_manifest
     from scpformer.experiments.runner import select_test_instances, theta_tasks
-    from scpformer.experiments.tscvx_studies import SolveTimeSolver
+    from scpformer.experiments.tscvx.common import SolveTimeSolver
     from scpformer.pretrained import default_model
 
     model = default_model("pdg6dof") if args.model == "default" else Path(args.model)

@@ -1,6 +1,6 @@
 """T-SCvx with an oracle predictor against cold SCvx: the most the networks can give.
 
-For each of ``--n`` nominal instances (``SampleRanges.nominal()``, ``--seed``) cold SCvx is
+For each of ``--n`` nominal instances (``PDGSampleRanges.nominal()``, ``--seed``) cold SCvx is
 solved first; the oracle then answers ``predict_tight(theta, k)`` with the flags of the cold
 run's k-th solve (the last one beyond its length) and ``predict_solution`` with the cold
 optimum. Side by side in one process, per instance:
@@ -27,12 +27,15 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
+from scpformer.pdg6dof import PDGSolverConfig, solve
 from scpformer.problems.pdg6dof.guess import straight_line_guess
-from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
-from scpformer.problems.pdg6dof.problem import PDGSolverConfig, propellant_gap, solve
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.metrics import propellant_gap
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 from scpformer.problems.pdg6dof.subproblem import trust_region_scales
 from scpformer.problems.pdg6dof.tscvx import TscvxParameters
 from scpformer.scp.solution import Solution, Trajectory
@@ -81,13 +84,18 @@ def variants(
     paper = TscvxParameters(eta_init=0.01)
     fuzzy = Oracle(cold, noisy(instance, cold.trajectory, args.noise, args.seed), args.flip)
     fuzzy_guess = TscvxWarmStart(fuzzy).guess(instance).trajectory
+    eta_one = replace(config, scvx=replace(config.scvx, eta_init=1.0))
+
+    def tscvx(provider: TscvxWarmStart) -> Solution:
+        return solve(instance, config, method="tscvx", warmstart=provider)
+
     return {
-        "guess only": lambda: solve(instance, config, guess=cold.trajectory, eta_init=1.0),
-        "T-SCvx": lambda: solve(instance, config, guess=TscvxWarmStart(oracle)),
-        "T-SCvx eta 0.01": lambda: solve(instance, config, guess=TscvxWarmStart(oracle, paper)),
-        "rows only": lambda: solve(instance, config, guess=TscvxWarmStart(line)),
-        "noisy guess only": lambda: solve(instance, config, guess=fuzzy_guess, eta_init=1.0),
-        "noisy T-SCvx": lambda: solve(instance, config, guess=TscvxWarmStart(fuzzy)),
+        "guess only": lambda: solve(instance, eta_one, warmstart=cold.trajectory),
+        "T-SCvx": lambda: tscvx(TscvxWarmStart(oracle)),
+        "T-SCvx eta 0.01": lambda: tscvx(TscvxWarmStart(oracle, paper)),
+        "rows only": lambda: tscvx(TscvxWarmStart(line)),
+        "noisy guess only": lambda: solve(instance, eta_one, warmstart=fuzzy_guess),
+        "noisy T-SCvx": lambda: tscvx(TscvxWarmStart(fuzzy)),
     }
 
 
@@ -99,7 +107,9 @@ def main() -> int:
     parser.add_argument("--flip", type=float, default=0.02, help="flipped flags (0.02)")
     args = parser.parse_args()
     config = PDGSolverConfig()
-    instances = sample_instances(np.random.default_rng(args.seed), args.n, SampleRanges.nominal())
+    instances = sample_instances(
+        np.random.default_rng(args.seed), args.n, PDGSampleRanges.nominal()
+    )
     solve(PDGInstance(), config)  # compile/load the subproblem, untimed
     rows: dict[str, list[dict]] = {}
     for index, instance in enumerate(instances):

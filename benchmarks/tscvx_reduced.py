@@ -1,6 +1,6 @@
 """Conic solver time of the reduced 6-DoF subproblem against the number of rows kept.
 
-On ``--n`` nominal instances (``SampleRanges.nominal()``, ``--seed``) solved cold, the
+On ``--n`` nominal instances (``PDGSampleRanges.nominal()``, ``--seed``) solved cold, the
 subproblem is linearized about the converged trajectory (trust radius 1, the soft region)
 and solved with several row sets, each with and without the safeguard box of the soft trust
 region, and without the box and the virtual control ``nu`` (what T-SCvx solves unless its
@@ -20,10 +20,11 @@ import argparse
 
 import numpy as np
 
+from scpformer.pdg6dof import PDGSolverConfig, solve
 from scpformer.problems.pdg6dof import constraints as con
-from scpformer.problems.pdg6dof.instance import SampleRanges, sample_instances
-from scpformer.problems.pdg6dof.problem import SOFT_BOX_FACTOR, PDGProblem, PDGSolverConfig, solve
+from scpformer.problems.pdg6dof.problem import SOFT_BOX_FACTOR, PDGProblem
 from scpformer.problems.pdg6dof.reduced import ReducedSubproblem
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 from scpformer.problems.pdg6dof.tscvx import TscvxParameters, near_active_rows, row_scales
 from scpformer.scp.conic import solve_timed
 
@@ -52,7 +53,9 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0, help="sampling seed (0)")
     args = parser.parse_args()
     config = PDGSolverConfig()
-    instances = sample_instances(np.random.default_rng(args.seed), args.n, SampleRanges.nominal())
+    instances = sample_instances(
+        np.random.default_rng(args.seed), args.n, PDGSampleRanges.nominal()
+    )
     times: dict[str, list[float]] = {}
     sizes: dict[str, list[tuple[int, int, int, int, int]]] = {}
     for instance in instances:
