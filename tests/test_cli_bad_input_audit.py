@@ -229,12 +229,12 @@ def test_train_lookup_into_a_folder_holding_a_table_is_refused(tmp_path, capsys)
     assert snapshot(tmp_path) == before
 
 
-def test_a_manifest_that_is_not_a_json_object_is_called_corrupt(tmp_path, capsys):
+def test_a_manifest_that_is_not_a_json_object_is_called_damaged(tmp_path, capsys):
     """Was: "cannot convert dictionary update sequence element #0 to a sequence"."""
     (tmp_path / "ds").mkdir()
     (tmp_path / "ds" / "manifest.json").write_text("[1, 2]")
-    one_line_error(capsys, ["dataset", "info", str(tmp_path / "ds")], "manifest.json is corrupt",
-                   "JSON list")  # fmt: skip
+    argv = ["dataset", "info", str(tmp_path / "ds")]
+    one_line_error(capsys, argv, "manifest.json: the manifest is damaged", "JSON list")
 
 
 @pytest.mark.parametrize(

@@ -66,7 +66,7 @@ def test_fixed_roll_landing_of_draw_0_converges_from_the_default_start(tmp_path)
     left (before the stall test and restart: 100 solves, max_iterations)."""
     from scpformer.cli.main import build_parser
     from scpformer.cli.pdg6dof import config_from_args, instance_from_args
-    from scpformer.problems.pdg6dof.problem import solve
+    from scpformer.pdg6dof import solve
     from scpformer.scp.solution import Status
 
     script = _embersarc_script()

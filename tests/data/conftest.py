@@ -15,9 +15,9 @@ PDG_SHARD = 2
 @pytest.fixture(scope="session")
 def pdg_family():
     from scpformer.data.pdg6dof_family import PDG6DoFDataConfig, PDG6DoFFamily
-    from scpformer.problems.pdg6dof.instance import SampleRanges
+    from scpformer.problems.pdg6dof.sampling import PDGSampleRanges
 
-    family = PDG6DoFFamily(PDG6DoFDataConfig(ranges=SampleRanges.nominal()))
+    family = PDG6DoFFamily(PDG6DoFDataConfig(ranges=PDGSampleRanges.nominal()))
     family.warm_up()  # build the on-disk subproblem cache once, before any worker needs it
     return family
 

@@ -72,7 +72,8 @@ def test_a_corrupt_manifest_is_a_clear_error(toy_folder):
 
 def test_a_manifest_missing_a_field_names_the_field(toy_folder):
     (toy_folder / storage.MANIFEST_NAME).write_text('{"format_version": 1}')
-    with pytest.raises(DatasetError, match=r"manifest\.json: the manifest is damaged \(manifest lacks") as info:
+    damaged = r"manifest\.json: the manifest is damaged \(manifest lacks"
+    with pytest.raises(DatasetError, match=damaged) as info:
         storage.read_manifest(toy_folder)
     assert "family, seed, n, shard_size" in str(info.value)  # every missing one, in order
 
@@ -103,14 +104,17 @@ def _tampered(folder, edit):
     path.write_text(json.dumps(data))
 
 
-@pytest.mark.parametrize("name", ["../victim.h5", "/tmp/victim.h5", "sub/shard.h5", ".h5", None])
+@pytest.mark.parametrize(
+    "name", ["../victim.h5", "/elsewhere/victim.h5", "sub/shard.h5", ".h5", None]
+)
 def test_a_manifest_naming_a_shard_outside_the_folder_is_corrupt_and_nothing_is_deleted(
     toy_folder, name
 ):
     victim = toy_folder.parent / "victim.h5"
     victim.write_text("not yours")
     _tampered(toy_folder, lambda data: data["shards"][0].update(file=name))
-    with pytest.raises(DatasetError, match=r"manifest\.json: the manifest is damaged \(.*shard file"):
+    damaged = r"manifest\.json: the manifest is damaged \(.*shard file"
+    with pytest.raises(DatasetError, match=damaged):
         generate(ToyFamily(), config(toy_folder))
     assert victim.read_text() == "not yours"
 
@@ -127,7 +131,8 @@ def test_a_manifest_naming_a_shard_outside_the_folder_is_corrupt_and_nothing_is_
 )
 def test_a_manifest_with_a_wrongly_typed_number_names_it(toy_folder, edit, message):
     _tampered(toy_folder, edit)
-    with pytest.raises(DatasetError, match=r"manifest\.json: the manifest is damaged \(.*" + message):
+    damaged = r"manifest\.json: the manifest is damaged \(.*" + message
+    with pytest.raises(DatasetError, match=damaged):
         storage.read_manifest(toy_folder)
 
 

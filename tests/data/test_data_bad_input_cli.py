@@ -1,7 +1,7 @@
 """Bad datasets and bad ``generate``/``dataset`` input: one error line, no silent result.
 
 Each case asserts the exit status, that stderr is one ``scpformer: error:`` line naming the
-flag, shard or path, and that no file written before is changed (issue 11). The toy family
+flag, shard or path, and that no file written before is changed. The toy family
 solves in microseconds, so everything but the SIGTERM case runs in-process.
 """
 

@@ -22,7 +22,8 @@ from scpformer.data.pdg6dof_family import (
     instance_from_theta,
     theta_vector,
 )
-from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges
 
 
 def test_every_planned_family_is_known_by_name():
@@ -41,7 +42,7 @@ def test_an_unknown_family_names_the_known_ones():
 
 
 def test_pdg6dof_family_implements_the_protocol_and_rebuilds_from_its_config():
-    family = PDG6DoFFamily(PDG6DoFDataConfig(ranges=SampleRanges.nominal()))
+    family = PDG6DoFFamily(PDG6DoFDataConfig(ranges=PDGSampleRanges.nominal()))
     assert isinstance(family, DatasetFamily)
     rebuilt = build_family("pdg6dof", family.config_dict())
     assert rebuilt == family
@@ -51,7 +52,7 @@ def test_pdg6dof_family_implements_the_protocol_and_rebuilds_from_its_config():
 def test_config_from_dict_rejects_unknown_keys():
     data = dataclasses.asdict(PDG6DoFDataConfig())
     data["solver"]["scvx"]["speed"] = 3
-    with pytest.raises(ValueError, match=r"SCvxParameters: unknown field.*speed"):
+    with pytest.raises(ValueError, match=r"field\(s\) speed that SCvxParameters does not know"):
         dataclass_from_dict(PDG6DoFDataConfig, data)
 
 

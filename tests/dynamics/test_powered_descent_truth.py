@@ -92,8 +92,8 @@ def test_a_non_finite_input_ends_the_integration_with_a_too_small_step(where):
 
 def test_propagation_names_the_interval_where_the_state_stops_being_finite():
     from scpformer.problems.pdg6dof.guess import straight_line_trajectory
-    from scpformer.problems.pdg6dof.instance import sample_instances
     from scpformer.problems.pdg6dof.problem import propagate
+    from scpformer.problems.pdg6dof.sampling import sample_instances
 
     instance = sample_instances(np.random.default_rng(0), 1)[0]
     z = straight_line_trajectory(instance, 10)

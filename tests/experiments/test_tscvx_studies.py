@@ -17,10 +17,11 @@ from scpformer.data.pdg6dof_family import PDG6DoFDataConfig, PDG6DoFFamily
 from scpformer.data.splits import SplitConfig, make_splits
 from scpformer.experiments import RunOptions, run_experiment
 from scpformer.experiments.runner import column
-from scpformer.experiments.tscvx_studies import COLD, method_stats, ood_selection
+from scpformer.experiments.tscvx.common import COLD, method_stats
+from scpformer.experiments.tscvx.lookup import ood_selection
 from scpformer.models.predictors import load_predictor, predictor_kind
-from scpformer.problems.pdg6dof.instance import SampleRanges
 from scpformer.problems.pdg6dof.problem import PDGSolverConfig
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges
 
 pytestmark = pytest.mark.slow
 
@@ -29,7 +30,7 @@ pytestmark = pytest.mark.slow
 def tscvx_study(tmp_path_factory):
     """4 nominal instances x 4 rotations, split by instance; a 1-epoch T-SCvx run; a k-d tree."""
     root = tmp_path_factory.mktemp("tscvx-exp")
-    config = PDG6DoFDataConfig(ranges=SampleRanges.nominal(), solver=PDGSolverConfig(n_nodes=20))
+    config = PDG6DoFDataConfig(ranges=PDGSampleRanges.nominal(), solver=PDGSolverConfig(n_nodes=20))
     generate(PDG6DoFFamily(config), GenerateConfig(n=4, out=root / "base", shard_size=3,
                                                    workers=1, seed=3))  # fmt: skip
     rotations = RotationAugmentation(angles_deg=(0.0, 90.0, 180.0, 270.0))
@@ -68,7 +69,7 @@ def test_solve_time_compares_cold_and_tscvx_on_the_same_instances(tscvx_study, t
     # T-SCvx converges (fallbacks included) near cold SCvx's verified optimum. The networks of
     # this fixture trained one epoch on four instances, so their guess can lead SCvx to another
     # local optimum: measured 0.55% of the propellant above cold SCvx's on one of these two
-    # instances (issue 14's 0.5% is a claim about trained networks, measured by the experiment)
+    # instances (the 0.5% bound is a claim about trained networks, measured by the experiment)
     assert all(r["tscvx_status"] == "converged" for r in rows)
     assert np.all(column(rows, "tscvx_gap") <= 1e-2)
     assert all(r["tscvx_verified"] == "True" for r in rows)
@@ -109,7 +110,7 @@ def test_ood_selection_takes_half_from_beyond_the_threshold():
 
 
 def test_the_report_names_the_model_card_of_the_shipped_model_and_the_preset_of_a_run(tmp_path):
-    from scpformer.experiments.tscvx_studies import train_command
+    from scpformer.experiments.tscvx.common import train_command
     from scpformer.pretrained import default_model
 
     shipped = default_model("pdg6dof")

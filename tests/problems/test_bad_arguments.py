@@ -1,4 +1,4 @@
-"""Public entry points name the bad argument in a TypeError or ValueError (issue 11).
+"""Public entry points name the bad argument in a TypeError or ValueError.
 
 Each case fails before any conic solve: wrong types (a string, a dict, a list), wrong shapes,
 NaN, complex numbers and JSON strings where booleans belong.
@@ -15,8 +15,8 @@ from scpformer.problems.rendezvous.instance import RendezvousInstance
 from scpformer.problems.rendezvous.problem import solve as solve_rdv
 from scpformer.problems.rendezvous.scenario import RendezvousScenario, VerificationTolerances
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
-from scpformer.problems.robust_rendezvous.problem import solve as solve_robust
 from scpformer.problems.robust_rendezvous.scenario import RobustScenario
+from scpformer.robust_rendezvous import solve as solve_robust
 from scpformer.scp.solution import Trajectory
 
 
@@ -99,7 +99,9 @@ RENDEZVOUS_CASES = {
     "robust-instance-a-dict": (lambda: solve_robust({}), ValueError, "instance"),
     "robust-config-a-string": (lambda: solve_robust(RobustInstance(), "fast"), TypeError, "config"),
     "robust-warmstart-a-list": (
-        lambda: solve_robust(RobustInstance(), warmstart=[1.0], verify=False),
+        lambda: solve_robust(
+            RobustInstance(), method="passive_safety", warmstart=[1.0], verify=False
+        ),
         ValueError,
         "warm start",
     ),

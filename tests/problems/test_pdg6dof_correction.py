@@ -5,7 +5,7 @@ import pytest
 
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof.correction import LeastChangeCorrection
-from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
+from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import (
     LEAST_CHANGE,
     PDGProblem,
@@ -14,6 +14,7 @@ from scpformer.problems.pdg6dof.problem import (
     propellant_gap,
     solve,
 )
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 from scpformer.problems.pdg6dof.subproblem import fixed_terminal_columns
 from scpformer.scp.scvx import Candidate, SCvxParameters
 from scpformer.scp.solution import Status, Trajectory
@@ -89,7 +90,7 @@ def test_a_correction_that_breaks_a_convex_row_is_refused(optimum):
 
 def test_least_change_corrections_replace_conic_solves_at_the_same_optimum():
     # the third nominal instance of seed 0: the default run needs corrections (bench pdg6dof)
-    instance = sample_instances(np.random.default_rng(0), 3, SampleRanges.nominal())[2]
+    instance = sample_instances(np.random.default_rng(0), 3, PDGSampleRanges.nominal())[2]
     on = solve(instance)
     off = solve(instance, PDGSolverConfig(least_change_correction=False))
     assert on.status is Status.CONVERGED and off.status is Status.CONVERGED
@@ -122,7 +123,7 @@ def test_with_the_hard_box_a_least_change_step_stays_inside_the_box():
     # Algorithm 1's hard box (no soft term): its steps end on the box, and a correction that
     # would leave it is refused for the conic one, which keeps the box (polish off: it
     # removes the defects that call for these corrections)
-    instance = sample_instances(np.random.default_rng(0), 1, SampleRanges.nominal())[0]
+    instance = sample_instances(np.random.default_rng(0), 1, PDGSampleRanges.nominal())[0]
     config = PDGSolverConfig(prox_weight=0.0, scvx=SCvxParameters(polish=False))
     solution = solve(instance, config)
     used = [rec for rec in solution.history if rec.solver_status == LEAST_CHANGE]

@@ -10,8 +10,9 @@ from scpformer.problems.pdg6dof.guess import (
     shortest_arc_from_x,
     straight_line_guess,
 )
-from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
+from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import PDGProblem, PDGSolverConfig
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 from scpformer.scp.solution import Trajectory
 
 
@@ -80,7 +81,7 @@ def test_cubic_profile_nearly_obeys_the_translational_and_mass_dynamics():
     nonlinear FOH flow of Eq. 4, where the straight line's do not. (Its body rates do not: a
     thrust along the body axis exerts no torque, so the flow keeps omega constant.)"""
     rows = [0, 1, 2, 3, 4, 5, 13]
-    for inst in sample_instances(np.random.default_rng(0), 3, SampleRanges.nominal()):
+    for inst in sample_instances(np.random.default_rng(0), 3, PDGSampleRanges.nominal()):
         problem = PDGProblem(inst, PDGSolverConfig())
         defects = {}
         for name, guess in (("cubic", cubic_profile_guess), ("line", straight_line_guess)):

@@ -9,7 +9,8 @@ from scpformer.problems.pdg6dof.constraints import (
     constraint_index,
     initial_state_violations,
 )
-from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 
 
 @pytest.mark.parametrize(
@@ -63,8 +64,8 @@ def test_rotation_about_up_preserves_altitude_speed_and_tilt():
 
 
 def test_sampler_is_reproducible_and_stays_in_range():
-    a = sample_instances(np.random.default_rng(7), 5, SampleRanges.table2())
-    b = sample_instances(np.random.default_rng(7), 5, SampleRanges.table2())
+    a = sample_instances(np.random.default_rng(7), 5, PDGSampleRanges.table2())
+    b = sample_instances(np.random.default_rng(7), 5, PDGSampleRanges.table2())
     assert a == b
     for inst in a:
         assert 0.003 <= inst.r0[0] <= 9.997 and inst.r0[1] >= 0.0 and inst.r0[2] >= 0.0

@@ -12,17 +12,17 @@ from scpformer.data.pdg6dof_family import (
     instance_from_theta,
     theta_vector,
 )
-from scpformer.problems.pdg6dof import instance as instance_module
+from scpformer.problems.pdg6dof import sampling as instance_module
 from scpformer.problems.pdg6dof.constraints import initial_state_violations
-from scpformer.problems.pdg6dof.instance import (
-    PDGInstance,
-    SampleRanges,
+from scpformer.problems.pdg6dof.instance import PDGInstance
+from scpformer.problems.pdg6dof.sampling import (
+    PDGSampleRanges,
     cubic_propellant,
     is_consistent_draw,
     sample_instances,
 )
 
-FEASIBLE = SampleRanges.feasible()
+FEASIBLE = PDGSampleRanges.feasible()
 
 
 @pytest.fixture(scope="module")
@@ -104,11 +104,11 @@ def test_the_consistent_draw_rejects_what_the_docstring_names():
 )
 def test_bad_margins_are_named_in_the_error(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        SampleRanges(**{**FEASIBLE.__dict__, **kwargs})
+        PDGSampleRanges(**{**FEASIBLE.__dict__, **kwargs})
 
 
 def test_ranges_without_a_consistent_instance_are_a_clear_error(monkeypatch):
     monkeypatch.setattr(instance_module, "MAX_REJECTED_DRAWS", 20)
-    starved = SampleRanges(**{**FEASIBLE.__dict__, "m0": (2.001, 2.002)})
+    starved = PDGSampleRanges(**{**FEASIBLE.__dict__, "m0": (2.001, 2.002)})
     with pytest.raises(ValueError, match="ranges: no consistent instance in 20 draws"):
         sample_instances(np.random.default_rng(0), 1, starved)

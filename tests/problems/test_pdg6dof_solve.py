@@ -165,12 +165,12 @@ def test_a_solve_does_not_depend_on_what_the_process_solved_before(nominal):
 
 
 def test_default_solutions_are_within_half_a_percent_of_propellant_of_the_reference():
-    from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
     from scpformer.problems.pdg6dof.problem import (
         PDGSolverConfig,
         propellant_gap,
         solve_reference,
     )
+    from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 
     instances = sample_instances(np.random.default_rng(0), 3, PDGSampleRanges.nominal())
     for instance in instances:
@@ -237,7 +237,7 @@ def _scripted_first_run(nominal, penalties, iterations):
 def _script_solve_scvx(monkeypatch, first, then):
     """Make the restart logic's ``solve_scvx`` return ``first``, then ``then``; the returned
     list collects each call's ``(guess, params, prior_penalties)``."""
-    from scpformer.problems.pdg6dof import problem as pdg
+    from scpformer.problems.pdg6dof import restart as pdg
 
     calls = []
 
@@ -256,7 +256,7 @@ def test_a_stopped_first_run_without_budget_for_a_restart(nominal, monkeypatch, 
     """Fewer than RESTART_MIN_BUDGET solves left: a run that fell by 10% over the window
     (stopped by the looser test of the first run) continues from its last iterate with the
     solves left; one that fell by 1% (stalled by the configured test) is returned as it is."""
-    from scpformer.problems.pdg6dof import problem as pdg
+    from scpformer.problems.pdg6dof import restart as pdg
     from scpformer.scp.scvx import SCvxParameters
 
     window = SCvxParameters().stall_window
@@ -267,7 +267,9 @@ def test_a_stopped_first_run_without_budget_for_a_restart(nominal, monkeypatch, 
     sol = solve(PDGInstance())
     assert calls[0][1].stall_decrease == pdg.RESTART_DECREASE  # the first run's looser test
     if not continued:
-        assert len(calls) == 1 and sol is first
+        assert len(calls) == 1  # the first run returned as it is (with its warm-start record)
+        assert sol.status is first.status and sol.trajectory is first.trajectory
+        assert sol.history is first.history and sol.iterations == first.iterations
         return
     guess, params, prior = calls[1]
     assert guess is first.trajectory  # not a new cubic profile
@@ -279,7 +281,7 @@ def test_a_stopped_first_run_without_budget_for_a_restart(nominal, monkeypatch, 
 
 
 def test_a_creeping_first_run_restarts_from_a_longer_final_time(nominal, monkeypatch):
-    from scpformer.problems.pdg6dof import problem as pdg
+    from scpformer.problems.pdg6dof import restart as pdg
 
     penalties = list(np.linspace(0.2, 0.19, 16))  # 5% over the window: slow, not stalled
     first = _scripted_first_run(nominal, penalties, 30)

@@ -9,18 +9,19 @@ from scpformer.data.pdg6dof_family import instance_from_theta, theta_vector
 from scpformer.dynamics import quaternion as quat
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.problems.pdg6dof import symmetry as sym
-from scpformer.problems.pdg6dof.instance import PDGInstance, SampleRanges, sample_instances
+from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.problem import (
     PDGSolverConfig,
     solve,
     solve_reference,
     verify_trajectory,
 )
+from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 from scpformer.scp.solution import Status, Trajectory
 
 
 def _sampled_thetas(n: int = 64, seed: int = 3) -> np.ndarray:
-    instances = sample_instances(np.random.default_rng(seed), n, SampleRanges.nominal())
+    instances = sample_instances(np.random.default_rng(seed), n, PDGSampleRanges.nominal())
     return np.array([theta_vector(i) for i in instances])
 
 

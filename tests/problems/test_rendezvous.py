@@ -345,7 +345,7 @@ def test_warm_starts_by_name_trajectory_or_array_reach_a_feasible_solution(nomin
     with pytest.raises(ValueError, match=r"states must have shape \(101, 6\), got \(50, 6\)"):
         solve(instance, "scp", np.zeros((50, 6)))
     with pytest.raises(ValueError, match="warmstart must be one of"):
-        solve(instance, "scp", "art")
+        solve(instance, "scp", "no-such-start")
     with pytest.raises(ValueError, match="problem must be one of"):
         solve(instance, "problem4")
 
@@ -424,7 +424,7 @@ def test_verification_fails_a_plan_that_violates_the_checked_constraints(nominal
 def _replay_and_verify(monkeypatch, method, instance, x, dv):
     """Replay and verification of ``dv`` with the truth propagation ``method``, cold cache."""
     from scpformer.dynamics import truth
-    from scpformer.problems.rendezvous import problem as problem_module
+    from scpformer.problems.rendezvous import verification as problem_module
 
     propagate = functools.partial(truth.propagate_relative, method=method)
     monkeypatch.setattr(problem_module, "propagate_relative", propagate)

@@ -259,9 +259,9 @@ def test_from_checkpoint_wraps_the_checkpoints_model_frame_and_family(monkeypatc
         return types.SimpleNamespace(model=model, normalization=norm, frame="roe",
                                      family="robust-rendezvous", config=STM)  # fmt: skip
 
-    fake = types.ModuleType("scpformer.train.checkpoint")
+    fake = types.ModuleType("scpformer.models.checkpoint")
     fake.load_checkpoint = load_checkpoint
-    monkeypatch.setitem(sys.modules, "scpformer.train.checkpoint", fake)
+    monkeypatch.setitem(sys.modules, "scpformer.models.checkpoint", fake)
     ws = ArtWarmStart.from_checkpoint(
         "RUN", family="robust-rendezvous", config=STM, acceptance=None
     )

@@ -37,11 +37,12 @@ def _one_error_line(capsys) -> str:
 
 
 def test_tscvx_without_a_model_loads_the_pretrained_default(monkeypatch):
-    from scpformer.cli.pdg6dof import add_solve_parser, warmstart_from_args
+    from scpformer.cli.parsers.pdg6dof import add_solve_parser
+    from scpformer.cli.pdg6dof import warmstart_from_args
 
     loaded = []
     monkeypatch.setattr(
-        TscvxWarmStart, "from_run", classmethod(lambda cls, run: loaded.append(run))
+        TscvxWarmStart, "from_checkpoint", classmethod(lambda cls, run: loaded.append(run))
     )
     parser = argparse.ArgumentParser()
     add_solve_parser(parser.add_subparsers())
@@ -81,11 +82,11 @@ def test_tscvx_solve_runs_algorithm_2_with_the_runs_predictor(tmp_path, monkeypa
     predictor = OraclePredictor(solve(PDGInstance()))
     loaded = {}
 
-    def from_run(cls, run_dir, device="cpu", **kwargs):
+    def from_checkpoint(cls, run_dir, device="cpu", **kwargs):
         loaded["run"] = str(run_dir)
         return cls(predictor, **kwargs)
 
-    monkeypatch.setattr(TscvxWarmStart, "from_run", classmethod(from_run))
+    monkeypatch.setattr(TscvxWarmStart, "from_checkpoint", classmethod(from_checkpoint))
     status = main(["solve", "pdg6dof", "--warmstart", "tscvx", "--model", str(tmp_path)])
     out = capsys.readouterr().out
     assert status == 0, out
