@@ -102,6 +102,27 @@ FLAG_CASES = {
     "scvx-iter-max-negative": (["solve", "pdg6dof", "--scvx-iter-max", "-1"], "iter_max"),
     "constant-nan": (["solve", "pdg6dof", "--const-t-max", "nan"], "T_max"),
     "rendezvous-int-field-float": (["solve", "rendezvous", "--scenario-n-nodes", "2.5"], "n-nodes"),
+    # silent before: a negative or NaN tolerance flags no row as tight
+    "tight-tol-negative": (["solve", "pdg6dof", "--tight-tol", "-1"], "tight_tol"),
+    "tight-tol-nan": (["solve", "pdg6dof", "--tight-tol", "nan"], "tight_tol must be finite"),
+    # sizes bounded by memory, refused before any work (the OOM killer took them before)
+    "pdg6dof-nodes-huge": (["solve", "pdg6dof", "--n-nodes", "100000000"], "n_nodes"),
+    "rendezvous-nodes-huge": (
+        ["solve", "rendezvous", "--scenario-n-nodes", "100000000"],
+        "scenario.n_nodes",
+    ),
+    "robust-nodes-huge": (
+        ["solve", "robust-rendezvous", "--scenario-n-nodes", "100000000"],
+        "scenario.n_nodes",
+    ),
+    "robust-approach-ellipsoid-inside-keep-out": (
+        ["solve", "robust-rendezvous", "--scenario-ae-semi-axes-m", "50", "100", "50"],
+        "must contain the keep-out zone",
+    ),
+    "monte-carlo-huge": (
+        ["solve", "robust-rendezvous", "--monte-carlo", "1000000000000"],
+        "monte_carlo.n_samples",
+    ),
     # output paths: checked before solving
     "out-existing-folder": (["solve", "pdg6dof", "--out", "{dir}"], "is a folder"),
     "out-under-a-file": (["solve", "pdg6dof", "--out", "{file}/sub/x.npz"], "is a file"),

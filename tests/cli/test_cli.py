@@ -36,12 +36,14 @@ def test_out_of_range_parameter_flag_is_a_clear_error(capsys):
     assert "rho_0 <= rho_1 < rho_2" in capsys.readouterr().err
 
 
-def test_infeasible_instance_reports_its_status(tmp_path, capsys):
+def test_an_instance_refused_before_solving_is_an_error_naming_the_constraint(tmp_path, capsys):
+    """An initial state that already violates a constraint is bad input (exit 2, one line),
+    not a solver outcome; the API reports it as status INFEASIBLE_INSTANCE."""
     path = tmp_path / "spin.json"
     path.write_text(json.dumps({"omega0_deg": [120.0, 0.0, 0.0]}))
-    assert main(["solve", "pdg6dof", "--instance", str(path)]) == 1
-    out = capsys.readouterr().out
-    assert "infeasible_instance" in out and "omega" in out
+    assert main(["solve", "pdg6dof", "--instance", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot be flown" in err[0] and "omega" in err[0]
 
 
 def test_help_documents_the_defaults_and_table_1_where_they_differ(capsys):

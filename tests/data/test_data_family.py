@@ -52,7 +52,7 @@ def test_pdg6dof_family_implements_the_protocol_and_rebuilds_from_its_config():
 def test_config_from_dict_rejects_unknown_keys():
     data = dataclasses.asdict(PDG6DoFDataConfig())
     data["solver"]["scvx"]["speed"] = 3
-    with pytest.raises(ValueError, match=r"field\(s\) speed that SCvxParameters does not know"):
+    with pytest.raises(ValueError, match=r"field\(s\) speed that this family does not know"):
         dataclass_from_dict(PDG6DoFDataConfig, data)
 
 

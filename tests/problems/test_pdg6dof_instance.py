@@ -90,3 +90,12 @@ def test_shipped_example_instance_is_valid():
     path = Path(__file__).parents[2] / "examples" / "pdg6dof_instance.json"
     inst = PDGInstance.from_json(path)
     assert inst.gamma_gs_deg == 15.0 and initial_state_violations(inst) == []
+
+
+def test_a_huge_initial_state_is_refused_by_name_without_an_overflow_warning():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's overflow RuntimeWarning would fail here
+        with pytest.raises(ValueError, match="r0: norm inf exceeds"):
+            PDGInstance(r0=(1e308, 1e308, 0.0))

@@ -13,15 +13,15 @@ import numpy as np
 from scpformer.cli.dataclass_args import overrides
 from scpformer.cli.outputs import check_solve_outputs, write_csv
 from scpformer.files import check_output_file
+from scpformer.pdg6dof import solve
 from scpformer.problems.pdg6dof.adapter import conic_solves
-from scpformer.problems.pdg6dof.api import solve
 from scpformer.problems.pdg6dof.config import PDGSolverConfig
 from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.problems.pdg6dof.instance import PDGInstance, constants_from_dict
 from scpformer.problems.pdg6dof.metrics import propellant_gap, solve_reference
 from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 from scpformer.scp.scvx import SCvxParameters
-from scpformer.scp.solution import Solution
+from scpformer.scp.solution import Solution, Status
 
 
 def config_from_args(args: argparse.Namespace) -> PDGSolverConfig:
@@ -130,6 +130,10 @@ def run_solve(args: argparse.Namespace) -> int:
     check_solve_outputs(args.out, args.plot, history)
     method = "scvx" if args.warmstart in ("cubic_profile", "straight_line") else "tscvx"
     solution = solve(instance, config, method=method, warmstart=warmstart_from_args(args))
+    if solution.status is Status.INFEASIBLE_INSTANCE and solution.iterations == 0:
+        # refused before any solve (the initial state already violates a constraint): bad
+        # input, said as such, not a solver outcome
+        raise ValueError(f"the instance cannot be flown: {solution.message}")
     print_summary(solution, instance)
     if solution.trajectory is not None:
         if args.out:

@@ -129,6 +129,10 @@ def run_solve(args: argparse.Namespace) -> int:
     instance = instance_from_args(args)
     config = dataclasses.replace(config_from_args(args), safety_mode=args.mode)
     check_solve_outputs(args.out, args.plot)
+    if args.monte_carlo:  # its bounds are checked before the solve, not after it
+        from scpformer.problems.robust_rendezvous.montecarlo import MonteCarloConfig
+
+        MonteCarloConfig(n_samples=args.monte_carlo, seed=args.mc_seed)
     provider = art_provider(args, "robust-rendezvous", config=config, mode=args.mode)
     if args.warmstart == "three_stage":
         solution = solve(instance, config, method="three_stage")

@@ -267,8 +267,8 @@ def dataclass_from_dict(cls: type, data: Mapping[str, Any]) -> Any:
     unknown = sorted(set(data) - known)
     if unknown:
         raise ValueError(
-            f"the dataset's configuration has field(s) {', '.join(unknown)} that "
-            f"{cls.__name__} does not know (data of another family, or an edited manifest?)"
+            f"the dataset's configuration has field(s) {', '.join(unknown)} that this family "
+            "does not know (data of another family, or an edited manifest?)"
         )
     kwargs = {}
     for name, value in data.items():

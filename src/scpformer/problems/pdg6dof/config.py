@@ -3,11 +3,13 @@ and the tolerances of the nonlinear check."""
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
 from scpformer.scp.scvx import SCvxParameters
+from scpformer.validation import check_in_range, check_int
 
 SOFT_BOX_FACTOR = 100.0  # hard box radius / eta under the soft trust region (a safeguard only)
 
@@ -22,6 +24,10 @@ class PDGVerificationTolerances:
     rtol: float = 1e-10  # integrator relative tolerance
     atol: float = 1e-12  # integrator absolute tolerance
     samples_per_interval: int = 5  # dense samples between nodes for path violations
+
+
+MAX_NODES = 1000  # largest N accepted (memory and time; see PDGSolverConfig.__post_init__)
+MAX_SUBSTEPS = 1000  # largest n_sub accepted
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -69,12 +75,16 @@ class PDGSolverConfig:
     verification: PDGVerificationTolerances = field(default_factory=PDGVerificationTolerances)
 
     def __post_init__(self) -> None:
-        if self.n_nodes < 3:
-            raise ValueError(f"n_nodes must be at least 3, got {self.n_nodes}")
-        if self.n_sub < 1:
-            raise ValueError(f"n_sub must be at least 1, got {self.n_sub}")
-        if not self.prox_weight >= 0.0:
-            raise ValueError(f"prox_weight must be nonnegative, got {self.prox_weight}")
+        # Upper bounds from memory and time, not physics: the compiled subproblem grows by about
+        # 17 variables and 300 discretization entries per node (50 in the paper); N = 1000
+        # already takes minutes to canonicalize, and N = 1e8 exhausts any machine's memory.
+        check_int("n_nodes", self.n_nodes, least=3, most=MAX_NODES)
+        check_int("n_sub", self.n_sub, least=1, most=MAX_SUBSTEPS)
+        if not 0.0 <= self.prox_weight < math.inf:
+            raise ValueError(f"prox_weight must be finite and nonnegative, got {self.prox_weight}")
+        # tight_tol compares the nondimensional constraint values g (Eqs. 4-6) with 0: a
+        # negative or NaN tolerance would flag no row as tight, silently
+        check_in_range("tight_tol", self.tight_tol, 0.0, 1.0)
 
 
 def __getattr__(name: str) -> Any:

@@ -43,9 +43,11 @@ class PDGInstance:
     def __post_init__(self) -> None:
         for name, size in (("r0", 3), ("v0", 3), ("q0", 4), ("omega0_deg", 3)):
             value = check_finite(name, getattr(self, name), shape=(size,))
-            if name != "q0" and np.linalg.norm(value) > MAX_INITIAL_STATE_NORM:
+            with np.errstate(over="ignore"):  # entries near 1e308: the norm is inf, not a warning
+                norm = float(np.linalg.norm(value))
+            if name != "q0" and norm > MAX_INITIAL_STATE_NORM:
                 raise ValueError(
-                    f"{name}: norm {np.linalg.norm(value):.3g} exceeds {MAX_INITIAL_STATE_NORM:g}"
+                    f"{name}: norm {norm:.3g} exceeds {MAX_INITIAL_STATE_NORM:g}"
                     " (nondimensional units of Table 1; Table 2 spans |r0| < 20)"
                 )
             object.__setattr__(self, name, tuple(float(v) for v in value))

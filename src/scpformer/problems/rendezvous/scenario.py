@@ -68,6 +68,9 @@ def _vector(name: str, value: Any, size: int) -> tuple[float, ...]:
     return tuple(float(v) for v in check_finite(name, value, shape=(size,)))
 
 
+MAX_NODES = 1000  # largest number of impulses N accepted (memory and time, not physics)
+
+
 @dataclass(frozen=True, kw_only=True)
 class TargetOrbit:
     """Mean orbital elements of the target (ISS) at ``t_0``, Table 1 of the ART paper."""
@@ -159,7 +162,10 @@ class RendezvousScenario:
     # (benchmarks/rendezvous_vs_public_art.py checks that its scenario matches ours).
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "n_nodes", check_int("scenario.n_nodes", self.n_nodes))
+        # at most MAX_NODES (memory and time: the compiled SCP holds dense (N+1) x 6 blocks per
+        # node; the paper uses 100), so that a typo fails here, not in the OOM killer
+        n_nodes = check_int("scenario.n_nodes", self.n_nodes, most=MAX_NODES)
+        object.__setattr__(self, "n_nodes", n_nodes)
         offset = check_int("scenario.waypoint_offset", self.waypoint_offset)
         object.__setattr__(self, "waypoint_offset", offset)
         if self.waypoint_offset < 2:

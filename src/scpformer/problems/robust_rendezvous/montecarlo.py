@@ -59,6 +59,9 @@ PROPAGATORS = ("linear", "truth")
 _CHUNK_FLOATS = 20_000_000  # largest (nodes, samples, instants, 6) block held at once
 
 
+MAX_SAMPLES = 200_000  # largest number of draws per node accepted (memory)
+
+
 @dataclass(frozen=True, kw_only=True)
 class MonteCarloConfig:
     """How the Monte Carlo check samples and propagates (not in the paper)."""
@@ -70,7 +73,9 @@ class MonteCarloConfig:
     seed: int = 0  # seed of the numpy Generator
 
     def __post_init__(self) -> None:
-        check_int("monte_carlo.n_samples", self.n_samples, least=1)
+        # memory, not statistics: the (nodes x draws) table of smallest distances holds 8 bytes
+        # per entry, 160 MB at N = 100 nodes and the largest count; 1e12 draws would need 800 TB
+        check_int("monte_carlo.n_samples", self.n_samples, least=1, most=MAX_SAMPLES)
         check_int("monte_carlo.seed", self.seed, least=0)
         if self.propagator not in PROPAGATORS:
             raise ValueError(

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.dynamics.uncertainty import UncertaintyModel
-from scpformer.problems.rendezvous.scenario import TargetOrbit, check_orbits
+from scpformer.problems.rendezvous.scenario import MAX_NODES, TargetOrbit, check_orbits
 from scpformer.scp.scvx_star import SCvxStarParameters
 from scpformer.validation import check_bool, check_finite, check_int, check_positive, known_fields
 
@@ -90,7 +90,8 @@ class RobustScenario:
     j2: bool = True  # J2 state transition matrix (Koenig 2017); False: Keplerian
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "n_nodes", check_int("scenario.n_nodes", self.n_nodes, least=2))
+        n_nodes = check_int("scenario.n_nodes", self.n_nodes, least=2, most=MAX_NODES)
+        object.__setattr__(self, "n_nodes", n_nodes)  # MAX_NODES: memory and time, not physics
         object.__setattr__(self, "n_safety", check_int("scenario.n_safety", self.n_safety, least=1))
         switch = check_int("scenario.n_ae_to_koz", self.n_ae_to_koz, least=0)
         if switch > self.n_nodes:
@@ -106,6 +107,14 @@ class RobustScenario:
         for name in ("ae_semi_axes_m", "koz_semi_axes_m"):
             object.__setattr__(self, name, _axes(f"scenario.{name}", getattr(self, name)))
         object.__setattr__(self, "j2", check_bool("scenario.j2", self.j2))
+        # Section 4: the approach ellipsoid guards the far nodes and the keep-out zone inside
+        # it the near ones; an AE inside the KOZ would relax the far nodes' safety below the
+        # near ones', which no mission asks for
+        if any(ae < koz for ae, koz in zip(self.ae_semi_axes_m, self.koz_semi_axes_m, strict=True)):
+            raise ValueError(
+                f"scenario.ae_semi_axes_m {self.ae_semi_axes_m} m must contain the keep-out "
+                f"zone scenario.koz_semi_axes_m {self.koz_semi_axes_m} m (each semi-axis >=)"
+            )
         if self.waypoint_distance_m <= max(self.koz_semi_axes_m):
             raise ValueError(
                 f"scenario.waypoint_distance_m ({self.waypoint_distance_m} m) must exceed the "
