@@ -75,6 +75,15 @@ def fill(argv: list[str], places: dict[str, str]) -> list[str]:
 
 ART = ["train", "art", "--data", "{nodata}", "--no-progress"]
 CASES = {
+    # a trained model and a random preset together: was the preset silently ignored
+    "bench-tscvx-model-and-preset": (
+        ["bench", "tscvx", "--model", "default", "--preset", "small"],
+        ["--preset", "--model"],
+    ),
+    "bench-art-model-and-preset": (
+        ["bench", "art", "--model", "default", "--preset", "paper"],
+        ["--preset", "--model"],
+    ),
     # --seed of numpy's generators: was numpy's "expected non-negative integer", no flag named
     "bench-art-seed-negative": (["bench", "art", "--seed", "-1"], ["--seed", "-1"]),
     "bench-tscvx-seed-negative": (["bench", "tscvx", "--seed", "-1"], ["--seed", "-1"]),

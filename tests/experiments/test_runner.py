@@ -89,3 +89,14 @@ def test_numpy_options_are_printed_as_plain_numbers(tmp_path, field, value, mess
     with pytest.raises(ValueError) as err:
         RunOptions(out=tmp_path, **{field: value})
     assert message in str(err.value) and "np." not in str(err.value)
+
+
+def test_more_test_instances_than_the_split_holds_is_said_on_stderr(tiny_data, capsys):
+    from scpformer.experiments.runner import select_test_instances
+
+    few = select_test_instances(tiny_data, 3, seed=0)
+    assert "warning" not in capsys.readouterr().err
+    every = select_test_instances(tiny_data, 500, seed=0)
+    err = capsys.readouterr().err
+    assert f"--n 500: the test split of {tiny_data} holds {every.size} samples" in err
+    assert list(every[: few.size]) == list(few)  # a larger --n extends the smaller selection

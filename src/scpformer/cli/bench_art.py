@@ -323,8 +323,10 @@ def load_setup(args: argparse.Namespace) -> dict[str, Any]:
     import torch
 
     torch.manual_seed(args.seed)
+    if args.model is not None and args.preset is not None:
+        raise ValueError("--preset sizes random weights; --model gives a trained run")
     if args.model is not None:
-        from scpformer.train.checkpoint import load_checkpoint
+        from scpformer.models.checkpoint import load_checkpoint
 
         checkpoint = load_checkpoint(require_model_path(args.model))
         model, frame = checkpoint.model, checkpoint.frame
@@ -333,9 +335,10 @@ def load_setup(args: argparse.Namespace) -> dict[str, Any]:
     else:
         from scpformer.models import build_model, preset
 
-        config = preset("art", args.preset, target_dim=6 if args.target else 0)
+        preset_name = args.preset or "small"
+        config = preset("art", preset_name, target_dim=6 if args.target else 0)
         model, frame, normalization = build_model("art", config), "rtn", None
-        label = f"ART {args.preset} preset, random weights"
+        label = f"ART {preset_name} preset, random weights"
     model.eval()
     codec = model.codec
     if args.steps > codec.context:

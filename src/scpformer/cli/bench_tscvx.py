@@ -100,6 +100,8 @@ def run_bench(args: argparse.Namespace) -> int:
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be positive, got {getattr(args, name)}")
     torch.set_num_threads(args.threads)
+    if args.model is not None and (args.preset or args.tokens):
+        raise ValueError("--preset and --tokens shape random networks; --model gives trained ones")
     if args.model is not None:
         from scpformer.pretrained import resolve_model
 
@@ -107,8 +109,9 @@ def run_bench(args: argparse.Namespace) -> int:
         predictor = load_tscvx_predictor(model)
         source = str(args.model)
     else:
-        predictor = random_predictor(args.preset, args.tokens, args.seed)
-        source = f"random {args.preset} weights"
+        preset_name = args.preset or "small"
+        predictor = random_predictor(preset_name, args.tokens, args.seed)
+        source = f"random {preset_name} weights"
     predictor.warm_up()  # batch-1 calls through the traced networks, as a long run makes them
     rng = np.random.default_rng(args.seed)
     mean, std = predictor.normalization.theta_mean, predictor.normalization.theta_std

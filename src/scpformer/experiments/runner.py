@@ -111,6 +111,12 @@ def select_test_instances(folder: Path, n: int, seed: int) -> np.ndarray:
     if test.size == 0:
         raise ValueError(f"--data {folder}: the test split is empty")
     order = np.random.default_rng(seed).permutation(test)
+    if n > order.size:  # said, not silent: the results hold fewer rows than asked for
+        print(
+            f"scpformer: warning: --n {n}: the test split of {folder} holds {order.size} "
+            f"samples; all {order.size} are used",
+            file=sys.stderr,
+        )
     return order[: min(n, order.size)]
 
 

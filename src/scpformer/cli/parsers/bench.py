@@ -20,8 +20,8 @@ def add_bench_art_parser(sub: argparse._SubParsersAction) -> None:
         "forward at every step), and the batched throughput with the cache. Random weights of "
         "a preset unless --model gives a trained run.",
     )
-    parser.add_argument("--preset", choices=("small", "paper"), default="small",
-                        help=with_default("model size", "small"))  # fmt: skip
+    parser.add_argument("--preset", choices=("small", "paper"), default=None,
+                        help=with_default("model size of the random weights", "small"))  # fmt: skip
     parser.add_argument("--model", type=Path, help="trained run folder or checkpoint.pt")
     parser.add_argument("--batch", type=int, default=64,
                         help=with_default("batch of the throughput run", 64))  # fmt: skip
@@ -57,7 +57,7 @@ def add_bench_tscvx_parser(sub: argparse._SubParsersAction) -> None:
         description="Time the T-SCvx predictor's calls (raw theta in, numpy out) at batch 1 and "
         "at --batch. Random weights of a preset unless --model gives a trained run.",
     )
-    parser.add_argument("--preset", choices=("small", "paper"), default="small",
+    parser.add_argument("--preset", choices=("small", "paper"), default=None,
                         help=with_default("sizes of random nets", "small"))  # fmt: skip
     parser.add_argument("--tokens", choices=("single", "inputs"), default=None,
                         help="tokenization of random nets (default: the preset's)")  # fmt: skip
