@@ -371,3 +371,12 @@ def test_a_cache_dir_that_is_a_file_is_said_once_on_stderr(tmp_path, capsys, mon
     assert cache.cached_pickle("one", lambda: 4) == 4
     assert cache.cached_pickle("one", lambda: 5) == 4
     assert capsys.readouterr().err == ""
+
+
+def test_a_model_of_another_kind_is_named_by_its_kind(tmp_path, capsys):
+    """Was: "no checkpoint at RUN/checkpoint.pt" for a T-SCvx run given where ART is needed."""
+    run = tmp_path / "tscvx-run"
+    (run / "tight").mkdir(parents=True)
+    (run / "solution").mkdir()
+    argv = ["solve", "rendezvous", "--warmstart", "art", "--model", str(run)]
+    one_line_error(capsys, argv, "is a T-SCvx run", "not a single-network run")

@@ -71,6 +71,17 @@ class Checkpoint:
     extra: dict[str, Any] = field(default_factory=dict)  # training state for --resume
 
 
+def _other_kind(folder: Path) -> str:
+    """What else ``folder`` holds, said beside a missing checkpoint (``""``: nothing known)."""
+    if (folder / "tight").is_dir() or (folder / "solution").is_dir():
+        return f": {folder} is a T-SCvx run (tight/, solution/), not a single-network run"
+    if (folder / "lookup.json").is_file():
+        return f": {folder} is a lookup table (lookup.json), not a network run"
+    if (folder / "manifest.json").is_file():
+        return f": {folder} is a dataset, not a training run"
+    return ""
+
+
 def checkpoint_path(path: Path | str) -> Path:
     """The checkpoint file of a run folder (an existing folder, or a path without a suffix),
     or ``path`` itself (a file such as ``RUN/best.pt``)."""
@@ -131,7 +142,7 @@ def read_checkpoint(
     """The checked payload of a checkpoint file (no model built): see :func:`load_checkpoint`."""
     path = checkpoint_path(path)
     if not path.is_file():
-        raise CheckpointError(f"no checkpoint at {path}")
+        raise CheckpointError(f"no checkpoint at {path}{_other_kind(path.parent)}")
     reason = _not_an_archive(path)
     if reason is not None:
         raise CheckpointError(f"{path} is not a readable scpformer checkpoint: {reason}")
