@@ -164,6 +164,12 @@ def test_an_existing_run_is_not_overwritten_and_resumes_only_as_itself(toy_rdv, 
     assert {f.name: f.read_bytes() for f in (tmp_path / "new").iterdir() if f.is_file()} == kept
     with pytest.raises(ValueError, match="only epochs and device may change, not lr"):
         _train(toy_rdv, tmp_path / "run", 2, resume=True, lr=0.5)
+    (tmp_path / "run2").mkdir()
+    _train(toy_rdv, tmp_path / "run2", 2)
+    config = (tmp_path / "run2" / "config.json").read_bytes()
+    with pytest.raises(ValueError, match="--epochs 1: the run to resume has finished 2 epochs"):
+        _train(toy_rdv, tmp_path / "run2", 1, resume=True)
+    assert (tmp_path / "run2" / "config.json").read_bytes() == config  # not rewritten
     with pytest.raises(ValueError, match="used preset 'small', not 'paper'"):
         train("art", data=toy_rdv, out=tmp_path / "run", preset="paper", resume=True,
               models=STANDIN_MODELS)  # fmt: skip

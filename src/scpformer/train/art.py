@@ -350,6 +350,12 @@ def _resumed_settings(
             f"not {', '.join(changed)}"
         )
     kept = {k: overrides[k] for k in ("epochs", "device") if overrides.get(k) is not None}
+    done = int(previous["extra"]["fit"]["epoch"])
+    if kept.get("epochs", stored.epochs) < done:  # would train nothing and record fewer epochs
+        raise ValueError(
+            f"--epochs {kept['epochs']}: the run to resume has finished {done} epochs already; "
+            f"give at least {done}"
+        )
     return previous["frame"], stored_preset, dataclasses.replace(stored, **kept)
 
 
