@@ -99,3 +99,8 @@ def test_a_huge_initial_state_is_refused_by_name_without_an_overflow_warning():
         warnings.simplefilter("error")  # numpy's overflow RuntimeWarning would fail here
         with pytest.raises(ValueError, match="r0: norm inf exceeds"):
             PDGInstance(r0=(1e308, 1e308, 0.0))
+
+
+def test_a_wet_mass_beyond_any_lander_is_refused_by_name():
+    with pytest.raises(ValueError, match=r"m0 \(1e\+308\) exceeds 20 times the dry mass"):
+        PDGInstance(m0=1e308)

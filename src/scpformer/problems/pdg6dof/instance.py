@@ -17,6 +17,8 @@ from scpformer.dynamics import quaternion as quat
 from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.validation import check_finite, check_in_range, known_fields, read_json
 
+# a wet-to-dry mass ratio beyond any single-stage lander (Table 1: m0 = 3, m_dry = 2)
+MAX_MASS_RATIO = 20.0
 UNIT_QUATERNION_TOL = 1e-6
 #: Largest |r0|, |v0|, |omega0_deg| accepted (nondimensional units). Table 2 spans |r0| < 20;
 #: far beyond it the scaled subproblem loses all precision and ends as a solver failure.
@@ -57,6 +59,11 @@ class PDGInstance:
         m0 = float(check_finite("m0", self.m0, shape=()))
         if m0 <= self.constants.m_dry:
             raise ValueError(f"m0 ({m0}) must exceed the dry mass m_dry ({self.constants.m_dry})")
+        if m0 > MAX_MASS_RATIO * self.constants.m_dry:
+            raise ValueError(
+                f"m0 ({m0:.3g}) exceeds {MAX_MASS_RATIO:g} times the dry mass m_dry "
+                f"({self.constants.m_dry}); Table 1's lander carries m0 = 1.5 m_dry"
+            )
         object.__setattr__(self, "m0", m0)
         gamma = check_in_range("gamma_gs_deg", self.gamma_gs_deg, 0.0, 90.0)
         if gamma >= 90.0:
