@@ -53,9 +53,8 @@ TSCVX_DIFFERENCES: tuple[str, ...] = (
     "r0 has no North component, the body rolled so that q0 has no twist about body x; both "
     "exact symmetries of the problem, scpformer.problems.pdg6dof.symmetry) and the solution "
     "network predicts there, mapped back exactly; the paper feeds the raw parameters and "
-    "relies on the rotation augmentation alone (train tscvx --no-canonical). On 8,208 "
-    "samples, with the same network and epochs, the canonical frame halved the test MSE of "
-    "every state group.",
+    "relies on the rotation augmentation alone (train tscvx --no-canonical trains that way, "
+    "for a comparison; no committed result measures the frame's effect).",
     "Stall test: our SCvx stops a run whose penalty stays above 1e-3 and falls less than 2% "
     "in 15 accepted iterations (status 'stalled'), and restarts a stalled cold solve once "
     "with a longer final time; the paper runs to its iteration limit.",
