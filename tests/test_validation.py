@@ -47,7 +47,7 @@ def test_configuration_errors_from_numpy_inputs_print_plain_numbers():
         (lambda: SCvxParameters(lambda_=NAN), "lambda_ must be finite, got nan"),
         (
             lambda: RendezvousScenario(n_nodes=np.float64(50.5)),
-            "n_nodes must be an integer, got float64 50.5",
+            "n_nodes must be an integer <= 1000, got float64 50.5",
         ),
         (
             lambda: SCPParameters(K=np.float64(2.5)),
