@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from scpformer.cli.argtypes import count
 from scpformer.cli.dataclass_args import constant, with_default
 
 #: the usage line of the commands with many flags: the groups below list them
@@ -19,6 +20,18 @@ def add_output_arguments(
     group = parser.add_argument_group("output")
     group.add_argument("--out", type=Path, help="write the solution to this .npz file")
     group.add_argument("--plot", type=Path, help=plot_help)
+    return group
+
+
+def add_instance_arguments(
+    parser: argparse.ArgumentParser, instance_help: str, seed_help: str
+) -> argparse._ArgumentGroup:
+    """Group ``instance``: ``--instance FILE`` or ``--seed S`` (one of them), for the flags of
+    the instance that the caller adds to the returned group."""
+    group = parser.add_argument_group("instance")
+    source = group.add_mutually_exclusive_group()
+    source.add_argument("--instance", type=Path, help=instance_help)
+    source.add_argument("--seed", type=count, help=seed_help)
     return group
 
 

@@ -10,7 +10,12 @@ from scpformer.cli.argtypes import count, positive
 from scpformer.cli.commands import command_help, lazy_handler
 from scpformer.cli.config_file import add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
-from scpformer.cli.parsers.common import USAGE, add_output_arguments, add_warmstart_arguments
+from scpformer.cli.parsers.common import (
+    USAGE,
+    add_instance_arguments,
+    add_output_arguments,
+    add_warmstart_arguments,
+)
 
 CONSTANTS_NOTE = (
     "Table 1's scenario and target-orbit constants are flags --scenario-NAME and "
@@ -60,15 +65,10 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
         "convex",
         "initial guess of Problem 3: Problem 1 (tpbvp), 2 (convex)",
     )
-    group = parser.add_argument_group("instance")
-    source = group.add_mutually_exclusive_group()
-    source.add_argument(
-        "--instance",
-        type=Path,
-        help="instance JSON (roe0_m, horizon_orbits[, target, scenario]) (default: Table 1's)",
-    )
-    source.add_argument(
-        "--seed", type=count, help="sample the instance from Table 1's last column with this seed"
+    group = add_instance_arguments(
+        parser,
+        "instance JSON (roe0_m, horizon_orbits[, target, scenario]) (default: Table 1's)",
+        "sample the instance from Table 1's last column with this seed",
     )
     group.add_argument(
         "--roe0",

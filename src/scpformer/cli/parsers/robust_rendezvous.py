@@ -11,7 +11,12 @@ from scpformer.cli.argtypes import count, positive
 from scpformer.cli.commands import command_help, lazy_handler
 from scpformer.cli.config_file import add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
-from scpformer.cli.parsers.common import USAGE, add_output_arguments, add_warmstart_arguments
+from scpformer.cli.parsers.common import (
+    USAGE,
+    add_instance_arguments,
+    add_output_arguments,
+    add_warmstart_arguments,
+)
 
 CONSTANTS_NOTE = (
     "Tables 1-2's scenario and target-orbit constants are flags --scenario-NAME and "
@@ -71,12 +76,11 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
         "three_stage",
         "three_stage (dataset procedure), tpbvp (PS-CVX)",
     )
-    group = parser.add_argument_group("instance")
-    source = group.add_mutually_exclusive_group()
-    source.add_argument(
-        "--instance", type=Path, help="instance JSON (x0_rtn, waypoint, ...) (default: Table 1's)"
+    group = add_instance_arguments(
+        parser,
+        "instance JSON (x0_rtn, waypoint, ...) (default: Table 1's)",
+        "sample the instance (Table 1) with this seed",
     )
-    source.add_argument("--seed", type=count, help="sample the instance (Table 1) with this seed")
     group.add_argument(
         "--waypoint",
         choices=constant("robust.waypoints"),
