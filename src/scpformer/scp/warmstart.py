@@ -25,6 +25,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from scpformer.scp.solution import Solution, Trajectory
+from scpformer.validation import check_type
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -222,3 +223,32 @@ def resolve(
             raise ValueError(f"warmstart must be one of {choices}, got {warmstart!r}")
         return learned[warmstart](config)
     return as_provider(warmstart, named)
+
+
+def checked_solve_arguments(
+    method: str,
+    methods: Sequence[str],
+    instance: Any,
+    instance_cls: type,
+    config: Any,
+    config_cls: type,
+) -> Any:
+    """The checks every family's ``solve`` makes first: ``method`` among ``methods``,
+    ``instance`` and ``config`` of the family's types. Returns ``config``, or the family's
+    default ``config_cls()`` when it is None.
+
+    Raises
+    ------
+    ValueError
+        An unknown method, or an instance or configuration of another type
+        (:class:`~scpformer.validation.ArgumentTypeError`, also a ``TypeError``).
+    """
+    if method not in methods:
+        raise ValueError(f"method must be one of {', '.join(methods)}, got {method!r}")
+    check_type("instance", instance, instance_cls)
+    return config_cls() if config is None else check_type("config", config, config_cls)
+
+
+def warmstart_name(warmstart: Any) -> str:
+    """How an error message names a warm start: its name, or its type."""
+    return warmstart if isinstance(warmstart, str) else type(warmstart).__name__

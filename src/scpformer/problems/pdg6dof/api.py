@@ -18,8 +18,12 @@ from scpformer.problems.pdg6dof.tscvx import TscvxProvider, solve_tscvx
 from scpformer.problems.pdg6dof.warmstart import AnalyticWarmStart
 from scpformer.scp.scvx import solve_scvx
 from scpformer.scp.solution import Solution, Status, Trajectory
-from scpformer.scp.warmstart import WarmStart, WarmStartRecord, resolve
-from scpformer.validation import check_type
+from scpformer.scp.warmstart import (
+    WarmStart,
+    WarmStartRecord,
+    checked_solve_arguments,
+    resolve,
+)
 
 FAMILY = "pdg6dof"  # key of the learned warm starts in scpformer.scp.warmstart's registry
 METHODS = ("scvx", "tscvx")  # SCvx (Algorithm 1) or T-SCvx (Algorithm 2)
@@ -81,10 +85,9 @@ def solve(
         An unknown method or warm start name, or a warm start the method cannot use
         (``"tscvx"`` with a warm start that has no tight-row predictor).
     """
-    check_type("instance", instance, PDGInstance)
-    config = PDGSolverConfig() if config is None else check_type("config", config, PDGSolverConfig)
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    config = checked_solve_arguments(
+        method, METHODS, instance, PDGInstance, config, PDGSolverConfig
+    )
     if warmstart is None:
         warmstart = DEFAULT_WARMSTART[method]
     named = analytic_providers(config)

@@ -13,8 +13,12 @@ from scpformer.problems.rendezvous.scenario import RendezvousSolverConfig
 from scpformer.problems.rendezvous.scp import setup, solve_convex, solve_scp
 from scpformer.problems.rendezvous.warmstart import RENDEZVOUS_CONVEX, RendezvousConvexWarmStart
 from scpformer.scp.solution import Solution
-from scpformer.scp.warmstart import WarmStartRecord, resolve
-from scpformer.validation import check_type
+from scpformer.scp.warmstart import (
+    WarmStartRecord,
+    checked_solve_arguments,
+    resolve,
+    warmstart_name,
+)
 
 FAMILY = "rendezvous"  # key of the learned warm starts in scpformer.scp.warmstart's registry
 METHODS = ("tpbvp", "convex", "scp")  # Problems 1, 2 and 3 (the SCP of Section 4)
@@ -67,17 +71,14 @@ def solve(
     ValueError
         An unknown method or warm start name, or a warm start given to a convex problem.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    if not isinstance(instance, RendezvousInstance):
-        raise ValueError(f"instance must be a RendezvousInstance, got {type(instance).__name__}")
-    config = RendezvousSolverConfig() if config is None else config
-    check_type("config", config, RendezvousSolverConfig)
+    config = checked_solve_arguments(
+        method, METHODS, instance, RendezvousInstance, config, RendezvousSolverConfig
+    )
     if method != "scp":
         if warmstart is not None:
             raise ValueError(
-                f"method {method!r} cannot use warmstart {_name(warmstart)!r}: it is a convex "
-                "problem solved from no guess (warm starts start method 'scp')"
+                f"method {method!r} cannot use warmstart {warmstart_name(warmstart)!r}: it is a "
+                "convex problem solved from no guess (warm starts start method 'scp')"
             )
         solution = solve_convex(instance, method, config, verify)
         record = WarmStartRecord(
@@ -96,7 +97,3 @@ def solve(
     warm_solver = warm.timing.solver if own and warm is not None and warm.timing else 0.0
     solution = solve_scp(prepared, result, verify, start, warm_solver)
     return replace(solution, extras={**solution.extras, "warmstart": result.record.to_dict()})
-
-
-def _name(warmstart: Any) -> str:
-    return warmstart if isinstance(warmstart, str) else type(warmstart).__name__

@@ -11,7 +11,12 @@ from scpformer.problems.robust_rendezvous.problem import passive_safety_from, th
 from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig
 from scpformer.problems.robust_rendezvous.warmstart import RobustTpbvpWarmStart
 from scpformer.scp.solution import Solution
-from scpformer.scp.warmstart import GivenWarmStart, resolve
+from scpformer.scp.warmstart import (
+    GivenWarmStart,
+    checked_solve_arguments,
+    resolve,
+    warmstart_name,
+)
 from scpformer.validation import check_type
 
 FAMILY = "robust-rendezvous"  # key of the learned warm starts in scpformer.scp.warmstart
@@ -70,17 +75,15 @@ def solve(
         An unknown method or warm start name, a warm start given to ``"three_stage"``, or a
         provider whose passive-safety mode differs from ``config.safety_mode``.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    if not isinstance(instance, RobustInstance):
-        raise ValueError(f"instance must be a RobustInstance, got {type(instance).__name__}")
-    config = RobustSolverConfig() if config is None else config
-    check_type("config", config, RobustSolverConfig)
+    config = checked_solve_arguments(
+        method, METHODS, instance, RobustInstance, config, RobustSolverConfig
+    )
     if method == "three_stage":
         if warmstart is not None:
             raise ValueError(
-                f"method 'three_stage' cannot use warmstart {_name(warmstart)!r}: the procedure "
-                "makes its own (TPBVP, then collision avoidance); use method 'passive_safety'"
+                f"method 'three_stage' cannot use warmstart {warmstart_name(warmstart)!r}: the "
+                "procedure makes its own (TPBVP, then collision avoidance); use method "
+                "'passive_safety'"
             )
         return three_stage(instance, config, RobustTpbvpWarmStart(config).guess(instance), verify)
     warmstart = "tpbvp" if warmstart is None else warmstart
@@ -94,10 +97,6 @@ def solve(
     result = provider.guess(instance)
     given = isinstance(provider, GivenWarmStart)
     return passive_safety_from(instance, config, result, verify, given=given)
-
-
-def _name(warmstart: Any) -> str:
-    return warmstart if isinstance(warmstart, str) else type(warmstart).__name__
 
 
 def legacy_solve(
