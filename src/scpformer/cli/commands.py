@@ -83,6 +83,14 @@ def command_help(parent: str, name: str) -> str:
     return COMMANDS[parent, name][0]
 
 
+def add_command_parser(
+    sub: argparse._SubParsersAction, parent: str, name: str, **kwargs: Any
+) -> argparse.ArgumentParser:
+    """Add command ``name`` of ``parent`` to ``sub``, with its help from :data:`COMMANDS`;
+    ``kwargs`` (``description=``, ...) go to ``add_parser``."""
+    return sub.add_parser(name, help=command_help(parent, name), **kwargs)
+
+
 def lazy_handler(target: str) -> Callable[[argparse.Namespace], int]:
     """A command handler named ``"module:function"``, imported when the command runs."""
 

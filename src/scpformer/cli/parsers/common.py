@@ -5,11 +5,39 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from scpformer.cli.argtypes import count
+from scpformer.cli.argtypes import count, positive
+from scpformer.cli.commands import add_command_parser
 from scpformer.cli.dataclass_args import constant, with_default
 
 #: the usage line of the commands with many flags: the groups below list them
 USAGE = "%(prog)s [options]"
+
+
+def add_family_parser(
+    sub: argparse._SubParsersAction, command: str, family: str, description: str, epilog: str
+) -> argparse.ArgumentParser:
+    """The parser of ``command family`` (``solve`` or ``bench`` of a problem family): the short
+    usage line, and ``epilog`` on the family's constant flags kept out of ``--help``."""
+    return add_command_parser(
+        sub, command, family, description=description, usage=USAGE, epilog=epilog
+    )
+
+
+def add_benchmark_arguments(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """Group ``benchmark`` of ``bench FAMILY``: ``--n`` instances sampled with ``--seed``, for
+    the family's flags that the caller adds to the returned group."""
+    group = parser.add_argument_group("benchmark")
+    group.add_argument("--n", type=positive, default=20,
+                       help=with_default("number of instances", 20))  # fmt: skip
+    group.add_argument("--seed", type=count, default=0, help=with_default("sampling seed", 0))
+    return group
+
+
+def add_csv_argument(group: argparse._ArgumentGroup, family: str) -> None:
+    """``--csv``: the per-instance rows of ``bench FAMILY`` (default ``bench_FAMILY.csv``)."""
+    name = f"bench_{family.replace('-', '_')}.csv"
+    group.add_argument("--csv", type=Path, default=Path(name),
+                       help=with_default("per-instance CSV", name))  # fmt: skip
 
 
 def add_output_arguments(

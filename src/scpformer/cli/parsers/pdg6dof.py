@@ -7,10 +7,10 @@ import argparse
 from pathlib import Path
 
 from scpformer.cli.argtypes import count
-from scpformer.cli.commands import command_help, lazy_handler
+from scpformer.cli.commands import lazy_handler
 from scpformer.cli.config_file import add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, with_default
-from scpformer.cli.parsers.common import USAGE, add_output_arguments
+from scpformer.cli.parsers.common import add_csv_argument, add_family_parser, add_output_arguments
 
 WARMSTARTS = ("cubic_profile", "straight_line", "tscvx", "kdtree", "interp")
 CONSTANTS_NOTE = (
@@ -35,14 +35,11 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "pdg6dof",
-        help=command_help("solve", "pdg6dof"),
-        description="Solve the 6-DoF minimum-fuel powered descent problem (T-SCvx paper, "
-        "Eqs. 2-6, Table 1) with SCvx and verify it by nonlinear propagation.",
-        usage=USAGE,
-        epilog=CONSTANTS_NOTE,
+    description = (
+        "Solve the 6-DoF minimum-fuel powered descent problem (T-SCvx paper, Eqs. 2-6, "
+        "Table 1) with SCvx and verify it by nonlinear propagation."
     )
+    parser = add_family_parser(sub, "solve", "pdg6dof", description, CONSTANTS_NOTE)
     parser.add_argument(
         "--instance",
         type=Path,
@@ -74,15 +71,12 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "pdg6dof",
-        help=command_help("bench", "pdg6dof"),
-        description="Solve a fixed, seeded set of instances from the nominal sub-range and "
-        "from Table 2; report wall time, iterations, converged rate and the share of time "
-        "inside the conic solver.",
-        usage=USAGE,
-        epilog=CONSTANTS_NOTE,
+    description = (
+        "Solve a fixed, seeded set of instances from the nominal sub-range and from Table 2; "
+        "report wall time, iterations, converged rate and the share of time inside the conic "
+        "solver."
     )
+    parser = add_family_parser(sub, "bench", "pdg6dof", description, CONSTANTS_NOTE)
     group = parser.add_argument_group("benchmark")
     group.add_argument("--n-nominal", type=count, default=20,
                        help=with_default("nominal instances", 20))  # fmt: skip
@@ -95,7 +89,6 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
         help="also continue every solve to full convergence (200 solves, stationarity "
         "tolerance 1e-6; untimed) and report the propellant gap to it",
     )
-    group.add_argument("--csv", type=Path, default=Path("bench_pdg6dof.csv"),
-                       help=with_default("per-instance CSV", "bench_pdg6dof.csv"))  # fmt: skip
+    add_csv_argument(group, "pdg6dof")
     add_config_arguments(parser)
     parser.set_defaults(handler=lazy_handler("scpformer.cli.pdg6dof:run_bench"))

@@ -4,14 +4,14 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from scpformer.cli.argtypes import count, positive
-from scpformer.cli.commands import command_help, lazy_handler
+from scpformer.cli.commands import lazy_handler
 from scpformer.cli.config_file import add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
 from scpformer.cli.parsers.common import (
-    USAGE,
+    add_benchmark_arguments,
+    add_csv_argument,
+    add_family_parser,
     add_instance_arguments,
     add_output_arguments,
     add_warmstart_arguments,
@@ -43,16 +43,12 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "rendezvous",
-        help=command_help("solve", "rendezvous"),
-        description="Solve Problem 1 (two-point boundary value), 2 (convex: waypoint and "
-        "approach cone) or 3 (keep-out ellipsoid, SCP of Section 4) of the ART paper for an "
-        "ISS rendezvous (Table 1), and verify it by replaying the impulses through a "
-        "two-body + J2 propagator.",
-        usage=USAGE,
-        epilog=CONSTANTS_NOTE,
+    description = (
+        "Solve Problem 1 (two-point boundary value), 2 (convex: waypoint and approach cone) or "
+        "3 (keep-out ellipsoid, SCP of Section 4) of the ART paper for an ISS rendezvous "
+        "(Table 1), and verify it by replaying the impulses through a two-body + J2 propagator."
     )
+    parser = add_family_parser(sub, "solve", "rendezvous", description, CONSTANTS_NOTE)
     parser.add_argument(
         "--problem",
         choices=constant("rendezvous.problems"),
@@ -89,28 +85,21 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "rendezvous",
-        help=command_help("bench", "rendezvous"),
-        description="Solve Problems 1, 2 and 3 (the SCP warm-started from Problem 1 or 2) on a "
-        "seeded set of instances sampled from Table 1; report wall time (median, p95), SCP "
-        "iterations, failure rate, the share of time inside the conic solver and C_CVX(t_1), "
-        "the constraint-to-go of the convex solution. Wall times exclude the verification.",
-        usage=USAGE,
-        epilog=CONSTANTS_NOTE,
+    description = (
+        "Solve Problems 1, 2 and 3 (the SCP warm-started from Problem 1 or 2) on a seeded set "
+        "of instances sampled from Table 1; report wall time (median, p95), SCP iterations, "
+        "failure rate, the share of time inside the conic solver and C_CVX(t_1), the "
+        "constraint-to-go of the convex solution. Wall times exclude the verification."
     )
-    group = parser.add_argument_group("benchmark")
-    group.add_argument("--n", type=positive, default=20,
-                       help=with_default("number of instances", 20))  # fmt: skip
-    group.add_argument("--seed", type=count, default=0, help=with_default("sampling seed", 0))
+    parser = add_family_parser(sub, "bench", "rendezvous", description, CONSTANTS_NOTE)
+    group = add_benchmark_arguments(parser)
     group.add_argument(
         "--warmstart",
         choices=constant("rendezvous.warmstarts"),
         default="convex",
         help=with_default("warm start of Problem 3", "convex"),
     )
-    group.add_argument("--csv", type=Path, default=Path("bench_rendezvous.csv"),
-                       help=with_default("per-instance CSV", "bench_rendezvous.csv"))  # fmt: skip
+    add_csv_argument(group, "rendezvous")
     group.add_argument(
         "--no-verify",
         action="store_true",

@@ -5,14 +5,15 @@ from __future__ import annotations
 
 import argparse
 import re
-from pathlib import Path
 
-from scpformer.cli.argtypes import count, positive
-from scpformer.cli.commands import command_help, lazy_handler
+from scpformer.cli.argtypes import count
+from scpformer.cli.commands import lazy_handler
 from scpformer.cli.config_file import add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
 from scpformer.cli.parsers.common import (
-    USAGE,
+    add_benchmark_arguments,
+    add_csv_argument,
+    add_family_parser,
     add_instance_arguments,
     add_output_arguments,
     add_warmstart_arguments,
@@ -54,16 +55,13 @@ def add_config_arguments(parser: argparse.ArgumentParser, unless: str | None = N
 
 
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "robust-rendezvous",
-        help=command_help("solve", "robust-rendezvous"),
-        description="Solve the passively safe rendezvous of the robust ART paper (Table 1) "
-        "with the three-stage procedure (convex TPBVP -> deterministic collision avoidance -> "
-        "passive safety, deterministic or chance-constrained) and SCvx*; optionally verify "
-        "the chance constraint by Monte Carlo through a two-body + J2 propagator.",
-        usage=USAGE,
-        epilog=CONSTANTS_NOTE,
+    description = (
+        "Solve the passively safe rendezvous of the robust ART paper (Table 1) with the "
+        "three-stage procedure (convex TPBVP -> deterministic collision avoidance -> passive "
+        "safety, deterministic or chance-constrained) and SCvx*; optionally verify the chance "
+        "constraint by Monte Carlo through a two-body + J2 propagator."
     )
+    parser = add_family_parser(sub, "solve", "robust-rendezvous", description, CONSTANTS_NOTE)
     parser.add_argument(
         "--mode",
         choices=constant("robust.modes"),
@@ -100,23 +98,14 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "robust-rendezvous",
-        help=command_help("bench", "robust-rendezvous"),
-        description="On a seeded set of Table 1 instances, solve the convex TPBVP and, from "
-        "it, the passive-safety problem with SCvx* in both modes (PS-CVX-D, PS-CVX-C); report "
-        "wall time (median, p95), iterations, infeasibility rate (not converged) and the share "
-        "of time in the conic solver. Wall times exclude the final verification.",
-        usage=USAGE,
-        epilog=CONSTANTS_NOTE,
+    description = (
+        "On a seeded set of Table 1 instances, solve the convex TPBVP and, from it, the "
+        "passive-safety problem with SCvx* in both modes (PS-CVX-D, PS-CVX-C); report wall "
+        "time (median, p95), iterations, infeasibility rate (not converged) and the share of "
+        "time in the conic solver. Wall times exclude the final verification."
     )
-    group = parser.add_argument_group("benchmark")
-    group.add_argument("--n", type=positive, default=20,
-                       help=with_default("number of instances", 20))  # fmt: skip
-    group.add_argument("--seed", type=count, default=0, help=with_default("sampling seed", 0))
-    group.add_argument(
-        "--csv", type=Path, default=Path("bench_robust_rendezvous.csv"),
-        help=with_default("per-instance CSV", "bench_robust_rendezvous.csv"),
-    )  # fmt: skip
+    parser = add_family_parser(sub, "bench", "robust-rendezvous", description, CONSTANTS_NOTE)
+    group = add_benchmark_arguments(parser)
+    add_csv_argument(group, "robust-rendezvous")
     add_config_arguments(parser)
     parser.set_defaults(handler=lazy_handler("scpformer.cli.robust_rendezvous:run_bench"))
