@@ -179,19 +179,22 @@ def experiment_status(statuses: Iterable[str]) -> str:
 # ======================================================================================
 # provenance
 # ======================================================================================
+def _git(folder: Path, *args: str, timeout: float = 10) -> subprocess.CompletedProcess | None:
+    """``git -C folder ARGS`` with its output captured; ``None`` when git could not run."""
+    try:
+        return subprocess.run(
+            ["git", "-C", str(folder), *args], capture_output=True, text=True, timeout=timeout
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
 def repository_root() -> Path | None:
     """The git checkout the ``scpformer`` package was imported from (``None`` outside one)."""
     import scpformer
 
-    folder = Path(scpformer.__file__).resolve().parent
-    try:
-        top = subprocess.run(
-            ["git", "-C", str(folder), "rev-parse", "--show-toplevel"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-    except (OSError, subprocess.SubprocessError):
+    top = _git(Path(scpformer.__file__).resolve().parent, "rev-parse", "--show-toplevel")
+    if top is None:
         return None
     return Path(top.stdout.strip()) if top.returncode == 0 and top.stdout.strip() else None
 
@@ -203,22 +206,11 @@ def git_state(root: Path | None) -> tuple[str, bool | str]:
     """
     if root is None:
         return UNKNOWN, UNKNOWN
-    try:
-        head = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-        status = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            timeout=30,
-        )
-    except (OSError, subprocess.SubprocessError):
+    head = _git(root, "rev-parse", "HEAD")
+    if head is None:
         return UNKNOWN, UNKNOWN
-    if head.returncode != 0:
+    status = _git(root, "status", "--porcelain", "--untracked-files=no", timeout=30)
+    if status is None or head.returncode != 0:
         return UNKNOWN, UNKNOWN
     dirty: bool | str = bool(status.stdout.strip()) if status.returncode == 0 else UNKNOWN
     return head.stdout.strip(), dirty
