@@ -281,43 +281,26 @@ def plot_trajectory(
     axes = grid.subplots(sharex=True)
     style = {"color": _TRAJ_COLOR, "marker": ".", "markersize": 4, "linewidth": 1.4}
 
-    ax = axes[0, 0]
-    ax.plot(t, thrust, **style)
-    _bound(ax, float(constants["T_max"]), r"$T_{min}$, $T_{max}$")
-    _bound(ax, float(constants["T_min"]), None)
-    ax.set_ylabel(r"$\|T_B\|$ [$U_M U_L/U_T^2$]")
-    ax.set_title("Thrust magnitude")
-
-    ax = axes[0, 1]
-    ax.plot(t, gimbal, **style)
-    _bound(ax, float(constants["delta_max_deg"]), r"$\delta_{max}$")
-    ax.set_ylabel(r"$\delta$ [deg]")
-    ax.set_title("Gimbal angle")
-
-    ax = axes[1, 0]
-    ax.plot(t, tilt, **style)
     theta_max = float(constants["theta_max_deg"])
-    if theta_max < 180.0:
-        _bound(ax, theta_max, r"$\theta_{max}$")
-    ax.set_ylabel(r"$\theta$ [deg]")
-    ax.set_title("Tilt angle")
-
-    ax = axes[1, 1]
-    ax.plot(t, rate, **style)
-    _bound(ax, float(constants["omega_max_deg"]), r"$\omega_{max}$")
-    ax.set_ylabel(r"$\|\omega_B\|$ [deg/$U_T$]")
-    ax.set_title("Angular rate")
-
-    ax = axes[2, 0]
-    ax.plot(t, mass, **style)
-    _bound(ax, float(constants["m_dry"]), r"$m_{dry}$")
-    ax.set_ylabel(r"$m$ [$U_M$]")
-    ax.set_title("Mass")
-
-    ax = axes[2, 1]
-    ax.plot(t, speed, **style)
-    ax.set_ylabel(r"$\|v_I\|$ [$U_L/U_T$]")
-    ax.set_title("Speed")
+    # the panels row by row: series, bounds (value, legend label), y label, title
+    panels = (
+        (thrust, [(constants["T_max"], r"$T_{min}$, $T_{max}$"), (constants["T_min"], None)],
+         r"$\|T_B\|$ [$U_M U_L/U_T^2$]", "Thrust magnitude"),
+        (gimbal, [(constants["delta_max_deg"], r"$\delta_{max}$")], r"$\delta$ [deg]",
+         "Gimbal angle"),
+        (tilt, [(theta_max, r"$\theta_{max}$")] if theta_max < 180.0 else [],
+         r"$\theta$ [deg]", "Tilt angle"),
+        (rate, [(constants["omega_max_deg"], r"$\omega_{max}$")],
+         r"$\|\omega_B\|$ [deg/$U_T$]", "Angular rate"),
+        (mass, [(constants["m_dry"], r"$m_{dry}$")], r"$m$ [$U_M$]", "Mass"),
+        (speed, [], r"$\|v_I\|$ [$U_L/U_T$]", "Speed"),
+    )  # fmt: skip
+    for ax, (series, bounds, ylabel, name) in zip(axes.flat, panels, strict=True):
+        ax.plot(t, series, **style)
+        for value, label in bounds:
+            _bound(ax, float(value), label)
+        ax.set_ylabel(ylabel)
+        ax.set_title(name)
 
     for ax in axes.flat:
         ax.grid(True, alpha=0.3)
