@@ -247,6 +247,20 @@ def _chief_geometry(c: FloatArray) -> dict[str, FloatArray]:
     return dict(a=a, e=e, i=i, n=n, eta=eta, theta=theta, ex=ex, ey=ey, ec=ec, es=es, k=k, u=w + M)
 
 
+def _map_geometry(
+    oe_chief: ArrayLike | OrbitalElements, model: Model
+) -> tuple[FloatArray, dict[str, FloatArray]]:
+    """The chief elements and their geometry for the first-order maps (``Psi``, ``B``) of
+    ``model`` (checked): :func:`_chief_geometry` with the cosine and sine of the mean argument
+    of latitude ``u`` (``cu``, ``su``: the near-circular maps) and of the true one ``theta``
+    (``ct``, ``st``: the eccentric maps)."""
+    _check_model(model)
+    c = _chief(oe_chief)
+    g = _chief_geometry(c)
+    g.update(cu=np.cos(g["u"]), su=np.sin(g["u"]), ct=np.cos(g["theta"]), st=np.sin(g["theta"]))
+    return c, g
+
+
 def psi_matrix(oe_chief: ArrayLike | OrbitalElements, model: Model = "eccentric") -> FloatArray:
     """First-order map ``Psi`` from scaled ROE ``a_c * delta_alpha`` [m] to RTN [m, m/s].
 
@@ -284,14 +298,11 @@ def psi_matrix(oe_chief: ArrayLike | OrbitalElements, model: Model = "eccentric"
     numpy.ndarray
         ``Psi`` of shape ``(..., 6, 6)``.
     """
-    _check_model(model)
-    c = _chief(oe_chief)
-    g = _chief_geometry(c)
+    c, g = _map_geometry(oe_chief, model)
     n = g["n"]
     P = np.zeros((*n.shape, 6, 6))
     if model == "near_circular":
-        u = g["u"]
-        cu, su = np.cos(u), np.sin(u)
+        cu, su = g["cu"], g["su"]
         P[..., 0, 0] = 1.0
         P[..., 0, 2] = -cu
         P[..., 0, 3] = -su
@@ -310,8 +321,7 @@ def psi_matrix(oe_chief: ArrayLike | OrbitalElements, model: Model = "eccentric"
         return P
 
     eta, k, ec, es = g["eta"], g["k"], g["ec"], g["es"]
-    ex, ey, th = g["ex"], g["ey"], g["theta"]
-    ct, st = np.cos(th), np.sin(th)
+    ex, ey, ct, st = g["ex"], g["ey"], g["ct"], g["st"]
     cot_i = _cot_i(c, need=g["e"] > 0.0)
     thd = n * k**2 / eta**3  # true-argument-of-latitude rate / (1)
     b = 1.0 / (eta * (1.0 + eta))
@@ -630,14 +640,11 @@ def control_input_matrix(
     numpy.ndarray
         ``B`` of shape ``(..., 6, 3)`` [s].
     """
-    _check_model(model)
-    c = _chief(oe_chief)
-    g = _chief_geometry(c)
+    c, g = _map_geometry(oe_chief, model)
     n = g["n"]
     B = np.zeros((*n.shape, 6, 3))
     if model == "near_circular":
-        u = g["u"]
-        cu, su = np.cos(u), np.sin(u)
+        cu, su = g["cu"], g["su"]
         B[..., 0, 1] = 2.0 / n
         B[..., 1, 0] = -2.0 / n
         B[..., 2, 0] = su / n
@@ -649,8 +656,7 @@ def control_input_matrix(
         return B
 
     eta, k, ec, es = g["eta"], g["k"], g["ec"], g["es"]
-    ex, ey, th = g["ex"], g["ey"], g["theta"]
-    ct, st = np.cos(th), np.sin(th)
+    ex, ey, ct, st = g["ex"], g["ey"], g["ct"], g["st"]
     cot_i = _cot_i(c, need=g["e"] > 0.0)
     s = eta / n
     B[..., 0, 0] = 2.0 * es / (n * eta)
