@@ -101,6 +101,32 @@ class Executor(Protocol):
         """Stop every worker."""
 
 
+@dataclass
+class _OneAtATime:
+    """A pool of workers (:meth:`_workers`: slots or actors, each with the ``index`` it runs,
+    None when idle, since ``started``) that solve one instance of ``family`` at a time each,
+    from the pool's queue ``_queue`` of instance indices."""
+
+    family: DatasetFamily
+    seed: int
+    n_workers: int | None
+    time_limit: float
+
+    def _workers(self) -> list[Any]:
+        raise NotImplementedError
+
+    def submit(self, indices: Iterable[int]) -> None:
+        self._queue.extend(indices)
+
+    def pending(self) -> int:
+        return len(self._queue) + sum(w.index is not None for w in self._workers())
+
+    def _time_to_deadlines(self) -> list[float]:
+        """Seconds until each running instance reaches the time limit."""
+        now = time.perf_counter()
+        return [w.started + self.time_limit - now for w in self._workers() if w.index is not None]
+
+
 # -- local process pool ----------------------------------------------------------------------
 def _worker_main(conn: mpc.Connection, family: DatasetFamily, seed: int) -> None:
     """Serve instance indices until told to stop; a vanished parent ends it quietly."""
@@ -140,13 +166,10 @@ class _Slot:
 
 
 @dataclass
-class LocalPool:
+class LocalPool(_OneAtATime):
     """Worker processes on this machine, one instance at a time each."""
 
-    family: DatasetFamily
-    seed: int
     n_workers: int
-    time_limit: float
     start_method: str = "forkserver"
     backend: str = "local"
     startup_time: float = float("nan")
@@ -170,11 +193,8 @@ class LocalPool:
         child.close()
         return _Slot(process=process, conn=parent, startup_failures=failures)
 
-    def submit(self, indices: Iterable[int]) -> None:
-        self._queue.extend(indices)
-
-    def pending(self) -> int:
-        return len(self._queue) + sum(s.index is not None for s in self._slots)
+    def _workers(self) -> list[_Slot]:
+        return self._slots
 
     def wait(self, timeout: float) -> list[TaskResult]:
         self._dispatch()
@@ -187,10 +207,6 @@ class LocalPool:
         results += self._enforce_time_limit()
         self._dispatch()
         return results
-
-    def _time_to_deadlines(self) -> list[float]:
-        now = time.perf_counter()
-        return [s.started + self.time_limit - now for s in self._slots if s.index is not None]
 
     def _collect(self, number: int, slot: _Slot) -> list[TaskResult]:
         try:
@@ -373,13 +389,9 @@ def connect_ray(address: str, workers: int | None) -> bool:
 
 
 @dataclass
-class RayPool:
+class RayPool(_OneAtATime):
     """One Ray actor per worker (``num_cpus=1`` each), one instance at a time each."""
 
-    family: DatasetFamily
-    seed: int
-    n_workers: int | None
-    time_limit: float
     address: str = "local"
     backend: str = "ray"
     startup_time: float = float("nan")
@@ -402,18 +414,14 @@ class RayPool:
         handle = self._remote.remote(self._family_ref, self.seed)
         return _Actor(handle=handle, ready_ref=handle.warm_up.remote())
 
-    def submit(self, indices: Iterable[int]) -> None:
-        self._queue.extend(indices)
-
-    def pending(self) -> int:
-        return len(self._queue) + sum(a.index is not None for a in self._actors)
+    def _workers(self) -> list[_Actor]:
+        return self._actors
 
     def wait(self, timeout: float) -> list[TaskResult]:
         self._dispatch()
         refs = {self._watched(a): n for n, a in enumerate(self._actors)}
         refs.pop(None, None)
-        now = time.perf_counter()
-        limits = [a.started + self.time_limit - now for a in self._actors if a.index is not None]
+        limits = self._time_to_deadlines()
         if refs:
             wait_for = max(min([timeout, *limits]), 0.0)
             self._ray.wait(list(refs), num_returns=1, timeout=wait_for)
