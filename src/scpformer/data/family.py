@@ -27,11 +27,12 @@ import typing
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from importlib import metadata
-from typing import Any, Protocol, TypeVar, runtime_checkable
+from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
 from scpformer.data.errors import DatasetError
+from scpformer.scp.solution import Status
 
 _Family = TypeVar("_Family")
 
@@ -172,6 +173,31 @@ def family_from_config(
     if not config:
         return family()
     return family(config_class.from_dict(config))
+
+
+class ConfiguredFamily:
+    """What the built-in families share: a frozen dataclass whose one field ``config`` is an
+    instance of ``config_class`` (plain values, read back by ``config_class.from_dict``), and
+    a sample counts as solved when it converged."""
+
+    config: Any
+    config_class: ClassVar[Any]
+    name: ClassVar[str]
+    success_statuses: ClassVar[frozenset[str]] = frozenset({Status.CONVERGED.value})
+
+    def config_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self.config)
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any] | None = None) -> Any:
+        """The family from a resolved config dict (a manifest's), or with its paper defaults
+        when ``config`` is ``None`` or empty: the :attr:`FamilySpec.build` of the family."""
+        return family_from_config(cls, cls.config_class, config)
+
+    @classmethod
+    def spec(cls, summary: str) -> FamilySpec:
+        """The registry entry of the family: its ``name``, ``summary``, :meth:`from_config`."""
+        return FamilySpec(name=cls.name, summary=summary, build=cls.from_config)
 
 
 # Built-in families and the module that defines each one's ``SPEC``.

@@ -30,7 +30,6 @@ a trajectory, hold fill values (False, NaN).
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -40,11 +39,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from scpformer.data.family import (
-    FamilySpec,
+    ConfiguredFamily,
     Field,
     SampleResult,
     dataclass_from_dict,
-    family_from_config,
     package_versions,
 )
 from scpformer.data.storage import ShardedSamples
@@ -60,7 +58,7 @@ from scpformer.problems.pdg6dof.theta import (  # noqa: F401 (also imported from
     instance_from_theta,
     theta_vector,
 )
-from scpformer.scp.solution import Solution, Status, Trajectory
+from scpformer.scp.solution import Solution, Trajectory
 
 RANGE_PRESETS = {
     "feasible": PDGSampleRanges.feasible,
@@ -84,20 +82,17 @@ class PDG6DoFDataConfig:
 
 
 @dataclass(frozen=True)
-class PDG6DoFFamily:
+class PDG6DoFFamily(ConfiguredFamily):
     """The 6-DoF powered descent family (a :class:`~scpformer.data.family.DatasetFamily`)."""
 
     config: PDG6DoFDataConfig = field(default_factory=PDG6DoFDataConfig)
+    config_class: ClassVar[type[PDG6DoFDataConfig]] = PDG6DoFDataConfig
     name: ClassVar[str] = "pdg6dof"
-    success_statuses: ClassVar[frozenset[str]] = frozenset({Status.CONVERGED.value})
 
     @property
     def n_nodes(self) -> int:
         """N, the number of temporal nodes."""
         return self.config.solver.n_nodes
-
-    def config_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self.config)
 
     def schema(self) -> tuple[Field, ...]:
         n, rows = self.n_nodes, len(CONSTRAINT_NAMES) * self.n_nodes
@@ -178,15 +173,11 @@ class PDG6DoFFamily:
         return out
 
 
-def build(config: Mapping[str, Any] | None = None) -> PDG6DoFFamily:
-    """The family from a resolved config dict (a manifest's), or Tables 1 and 2 defaults."""
-    return family_from_config(PDG6DoFFamily, PDG6DoFDataConfig, config)
+build = PDG6DoFFamily.from_config  # the family from a config dict, or its defaults
 
 
-SPEC = FamilySpec(
-    name="pdg6dof",
-    summary="6-DoF free-final-time Mars powered descent solved with SCvx (T-SCvx dataset)",
-    build=build,
+SPEC = PDG6DoFFamily.spec(
+    "6-DoF free-final-time Mars powered descent solved with SCvx (T-SCvx dataset)"
 )
 
 

@@ -44,7 +44,6 @@ Twin fields of a twin that has no trajectory hold fill values (NaN, -1, False, `
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Mapping
@@ -54,11 +53,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from scpformer.data.family import (
-    FamilySpec,
+    ConfiguredFamily,
     Field,
     SampleResult,
     dataclass_from_dict,
-    family_from_config,
     package_versions,
 )
 from scpformer.problems.rendezvous.api import solve
@@ -76,8 +74,9 @@ from scpformer.problems.rendezvous.scenario import (
 )
 from scpformer.problems.rendezvous.subproblems import compiled_subproblem
 from scpformer.problems.rendezvous.warmstart import RENDEZVOUS_CONVEX as WARMSTARTS
-from scpformer.scp.solution import Solution, Status
+from scpformer.scp.solution import Solution
 
+TARGET_KEYS = ("a_m", "e", "i_deg", "raan_deg", "argp_deg", "M_deg")  # theta's target orbit
 THETA_NAMES: tuple[str, ...] = (
     "roe0_da_m",
     "roe0_dlambda_m",
@@ -86,14 +85,8 @@ THETA_NAMES: tuple[str, ...] = (
     "roe0_dix_m",
     "roe0_diy_m",
     "horizon_orbits",
-    "target_a_m",
-    "target_e",
-    "target_i_deg",
-    "target_raan_deg",
-    "target_argp_deg",
-    "target_M_deg",
+    *(f"target_{key}" for key in TARGET_KEYS),
 )
-TARGET_KEYS = ("a_m", "e", "i_deg", "raan_deg", "argp_deg", "M_deg")
 TWINS: tuple[str, ...] = ("scp", "cvx", "tpbvp")  # Problem 3, 2 and 1 twins
 TWIN_PROBLEM = {"scp": "scp", "cvx": "convex", "tpbvp": "tpbvp"}  # prefix -> solve() problem
 STATE_FRAMES = ("roe", "rtn")
@@ -180,6 +173,21 @@ def twin_schema(prefix: str, n: int) -> tuple[Field, ...]:
     )
 
 
+def sample_schema(
+    n: int, twins: tuple[str, ...], cost_doc: str, iterations_doc: str
+) -> tuple[Field, ...]:
+    """The leading fields of a rendezvous sample, N = ``n``: theta, the cost and iterations of
+    the solve the sample keeps, the node times and the fields of each of ``twins``."""
+    f64 = "float64"
+    return (
+        Field(name="theta", dtype=f64, shape=(13,), normalize=True, doc="instance parameters"),
+        Field(name="cost", dtype=f64, doc=cost_doc),
+        Field(name="iterations", dtype="int64", doc=iterations_doc),
+        Field(name="t", dtype=f64, shape=(n + 1,), doc="node times [s]"),
+        *(f for p in twins for f in twin_schema(p, n)),
+    )
+
+
 def twin_fields(
     prefix: str,
     instance: RendezvousInstance,
@@ -244,12 +252,12 @@ def art_sequences(
 
 
 @dataclass(frozen=True)
-class RendezvousFamily:
+class RendezvousFamily(ConfiguredFamily):
     """The rendezvous family (a :class:`~scpformer.data.family.DatasetFamily`)."""
 
     config: RendezvousDataConfig = field(default_factory=RendezvousDataConfig)
+    config_class: ClassVar[type[RendezvousDataConfig]] = RendezvousDataConfig
     name: ClassVar[str] = "rendezvous"
-    success_statuses: ClassVar[frozenset[str]] = frozenset({Status.CONVERGED.value})
 
     @property
     def twins(self) -> tuple[str, ...]:
@@ -261,18 +269,11 @@ class RendezvousFamily:
         """N, the number of impulses."""
         return self.config.scenario.n_nodes
 
-    def config_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self.config)
-
     def schema(self) -> tuple[Field, ...]:
         n, f64 = self.n_nodes, "float64"
-        twins = tuple(f for p in self.twins for f in twin_schema(p, n))
+        cost, iterations = "Problem 3 cost sum |dv|_2 [m/s]", "Problem 3 SCP iterations"
         return (
-            Field(name="theta", dtype=f64, shape=(13,), normalize=True, doc="instance parameters"),
-            Field(name="cost", dtype=f64, doc="Problem 3 cost sum |dv|_2 [m/s]"),
-            Field(name="iterations", dtype="int64", doc="Problem 3 SCP iterations"),
-            Field(name="t", dtype=f64, shape=(n + 1,), doc="node times [s]"),
-            *twins,
+            *sample_schema(n, self.twins, cost, iterations),
             Field(name="c_cvx_t1", dtype="int64", doc="C_CVX(t_1): convex twin's ctg at t_0"),
             Field(name="warmstart", dtype="str", doc="SCP warm start: convex or tpbvp"),
             Field(name="ws_roe", dtype=f64, shape=(n + 1, 6), doc="warm start states [m]"),
@@ -350,14 +351,10 @@ class RendezvousFamily:
         return out
 
 
-def build(config: Mapping[str, Any] | None = None) -> RendezvousFamily:
-    """The family from a resolved config dict (a manifest's), or the ART Table 1 defaults."""
-    return family_from_config(RendezvousFamily, RendezvousDataConfig, config)
+build = RendezvousFamily.from_config  # the family from a config dict, or its defaults
 
 
-SPEC = FamilySpec(
-    name="rendezvous",
-    summary="ISS rendezvous in ROE: TPBVP (Problem 1), convex (Problem 2) and SCP (Problem 3) "
-    "twins (ART dataset)",
-    build=build,
+SPEC = RendezvousFamily.spec(
+    "ISS rendezvous in ROE: TPBVP (Problem 1), convex (Problem 2) and SCP (Problem 3) "
+    "twins (ART dataset)"
 )

@@ -49,14 +49,13 @@ from typing import Any, ClassVar
 import numpy as np
 
 from scpformer.data.family import (
-    FamilySpec,
+    ConfiguredFamily,
     Field,
     SampleResult,
     dataclass_from_dict,
-    family_from_config,
     package_versions,
 )
-from scpformer.data.rendezvous_family import TARGET_KEYS, twin_fields, twin_schema
+from scpformer.data.rendezvous_family import TARGET_KEYS, sample_schema, twin_fields
 from scpformer.dynamics.uncertainty import UncertaintyModel
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.rendezvous.subproblems import compiled_subproblem
@@ -80,7 +79,7 @@ from scpformer.problems.robust_rendezvous.scenario import (
     robust_target,
 )
 from scpformer.problems.robust_rendezvous.subproblem import compiled_safety_subproblem
-from scpformer.scp.solution import Solution, Status
+from scpformer.scp.solution import Solution
 
 THETA_NAMES: tuple[str, ...] = (
     "x0_r_m",
@@ -90,12 +89,7 @@ THETA_NAMES: tuple[str, ...] = (
     "x0_vt_m_s",
     "x0_vn_m_s",
     "waypoint_code",
-    "target_a_m",
-    "target_e",
-    "target_i_deg",
-    "target_raan_deg",
-    "target_argp_deg",
-    "target_M_deg",
+    *(f"target_{key}" for key in TARGET_KEYS),
 )
 TWINS: tuple[str, ...] = ("ps", "cvx")  # three-stage result and convex TPBVP twins
 
@@ -179,12 +173,12 @@ def stage_fields(solution: Solution) -> dict[str, Any]:
 
 
 @dataclass(frozen=True)
-class RobustRendezvousFamily:
+class RobustRendezvousFamily(ConfiguredFamily):
     """The robust rendezvous family (a :class:`~scpformer.data.family.DatasetFamily`)."""
 
     config: RobustDataConfig = field(default_factory=RobustDataConfig)
+    config_class: ClassVar[type[RobustDataConfig]] = RobustDataConfig
     name: ClassVar[str] = "robust-rendezvous"
-    success_statuses: ClassVar[frozenset[str]] = frozenset({Status.CONVERGED.value})
     twins: ClassVar[tuple[str, ...]] = TWINS  # trajectory twins per sample (ART view)
 
     @property
@@ -192,18 +186,11 @@ class RobustRendezvousFamily:
         """N, the number of impulses."""
         return self.config.scenario.n_nodes
 
-    def config_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self.config)
-
     def schema(self) -> tuple[Field, ...]:
-        n, f64 = self.n_nodes, "float64"
-        twins = tuple(f for p in TWINS for f in twin_schema(p, n))
+        cost = "kept trajectory's cost sum |dv|_2 [m/s]"
+        iterations = "SCvx* iterations, passive safety"
         return (
-            Field(name="theta", dtype=f64, shape=(13,), normalize=True, doc="instance parameters"),
-            Field(name="cost", dtype=f64, doc="kept trajectory's cost sum |dv|_2 [m/s]"),
-            Field(name="iterations", dtype="int64", doc="SCvx* iterations, passive safety"),
-            Field(name="t", dtype=f64, shape=(n + 1,), doc="node times [s]"),
-            *twins,
+            *sample_schema(self.n_nodes, TWINS, cost, iterations),
             Field(name="mode", dtype="str", doc="deterministic or chance"),
             Field(name="waypoint", dtype="str", doc="pre-docking state +T, -T, +R or -R"),
             Field(name="stage", dtype="str", doc="stage that produced the kept trajectory"),
@@ -268,13 +255,9 @@ class RobustRendezvousFamily:
         return fields
 
 
-def build(config: Mapping[str, Any] | None = None) -> RobustRendezvousFamily:
-    """The family from a resolved config dict (a manifest's), or the robust tables' defaults."""
-    return family_from_config(RobustRendezvousFamily, RobustDataConfig, config)
+build = RobustRendezvousFamily.from_config  # the family from a config dict, or its defaults
 
 
-SPEC = FamilySpec(
-    name="robust-rendezvous",
-    summary="passively safe LEO rendezvous: three-stage SCvx* result and convex TPBVP twins",
-    build=build,
+SPEC = RobustRendezvousFamily.spec(
+    "passively safe LEO rendezvous: three-stage SCvx* result and convex TPBVP twins"
 )
