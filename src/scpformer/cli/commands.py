@@ -1,11 +1,13 @@
-"""Every ``scpformer`` command: its name, one-line help and where its parser is built.
+"""Every ``scpformer`` command: its name, one-line help, description and where its parser is
+built.
 
 A command's parser is built only when the command is used: ``scpformer --help`` and
 ``scpformer solve --help`` list the commands from this table alone, and ``scpformer solve
 rendezvous`` builds the rendezvous parser only. The parsers (:mod:`scpformer.cli.parsers`)
 import no part of the library; a command's handler, and with it cvxpy, torch, h5py, ..., is
-imported when the command runs (:func:`lazy_handler`). The parsers take their ``help=`` from
-:func:`command_help`, so the text lives here once.
+imported when the command runs (:func:`lazy_handler`). The parsers take their ``help=`` and
+description from here (:func:`add_command_parser`), so the text lives here once and the
+parsers hold the flags.
 """
 
 from __future__ import annotations
@@ -78,6 +80,75 @@ COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
 }
 
 
+#: ``(parent, name) -> description``: the paragraph of ``scpformer PARENT NAME --help`` under its
+#: usage line (:func:`add_command_parser`); commands without one list only their sub-commands.
+DESCRIPTIONS: dict[tuple[str, str], str] = {
+    ("solve", "pdg6dof"): (
+        "Solve the 6-DoF minimum-fuel powered descent problem (T-SCvx paper, Eqs. 2-6, Table 1) "
+        "with SCvx and verify it by nonlinear propagation."
+    ),
+    ("solve", "rendezvous"): (
+        "Solve Problem 1 (two-point boundary value), 2 (convex: waypoint and approach cone) or 3 "
+        "(keep-out ellipsoid, SCP of Section 4) of the ART paper for an ISS rendezvous (Table 1), "
+        "and verify it by replaying the impulses through a two-body + J2 propagator."
+    ),
+    ("solve", "robust-rendezvous"): (
+        "Solve the passively safe rendezvous of the robust ART paper (Table 1) with the "
+        "three-stage procedure (convex TPBVP -> deterministic collision avoidance -> passive "
+        "safety, deterministic or chance-constrained) and SCvx*; optionally verify the chance "
+        "constraint by Monte Carlo through a two-body + J2 propagator."
+    ),
+    ("bench", "pdg6dof"): (
+        "Solve a fixed, seeded set of instances from the nominal sub-range and from Table 2; "
+        "report wall time, iterations, converged rate and the share of time inside the conic "
+        "solver."
+    ),
+    ("bench", "rendezvous"): (
+        "Solve Problems 1, 2 and 3 (the SCP warm-started from Problem 1 or 2) on a seeded set of "
+        "instances sampled from Table 1; report wall time (median, p95), SCP iterations, failure "
+        "rate, the share of time inside the conic solver and C_CVX(t_1), the constraint-to-go of "
+        "the convex solution. Wall times exclude the verification."
+    ),
+    ("bench", "robust-rendezvous"): (
+        "On a seeded set of Table 1 instances, solve the convex TPBVP and, from it, the "
+        "passive-safety problem with SCvx* in both modes (PS-CVX-D, PS-CVX-C); report wall time "
+        "(median, p95), iterations, infeasibility rate (not converged) and the share of time in "
+        "the conic solver. Wall times exclude the final verification."
+    ),
+    ("bench", "art"): (
+        "Generate ART trajectories with the rendezvous dynamics in the loop (Algorithm 2) and "
+        "time them: batch 1 with the key-value cache, and without it (full forward at every "
+        "step), and the batched throughput with the cache. Random weights of a preset unless "
+        "--model gives a trained run."
+    ),
+    ("bench", "tscvx"): (
+        "Time the T-SCvx predictor's calls (raw theta in, numpy out) at batch 1 and at --batch. "
+        "Random weights of a preset unless --model gives a trained run."
+    ),
+    ("", "generate"): (
+        "Sample N instances with the family's sampler, solve them on a local process pool (or a "
+        "Ray cluster with --ray) and store them as HDF5 shards with a manifest. Re-running the "
+        "same command resumes an interrupted run."
+    ),
+    ("", "report"): (
+        "Write one page with, per paper table and figure, the paper's number, ours and the "
+        "commands that reproduce ours."
+    ),
+    ("", "demo"): (
+        "The papers' learned warm starts beside the classical ones, in seconds: the ISS "
+        "rendezvous (SCP from the convex solution and from ART), the passively safe rendezvous "
+        "(PS-CVX and PS-ART) and the 6-DoF Mars landing (SCvx from the cubic profile and T-SCvx), "
+        "each solve timed and verified; with --out, one figure per solve."
+    ),
+    ("", "export"): (
+        "Export each network of a training run to ONNX (full-sequence forward, dynamic batch and "
+        "sequence axes), run it with onnxruntime and PyTorch on the same inputs and fail when "
+        "they differ by more than --tolerance. A run with sub-folders (RUN/tight, RUN/solution) "
+        "writes FILE with each sub-folder's name before .onnx."
+    ),
+}
+
+
 def command_help(parent: str, name: str) -> str:
     """The one-line help of command ``name`` under ``parent`` (``""``: top level)."""
     return COMMANDS[parent, name][0]
@@ -86,9 +157,11 @@ def command_help(parent: str, name: str) -> str:
 def add_command_parser(
     sub: argparse._SubParsersAction, parent: str, name: str, **kwargs: Any
 ) -> argparse.ArgumentParser:
-    """Add command ``name`` of ``parent`` to ``sub``, with its help from :data:`COMMANDS`;
-    ``kwargs`` (``description=``, ...) go to ``add_parser``."""
-    return sub.add_parser(name, help=command_help(parent, name), **kwargs)
+    """Add command ``name`` of ``parent`` to ``sub``, with its help from :data:`COMMANDS` and
+    its description from :data:`DESCRIPTIONS`; ``kwargs`` (``usage=``, ...) go to
+    ``add_parser``."""
+    description = DESCRIPTIONS.get((parent, name))
+    return sub.add_parser(name, help=command_help(parent, name), description=description, **kwargs)
 
 
 def lazy_handler(target: str) -> Callable[[argparse.Namespace], int]:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from scpformer.cli.argtypes import count, positive
-from scpformer.cli.commands import command_help
+from scpformer.cli.commands import add_command_parser
 from scpformer.cli.config_file import ConfigParser, add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
 from scpformer.cli.errors import Terminated, run_command
@@ -169,13 +169,7 @@ register_family_arguments(
 # -- generate ----------------------------------------------------------------------------------
 def add_generate_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``generate FAMILY`` with one sub-command per known family."""
-    parser = subparsers.add_parser(
-        "generate",
-        help=command_help("", "generate"),
-        description="Sample N instances with the family's sampler, solve them on a local "
-        "process pool (or a Ray cluster with --ray) and store them as HDF5 shards with a "
-        "manifest. Re-running the same command resumes an interrupted run.",
-    )
+    parser = add_command_parser(subparsers, "", "generate")
     families = parser.add_subparsers(dest="family", required=True, metavar="FAMILY")
     for name, summary in _family_summaries().items():
         sub = families.add_parser(name, help=summary, description=summary)
@@ -346,7 +340,7 @@ def _solved_line(manifest: Manifest) -> str:
 # -- dataset -----------------------------------------------------------------------------------
 def add_dataset_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``dataset info|verify|augment|split``."""
-    parser = subparsers.add_parser("dataset", help=command_help("", "dataset"))
+    parser = add_command_parser(subparsers, "", "dataset")
     commands = parser.add_subparsers(dest="dataset_command", required=True, metavar="COMMAND")
     folder_commands = (
         ("info", "summarize a dataset", run_info),

@@ -6,19 +6,12 @@ import argparse
 from pathlib import Path
 
 from scpformer.cli.argtypes import positive
-from scpformer.cli.commands import command_help
+from scpformer.cli.commands import add_command_parser
 
 
 def add_export_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``export`` on the top-level subparsers."""
-    export = commands.add_parser(
-        "export",
-        help=command_help("", "export"),
-        description="Export each network of a training run to ONNX (full-sequence forward, "
-        "dynamic batch and sequence axes), run it with onnxruntime and PyTorch on the same "
-        "inputs and fail when they differ by more than --tolerance. A run with sub-folders "
-        "(RUN/tight, RUN/solution) writes FILE with each sub-folder's name before .onnx.",
-    )
+    export = add_command_parser(commands, "", "export")
     export.add_argument(
         "--model", type=Path, required=True, metavar="RUN", help="training run folder or checkpoint"
     )

@@ -5,17 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from scpformer.cli.commands import command_help
+from scpformer.cli.commands import add_command_parser
 
 
 def add_report_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``report`` on the top-level subparsers."""
-    report = commands.add_parser(
-        "report",
-        help=command_help("", "report"),
-        description="Write one page with, per paper table and figure, the paper's number, "
-        "ours and the commands that reproduce ours.",
-    )
+    report = add_command_parser(commands, "", "report")
     report.add_argument(
         "--results",
         type=Path,

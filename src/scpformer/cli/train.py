@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 from scpformer.cli.argtypes import count
-from scpformer.cli.commands import command_help
+from scpformer.cli.commands import add_command_parser
 from scpformer.cli.config_file import add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, overrides
 
@@ -27,7 +27,7 @@ _HELP = {
 
 def add_train_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``train MODEL`` on the top-level subparsers."""
-    train = commands.add_parser("train", help=command_help("", "train"))
+    train = add_command_parser(commands, "", "train")
     models = train.add_subparsers(dest="model", required=True, metavar="MODEL")
     for kind in SEQUENCE_MODELS:
         parser = models.add_parser(kind, help=_HELP[kind], description=_HELP[kind])

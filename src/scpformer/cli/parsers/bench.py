@@ -7,19 +7,12 @@ import argparse
 from pathlib import Path
 
 from scpformer.cli.argtypes import count, int_at_least
-from scpformer.cli.commands import command_help, lazy_handler
+from scpformer.cli.commands import add_command_parser, lazy_handler
 from scpformer.cli.dataclass_args import with_default
 
 
 def add_bench_art_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "art",
-        help=command_help("bench", "art"),
-        description="Generate ART trajectories with the rendezvous dynamics in the loop "
-        "(Algorithm 2) and time them: batch 1 with the key-value cache, and without it (full "
-        "forward at every step), and the batched throughput with the cache. Random weights of "
-        "a preset unless --model gives a trained run.",
-    )
+    parser = add_command_parser(sub, "bench", "art")
     parser.add_argument("--preset", choices=("small", "paper"), default=None,
                         help=with_default("model size of the random weights", "small"))  # fmt: skip
     parser.add_argument("--model", type=Path, help="trained run folder or checkpoint.pt")
@@ -51,12 +44,7 @@ def add_bench_art_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def add_bench_tscvx_parser(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser(
-        "tscvx",
-        help=command_help("bench", "tscvx"),
-        description="Time the T-SCvx predictor's calls (raw theta in, numpy out) at batch 1 and "
-        "at --batch. Random weights of a preset unless --model gives a trained run.",
-    )
+    parser = add_command_parser(sub, "bench", "tscvx")
     parser.add_argument("--preset", choices=("small", "paper"), default=None,
                         help=with_default("sizes of random nets", "small"))  # fmt: skip
     parser.add_argument("--tokens", choices=("single", "inputs"), default=None,

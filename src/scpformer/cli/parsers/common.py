@@ -14,13 +14,11 @@ USAGE = "%(prog)s [options]"
 
 
 def add_family_parser(
-    sub: argparse._SubParsersAction, command: str, family: str, description: str, epilog: str
+    sub: argparse._SubParsersAction, command: str, family: str, epilog: str
 ) -> argparse.ArgumentParser:
     """The parser of ``command family`` (``solve`` or ``bench`` of a problem family): the short
     usage line, and ``epilog`` on the family's constant flags kept out of ``--help``."""
-    return add_command_parser(
-        sub, command, family, description=description, usage=USAGE, epilog=epilog
-    )
+    return add_command_parser(sub, command, family, usage=USAGE, epilog=epilog)
 
 
 def add_benchmark_arguments(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup:

@@ -6,13 +6,13 @@ import argparse
 from pathlib import Path
 
 from scpformer.cli.argtypes import count, positive
-from scpformer.cli.commands import command_help, lazy_handler
+from scpformer.cli.commands import add_command_parser, lazy_handler
 from scpformer.cli.dataclass_args import with_default
 
 
 def add_experiment_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``experiment list`` and ``experiment run NAME`` on the top-level subparsers."""
-    experiment = commands.add_parser("experiment", help=command_help("", "experiment"))
+    experiment = add_command_parser(commands, "", "experiment")
     actions = experiment.add_subparsers(dest="action", required=True, metavar="ACTION")
     listing = actions.add_parser("list", help="name every experiment and what it reproduces")
     listing.set_defaults(handler=lazy_handler("scpformer.cli.experiment:run_list"))

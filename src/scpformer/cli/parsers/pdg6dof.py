@@ -35,11 +35,7 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    description = (
-        "Solve the 6-DoF minimum-fuel powered descent problem (T-SCvx paper, Eqs. 2-6, "
-        "Table 1) with SCvx and verify it by nonlinear propagation."
-    )
-    parser = add_family_parser(sub, "solve", "pdg6dof", description, CONSTANTS_NOTE)
+    parser = add_family_parser(sub, "solve", "pdg6dof", CONSTANTS_NOTE)
     parser.add_argument(
         "--instance",
         type=Path,
@@ -71,12 +67,7 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    description = (
-        "Solve a fixed, seeded set of instances from the nominal sub-range and from Table 2; "
-        "report wall time, iterations, converged rate and the share of time inside the conic "
-        "solver."
-    )
-    parser = add_family_parser(sub, "bench", "pdg6dof", description, CONSTANTS_NOTE)
+    parser = add_family_parser(sub, "bench", "pdg6dof", CONSTANTS_NOTE)
     group = parser.add_argument_group("benchmark")
     group.add_argument("--n-nominal", type=count, default=20,
                        help=with_default("nominal instances", 20))  # fmt: skip

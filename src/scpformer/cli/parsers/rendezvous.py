@@ -43,12 +43,7 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    description = (
-        "Solve Problem 1 (two-point boundary value), 2 (convex: waypoint and approach cone) or "
-        "3 (keep-out ellipsoid, SCP of Section 4) of the ART paper for an ISS rendezvous "
-        "(Table 1), and verify it by replaying the impulses through a two-body + J2 propagator."
-    )
-    parser = add_family_parser(sub, "solve", "rendezvous", description, CONSTANTS_NOTE)
+    parser = add_family_parser(sub, "solve", "rendezvous", CONSTANTS_NOTE)
     parser.add_argument(
         "--problem",
         choices=constant("rendezvous.problems"),
@@ -85,13 +80,7 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    description = (
-        "Solve Problems 1, 2 and 3 (the SCP warm-started from Problem 1 or 2) on a seeded set "
-        "of instances sampled from Table 1; report wall time (median, p95), SCP iterations, "
-        "failure rate, the share of time inside the conic solver and C_CVX(t_1), the "
-        "constraint-to-go of the convex solution. Wall times exclude the verification."
-    )
-    parser = add_family_parser(sub, "bench", "rendezvous", description, CONSTANTS_NOTE)
+    parser = add_family_parser(sub, "bench", "rendezvous", CONSTANTS_NOTE)
     group = add_benchmark_arguments(parser)
     group.add_argument(
         "--warmstart",

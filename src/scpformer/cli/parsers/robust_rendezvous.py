@@ -55,13 +55,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, unless: str | None = N
 
 
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    description = (
-        "Solve the passively safe rendezvous of the robust ART paper (Table 1) with the "
-        "three-stage procedure (convex TPBVP -> deterministic collision avoidance -> passive "
-        "safety, deterministic or chance-constrained) and SCvx*; optionally verify the chance "
-        "constraint by Monte Carlo through a two-body + J2 propagator."
-    )
-    parser = add_family_parser(sub, "solve", "robust-rendezvous", description, CONSTANTS_NOTE)
+    parser = add_family_parser(sub, "solve", "robust-rendezvous", CONSTANTS_NOTE)
     parser.add_argument(
         "--mode",
         choices=constant("robust.modes"),
@@ -98,13 +92,7 @@ def add_solve_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    description = (
-        "On a seeded set of Table 1 instances, solve the convex TPBVP and, from it, the "
-        "passive-safety problem with SCvx* in both modes (PS-CVX-D, PS-CVX-C); report wall "
-        "time (median, p95), iterations, infeasibility rate (not converged) and the share of "
-        "time in the conic solver. Wall times exclude the final verification."
-    )
-    parser = add_family_parser(sub, "bench", "robust-rendezvous", description, CONSTANTS_NOTE)
+    parser = add_family_parser(sub, "bench", "robust-rendezvous", CONSTANTS_NOTE)
     group = add_benchmark_arguments(parser)
     add_csv_argument(group, "robust-rendezvous")
     add_config_arguments(parser)
