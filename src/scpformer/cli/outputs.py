@@ -37,3 +37,22 @@ def write_csv(path: Path, fields: Sequence[str], rows: Iterable[dict[str, Any]])
     writer.writeheader()
     writer.writerows(rows)
     write_bytes_atomic(path, text.getvalue().encode())
+
+
+def print_rows(rows: list[tuple[str, str]]) -> None:
+    """A two-column table: each key padded to the longest, then its value."""
+    width = max(len(k) for k, _ in rows)
+    for key, value in rows:
+        print(f"{key:<{width}}  {value}")
+
+
+def timing_rows(timing: Any, model_step: str) -> list[tuple[str, str]]:
+    """The wall time of a solve and its parts (``timing``: a ``Timing``); ``model_step`` names
+    the time in ``timing.discretization``."""
+    return [
+        ("wall time", f"{timing.total:.3f} s"),
+        (f"  {model_step}", f"{timing.discretization:.3f} s"),
+        ("  conic solver", f"{timing.solver:.3f} s"),
+        ("  verification", f"{timing.verification:.3f} s"),
+        ("  other", f"{timing.other:.3f} s"),
+    ]

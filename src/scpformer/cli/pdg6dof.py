@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from scpformer.cli.dataclass_args import overrides
-from scpformer.cli.outputs import check_solve_outputs, write_csv
+from scpformer.cli.outputs import check_solve_outputs, print_rows, timing_rows, write_csv
 from scpformer.files import check_output_file
 from scpformer.pdg6dof import solve
 from scpformer.problems.pdg6dof.adapter import conic_solves
@@ -91,17 +91,8 @@ def print_summary(solution: Solution, instance: PDGInstance) -> None:
     elif solution.trajectory is not None:
         rows.append(("verified", "not verified"))
     if solution.timing is not None:
-        tm = solution.timing
-        rows += [
-            ("wall time", f"{tm.total:.3f} s"),
-            ("  discretization", f"{tm.discretization:.3f} s"),
-            ("  conic solver", f"{tm.solver:.3f} s"),
-            ("  verification", f"{tm.verification:.3f} s"),
-            ("  other", f"{tm.other:.3f} s"),
-        ]
-    width = max(len(k) for k, _ in rows)
-    for key, value in rows:
-        print(f"{key:<{width}}  {value}")
+        rows += timing_rows(solution.timing, "discretization")
+    print_rows(rows)
 
 
 def tscvx_rows(extras: dict) -> list[tuple[str, str]]:

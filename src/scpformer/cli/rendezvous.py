@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.cli.dataclass_args import overrides, with_overrides
-from scpformer.cli.outputs import check_solve_outputs, write_csv
+from scpformer.cli.outputs import check_solve_outputs, print_rows, timing_rows, write_csv
 from scpformer.cli.warmstart import (
     art_provider,
     comparison_rows,
@@ -108,21 +108,8 @@ def summary_rows(solution: Solution, instance: RendezvousInstance) -> list[tuple
     elif solution.trajectory is not None:
         rows.append(("verified (replay)", "not verified"))
     if solution.timing is not None:
-        tm = solution.timing
-        rows += [
-            ("wall time", f"{tm.total:.3f} s"),
-            ("  model + linearization", f"{tm.discretization:.3f} s"),
-            ("  conic solver", f"{tm.solver:.3f} s"),
-            ("  verification", f"{tm.verification:.3f} s"),
-            ("  other", f"{tm.other:.3f} s"),
-        ]
+        rows += timing_rows(solution.timing, "model + linearization")
     return rows
-
-
-def print_rows(rows: list[tuple[str, str]]) -> None:
-    width = max(len(k) for k, _ in rows)
-    for key, value in rows:
-        print(f"{key:<{width}}  {value}")
 
 
 def run_solve(args: argparse.Namespace) -> int:

@@ -12,8 +12,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.cli.dataclass_args import overrides, with_overrides
-from scpformer.cli.outputs import check_solve_outputs, write_csv
-from scpformer.cli.rendezvous import print_rows
+from scpformer.cli.outputs import check_solve_outputs, print_rows, write_csv
 from scpformer.cli.warmstart import (
     art_provider,
     comparison_rows,
