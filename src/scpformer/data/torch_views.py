@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -90,15 +91,11 @@ class TightFlagsDataset(_StoredView):
     family = "pdg6dof"
 
     def __init__(
-        self,
-        folder: Path | str,
-        split: str | None = "train",
-        *,
-        normalize: bool = True,
-        statuses: Sequence[str] | None = None,
-        accepted_only: bool = False,
-    ) -> None:
-        super().__init__(folder, split, normalize=normalize, statuses=statuses)
+        self, folder: Path | str, split: str | None = "train", *, accepted_only: bool = False,
+        **view: Any,
+    ) -> None:  # fmt: skip
+        """``view``: ``normalize`` and ``statuses`` of every stored view."""
+        super().__init__(folder, split, **view)
         iterations = self.samples.column("iterations")[self.positions]
         pairs = [(p, k) for p, n in zip(self.positions, iterations, strict=True) for k in range(n)]
         items = np.array(pairs, dtype=np.int64).reshape(-1, 2)  # (items, 2): position, k - 1
