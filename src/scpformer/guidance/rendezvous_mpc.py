@@ -1,0 +1,691 @@
+"""Closed-loop guidance of the ISS rendezvous: shrinking-horizon model predictive control.
+
+The open-loop plan of the ART paper (Problem 3, Section 4) is solved once from the nominal
+instance. The loop then flies it through the truth model and re-plans on board:
+
+1. every ``replan_every`` impulses (node ``k = K, 2K, ...``; the first ``K`` impulses are the
+   open-loop plan's, solved from the known initial state) the navigation filter gives an
+   estimate of the servicer's MEAN scaled ROE: the true state (osculating, two-body + J2)
+   averaged to mean elements exactly as the verification defines them
+   (:func:`scpformer.dynamics.mean_elements.osculating_to_mean_qns`), plus a navigation error
+   ``~ N(0, X_nav(rho))`` of the robust ART paper (Eqs. 10-11, Table 2;
+   :class:`~scpformer.dynamics.uncertainty.NavigationModel`);
+2. the remaining problem is Problem 3 from that estimate over the nodes ``k .. N`` (a shrinking
+   horizon to the fixed final time ``t_N``, the same time step, waypoint hold at ``N_wp``,
+   approach cone and docking port), posed as a :class:`RendezvousInstance` of ``N - k``
+   impulses whose target elements are the target's mean elements at ``t_k``
+   (:func:`remaining_instance`), and solved by the family's public ``solve`` with the
+   chosen warm start; the plan is checked like any solution (its nonlinear replay,
+   :mod:`scpformer.problems.rendezvous.verification`);
+3. the plan's next ``K`` impulses are applied through the truth model (two-body + J2 of
+   :func:`scpformer.dynamics.truth.propagate_relative`, as the verification and the robust
+   family's truth replay do), each with a Gates execution error (Eqs. 12-13,
+   :class:`~scpformer.dynamics.uncertainty.GatesModel`) and with the process noise ``Q``
+   added to the state at every node (Table 2, mapped to RTN by ``Psi(t_k)``, Eq. 9, as the
+   robust family's Monte Carlo check does).
+
+A re-plan that fails (no trajectory, or a trajectory whose verification fails) is recorded,
+and the last accepted plan keeps being flown. The last re-plan is at node
+``N - waypoint_offset - 2`` (:func:`replan_nodes`): the family's instance needs at least two
+intervals before the waypoint hold (``RendezvousScenario``), so the last
+``waypoint_offset + 2`` intervals (the arrival at the waypoint, the hold and the final
+approach in the cone; 12 of 100 by default) are flown on the last accepted plan. Re-planning
+the final approach would need a problem without the waypoint (or with the waypoint at the
+current node), which the family's instance cannot pose.
+
+Warm starts of a re-plan (:data:`WARMSTARTS`): ``cold`` is the family's default start (the
+convex Problem 2 solved from the estimate); ``previous`` the last accepted plan shifted in
+time to node ``k`` (the classical MPC warm start), given to ``solve`` as a
+:class:`~scpformer.scp.warmstart.GivenWarmStart`. The learned ART start is not offered:
+see :data:`UNSUPPORTED`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from scpformer.dynamics.mean_elements import osculating_to_mean_qns, qns_difference
+from scpformer.dynamics.orbits import (
+    eci_to_oe,
+    j2_secular_rates,
+    oe_to_eci,
+    qns_to_oe,
+    rtn_to_eci,
+)
+from scpformer.dynamics.roe import oe_to_roe, psi_matrix, qns_offset_to_roe
+from scpformer.dynamics.truth import propagate_relative
+from scpformer.dynamics.uncertainty import GatesModel, NavigationModel, ProcessNoise, burn_frame
+from scpformer.problems.rendezvous.constraints import cone_slack, keep_out_slack
+from scpformer.problems.rendezvous.linear_model import linear_model
+from scpformer.problems.rendezvous.scenario import TargetOrbit
+from scpformer.problems.rendezvous.verification import osculating_initial_state
+from scpformer.rendezvous import (
+    RendezvousInstance,
+    RendezvousSolverConfig,
+    VerificationTolerances,
+    solve,
+)
+from scpformer.scp.solution import Solution, Status, Trajectory
+from scpformer.scp.warmstart import GivenWarmStart
+from scpformer.validation import check_bool, check_int, check_positive
+
+#: Warm starts of a re-plan that the loop implements.
+WARMSTARTS = ("cold", "previous")
+#: Warm starts of the closed-loop issue that are not implemented, and why.
+UNSUPPORTED = {
+    "art": (
+        "the shipped ART model cannot start mid-horizon: generation "
+        "(scpformer.warmstart.art.generate) always begins at time step 0 with a fresh context, "
+        "its tokens are normalized per time step and it has a learned time-step embedding, and "
+        "it was trained on N = 100 impulses from t_0 over 1-3 orbits; a remaining problem of "
+        "N - k impulses from node k would be fed as if it started at t_0 (out of distribution)"
+    ),
+    "best": "needs the learned ART start (see 'art'), which cannot start mid-horizon",
+}
+#: Accuracy of the mean elements of a navigation fix: samples per orbit of the averaging and
+#: RK4 steps per sample (those of :func:`osculating_to_mean_qns`, ~2 mm in the ROE).
+MEAN_SAMPLES, MEAN_SUBSTEPS = 48, 12
+#: Burns of the default open-loop plan after its last re-plan node: at the waypoint node
+#: N_wp and the final one at N - 1 (measured: nodes 90 and 99 of its 7 burns).
+TAIL_BURNS = 2
+
+
+def check_warmstart(name: Any) -> str:
+    """``name`` when it is a warm start of :data:`WARMSTARTS`; ``ValueError`` otherwise
+    (naming why an unimplemented one of the issue is missing)."""
+    if name in UNSUPPORTED:
+        raise ValueError(f"warmstart {name!r} is not available: {UNSUPPORTED[name]}")
+    if name not in WARMSTARTS:
+        raise ValueError(f"warmstart must be one of {', '.join(WARMSTARTS)}, got {name!r}")
+    return str(name)
+
+
+# ======================================================================================
+# configuration
+# ======================================================================================
+@dataclass(frozen=True, kw_only=True)
+class ErrorModels:
+    """The errors the closed loop flies with (robust ART paper, Section 4, Table 2).
+
+    A ``None`` model means no error of that kind; :meth:`none` turns every error off (the loop
+    then reproduces the open-loop plan up to the model error it corrects).
+
+    Attributes
+    ----------
+    navigation
+        Error of each navigation fix in scaled mean ROE, ``N(0, X_nav(rho))`` with
+        ``X_nav = rho^2 diag(s(rho))^2`` (Eqs. 10-11; ~0.3 m along-track at the 74-104 m
+        ranges of the final approach with Table 2's ``s_2``).
+    actuation
+        Gates execution error of every impulse (Eqs. 12-13; 0.3 mm/s fixed per axis).
+    process_noise
+        ``N(0, Q_roe)`` added to the true state at every node (Table 2: 1 mm per element).
+    """
+
+    navigation: NavigationModel | None = field(default_factory=NavigationModel)
+    actuation: GatesModel | None = field(default_factory=GatesModel)
+    process_noise: ProcessNoise | None = field(default_factory=ProcessNoise)
+
+    def __post_init__(self) -> None:
+        for name, cls in (
+            ("navigation", NavigationModel),
+            ("actuation", GatesModel),
+            ("process_noise", ProcessNoise),
+        ):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, cls):
+                raise ValueError(f"errors.{name} must be a {cls.__name__} or None, "
+                                 f"got {type(value).__name__}")  # fmt: skip
+
+    @classmethod
+    def none(cls) -> ErrorModels:
+        """No navigation, actuation or process error."""
+        return cls(navigation=None, actuation=None, process_noise=None)
+
+
+def navigation_position_sigma(nav: NavigationModel, rho: float) -> float:
+    """1-sigma RTN position error [m] of a navigation fix at range ``rho`` [m] (Eqs. 9-11).
+
+    The per-element ROE sigmas ``rho s(rho)`` mapped to position by the near-circular
+    ``Psi`` (D'Amico 2010): ``dr_R = a da - a dex cos u - a dey sin u``, ``dr_T = a dlambda +
+    2 (a dex sin u - a dey cos u)``, ``dr_N = a dix sin u - a diy cos u``, averaged over the
+    argument of latitude ``u``; returns ``sqrt(var_R + var_T + var_N)``.
+    """
+    sig = rho * np.asarray(nav.scale(rho), dtype=float)
+    var_r = sig[0] ** 2 + 0.5 * (sig[2] ** 2 + sig[3] ** 2)
+    var_t = sig[1] ** 2 + 2.0 * (sig[2] ** 2 + sig[3] ** 2)
+    var_n = 0.5 * (sig[4] ** 2 + sig[5] ** 2)
+    return float(math.sqrt(var_r + var_t + var_n))
+
+
+@dataclass(frozen=True, kw_only=True)
+class DockingTolerance:
+    """Success thresholds of a flown rendezvous (not in the papers; derived in :meth:`derive`).
+
+    Attributes
+    ----------
+    position_m
+        Largest miss ``|r(t_N) - dr_dp|`` of the true final state [m].
+    velocity_m_s
+        Largest ``|v(t_N)|`` of the true final state [m/s].
+    keep_out
+        Largest ``1 - |E_koz dr|`` along the true flown trajectory up to the waypoint (dense)
+        [-]; the verification's threshold of a nominal replay
+        (``VerificationTolerances.keep_out``, 0.02: 1.2-2.6 m at the semi-axes 60-123 m).
+    cone_m
+        Largest approach-cone violation ``|d| cos gamma - n.d`` from the waypoint on (dense)
+        [m]; the verification's ``cone_m`` (0.5 m).
+    """
+
+    position_m: float = 2.63  # derive() of the default instance and errors, rounded [m]
+    velocity_m_s: float = 3.55e-3  # same [m/s]
+    keep_out: float = 0.02
+    cone_m: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("position_m", "velocity_m_s", "keep_out", "cone_m"):
+            value = float(getattr(self, name))
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"tolerance.{name} must be a positive number, got {value}")
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def derive(
+        cls,
+        instance: RendezvousInstance,
+        errors: ErrorModels | None = None,
+        verification: VerificationTolerances | None = None,
+        tail_burns: int = TAIL_BURNS,
+    ) -> DockingTolerance:
+        """The tolerance of a closed-loop docking, from the approach geometry and the errors.
+
+        The last re-plan is at ``N - waypoint_offset - 2`` (:func:`replan_nodes`), just before
+        the waypoint ``dr_wp`` (104 m from the target, Table 1); the last
+        ``waypoint_offset + 2`` intervals (hold at the waypoint, final approach in the cone)
+        are flown open loop on that plan. Every term below is one source's error at ``t_N``:
+
+        * the plan's own model error: the verification's ``terminal_position_m`` (2 m) and
+          ``terminal_velocity_m_s`` (2 mm/s) of a nominal replay (measured maxima 0.68 m and
+          0.46 mm/s on 100 plans);
+        * the last navigation fix, taken at about the waypoint's range ``rho = |dr_wp|``:
+          3-sigma RTN position error (Eqs. 10-11, Table 2 ``s_2``: 0.57 m 1-sigma at 104 m,
+          :func:`navigation_position_sigma`) and its velocity counterpart ``n x`` that, at the
+          target's mean motion ``n``;
+        * the execution errors of the burns of the open-loop tail (``tail_burns``: 2, the
+          default plan's burns at the waypoint node and at ``N - 1``), each persisting to
+          ``t_N`` as a velocity error: 3-sigma of Eq. 12's fixed terms,
+          ``sqrt(sigma_r^2 + 2 sigma_a^2)`` = 0.52 mm/s 1-sigma in 3-D.
+
+        Position: ``sqrt(2^2 + (3 x 0.57)^2) = 2.63 m``, capped by the radius of the approach
+        cone's cross-section at the docking port, ``setback tan(gamma_ac) = 5 tan 30 deg =
+        2.89 m`` (Table 1 geometry: a larger lateral miss leaves the cone the approach is
+        constrained to). Velocity: ``sqrt(2^2 + 2 (3 x 0.52)^2 + (3 n 0.57)^2)`` = 3.55 mm/s
+        (``3 n 0.57 m`` = 1.93 mm/s).
+        Path constraints: the verification's keep-out and cone thresholds.
+        """
+        errors = errors or ErrorModels()
+        tol = verification or VerificationTolerances()
+        check_int("tail_burns", tail_burns, least=0)
+        sc = instance.scenario
+        rho = float(np.linalg.norm(sc.waypoint_m))
+        sigma_pos = navigation_position_sigma(errors.navigation, rho) if errors.navigation else 0.0
+        position = math.hypot(tol.terminal_position_m, 3.0 * sigma_pos)
+        cone_radius = sc.cone_vertex_setback_m * math.tan(math.radians(sc.cone_half_angle_deg))
+        if cone_radius > 0.0:
+            position = min(position, max(cone_radius, tol.terminal_position_m))
+        n_mean = 2.0 * math.pi / instance.target.period_s
+        act = errors.actuation
+        sigma_act = math.sqrt(act.sigma_r**2 + 2.0 * act.sigma_a**2) if act else 0.0
+        velocity = math.sqrt(
+            tol.terminal_velocity_m_s**2 + tail_burns * (3.0 * sigma_act) ** 2
+            + (3.0 * n_mean * sigma_pos) ** 2
+        )  # fmt: skip
+        return cls(position_m=position, velocity_m_s=velocity, keep_out=tol.keep_out,
+                   cone_m=tol.cone_m)  # fmt: skip
+
+
+@dataclass(frozen=True, kw_only=True)
+class MPCConfig:
+    """How the closed loop re-plans and what it flies through.
+
+    Attributes
+    ----------
+    replan_every
+        ``K``, impulses flown between re-plans (>= 1); re-plans happen at nodes
+        ``K, 2K, ...`` and at the last node that still poses the problem
+        (:func:`replan_nodes`). Default 10 (the waypoint offset of Table 1): 9 re-plans over
+        the N = 100 impulses, at nodes 10, 20, ..., 80 and 88.
+    warmstart
+        Warm start of every re-plan, one of :data:`WARMSTARTS`.
+    compare
+        Other warm starts solved on the same re-plan instances for comparison only (their
+        plans are not flown): per re-plan cost, iterations and wall time of each.
+    solver
+        The family's SCP and verification constants (default: ART paper Table 1).
+    errors
+        Navigation, actuation and process errors (default: robust ART paper Table 2).
+    tolerance
+        Success thresholds; ``None`` derives them (:meth:`DockingTolerance.derive`).
+    samples_per_interval
+        Truth outputs per interval for the dense constraint check of the flown trajectory
+        (default 10: every ~11 s on the default 2-orbit, 100-impulse instance).
+    burn_threshold_m_s
+        Impulses of at least this norm are burns and executed with a Gates error; smaller
+        ones are applied as planned (default 1e-6 m/s). A plan's impulses are either burns
+        (mm/s to cm/s) or conic round-off (the default instance's plan: 7 burns of 5-63 mm/s,
+        93 impulses below 3e-9 m/s); no thruster fires for the latter, and Eq. 12's fixed
+        terms (0.3 mm/s) would otherwise add a burn error at every node.
+    accept_max_iterations
+        Accept a re-plan that reached the iteration limit when its verification passes
+        (default True): every SCP iterate of this family satisfies Problem 3 in the model
+        (the keep-out cut is conservative, Eqs. 15-16) and the best one is returned.
+    """
+
+    replan_every: int = 10
+    warmstart: str = "cold"
+    compare: tuple[str, ...] = ()
+    solver: RendezvousSolverConfig = field(default_factory=RendezvousSolverConfig)
+    errors: ErrorModels = field(default_factory=ErrorModels)
+    tolerance: DockingTolerance | None = None
+    samples_per_interval: int = 10
+    accept_max_iterations: bool = True
+    burn_threshold_m_s: float = 1e-6
+
+    def __post_init__(self) -> None:
+        check_int("replan_every", self.replan_every, least=1)
+        check_warmstart(self.warmstart)
+        compare = tuple(self.compare)
+        for name in compare:
+            check_warmstart(name)
+        object.__setattr__(self, "compare", tuple(n for n in compare if n != self.warmstart))
+        if not isinstance(self.solver, RendezvousSolverConfig):
+            raise ValueError(f"solver must be a RendezvousSolverConfig, got "
+                             f"{type(self.solver).__name__}")  # fmt: skip
+        if not isinstance(self.errors, ErrorModels):
+            raise ValueError(f"errors must be an ErrorModels, got {type(self.errors).__name__}")
+        if self.tolerance is not None and not isinstance(self.tolerance, DockingTolerance):
+            raise ValueError(f"tolerance must be a DockingTolerance or None, got "
+                             f"{type(self.tolerance).__name__}")  # fmt: skip
+        check_int("samples_per_interval", self.samples_per_interval, least=1)
+        check_bool("accept_max_iterations", self.accept_max_iterations)
+        check_positive("burn_threshold_m_s", self.burn_threshold_m_s)
+
+
+# ======================================================================================
+# results
+# ======================================================================================
+@dataclass(frozen=True)
+class ReplanRecord:
+    """One re-plan (or one comparison solve of the same re-plan instance)."""
+
+    node: int  # node k it starts from
+    warmstart: str
+    accepted: bool  # a verified trajectory: flown from here on (for the flown warm start)
+    status: str  # Solution.status, or "invalid_instance" when the estimate poses none
+    cost: float  # sum |dv| of the plan [m/s] (nan without one)
+    iterations: int
+    wall_s: float  # wall time of the solve, warm start and verification included [s]
+    message: str
+
+
+@dataclass(frozen=True)
+class ClosedLoopResult:
+    """A flown rendezvous.
+
+    ``t`` (M,) and ``rtn`` (M, 6): the true relative state [m, m/s] every
+    ``1 / samples_per_interval`` of an interval, node ``k`` at index ``k * m`` (pre-impulse),
+    the final state last. ``dv_planned`` and ``dv_applied`` (N, 3) [m/s]: commanded and
+    executed impulses (RTN of the servicer). ``estimates`` (R, 6) [m]: the navigation
+    estimates of the re-plans (mean scaled ROE), ``truth_roe`` (R, 6) the true mean ROE.
+    """
+
+    instance: RendezvousInstance
+    config: MPCConfig
+    tolerance: DockingTolerance
+    open_loop: Solution
+    t: np.ndarray
+    rtn: np.ndarray
+    dv_planned: np.ndarray
+    dv_applied: np.ndarray
+    replans: list[ReplanRecord]
+    comparisons: list[ReplanRecord]
+    estimates: np.ndarray
+    truth_roe: np.ndarray
+    samples_per_interval: int
+
+    @property
+    def n_nodes(self) -> int:
+        return self.dv_planned.shape[0]
+
+    @property
+    def terminal_position_error(self) -> float:
+        """``|r(t_N) - dr_dp|`` of the true final state [m]."""
+        dock = np.asarray(self.instance.scenario.dock_port_m)
+        return float(np.linalg.norm(self.rtn[-1, :3] - dock))
+
+    @property
+    def terminal_velocity_error(self) -> float:
+        """``|v(t_N)|`` of the true final state [m/s]."""
+        return float(np.linalg.norm(self.rtn[-1, 3:]))
+
+    @property
+    def fuel(self) -> float:
+        """Executed delta-v ``sum |dv_applied|`` [m/s]."""
+        return float(np.linalg.norm(self.dv_applied, axis=1).sum())
+
+    @property
+    def open_loop_fuel(self) -> float:
+        """Cost of the open-loop plan ``sum |dv|`` [m/s]."""
+        return float(self.open_loop.cost)
+
+    def path_violations(self) -> dict[str, Any]:
+        """Dense keep-out (nodes 0 .. N_wp) and cone (N_wp .. N) check of the flown states.
+
+        The windows are the verification's. Returns the worst keep-out ``1 - |E_koz dr|``
+        [-], the worst cone violation [m] (both clipped at 0) and ``count``: samples beyond
+        the tolerance.
+        """
+        sc, m = self.instance.scenario, self.samples_per_interval
+        kw, n = sc.n_waypoint, sc.n_nodes
+        koz = -keep_out_slack(self.rtn[: kw * m + 1], sc)
+        cone = -cone_slack(self.rtn[kw * m : n * m], sc)
+        count = int((koz > self.tolerance.keep_out).sum() + (cone > self.tolerance.cone_m).sum())
+        return {
+            "keep_out": float(max(0.0, koz.max())),
+            "cone_m": float(max(0.0, cone.max())) if cone.size else 0.0,
+            "count": count,
+        }
+
+    @property
+    def success(self) -> bool:
+        """Terminal tolerance met and no constraint violated along the flown trajectory."""
+        tol = self.tolerance
+        return (
+            self.terminal_position_error <= tol.position_m
+            and self.terminal_velocity_error <= tol.velocity_m_s
+            and self.path_violations()["count"] == 0
+        )
+
+    @property
+    def replan_period_s(self) -> float:
+        """Time between re-plans ``K dt`` [s]."""
+        t_nodes = self.t[:: self.samples_per_interval]
+        return float(self.config.replan_every * (t_nodes[1] - t_nodes[0]))
+
+    def summary(self) -> dict[str, Any]:
+        """The row of ``runs.csv`` (without the run number)."""
+        times = np.array([r.wall_s for r in self.replans])
+        iters = np.array([r.iterations for r in self.replans])
+        violations = self.path_violations()
+        return {
+            "warmstart": self.config.warmstart,
+            "success": self.success,
+            "terminal_position_error": self.terminal_position_error,
+            "terminal_velocity_error": self.terminal_velocity_error,
+            "fuel": self.fuel,
+            "open_loop_fuel": self.open_loop_fuel,
+            "replans": len(self.replans),
+            "replans_failed": sum(not r.accepted for r in self.replans),
+            "replan_time_median_s": float(np.median(times)) if times.size else math.nan,
+            "replan_time_p99_s": float(np.percentile(times, 99)) if times.size else math.nan,
+            "replan_period_s": self.replan_period_s,
+            "replan_iterations_median": float(np.median(iters)) if iters.size else math.nan,
+            "violations": violations["count"],
+            "keep_out_violation": violations["keep_out"],
+            "cone_violation_m": violations["cone_m"],
+        }
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Arrays of ``run-NNNN.npz``: flown states, impulses, re-plans and comparisons."""
+
+        def table(records: list[ReplanRecord]) -> dict[str, np.ndarray]:
+            return {
+                "node": np.array([r.node for r in records], dtype=int),
+                "warmstart": np.array([r.warmstart for r in records], dtype=str),
+                "accepted": np.array([r.accepted for r in records], dtype=bool),
+                "status": np.array([r.status for r in records], dtype=str),
+                "cost": np.array([r.cost for r in records], dtype=float),
+                "iterations": np.array([r.iterations for r in records], dtype=int),
+                "wall_s": np.array([r.wall_s for r in records], dtype=float),
+            }
+
+        out = {
+            "t": self.t, "rtn": self.rtn, "dv_planned": self.dv_planned,
+            "dv_applied": self.dv_applied, "estimates": self.estimates,
+            "truth_roe": self.truth_roe, "open_loop_x": self.open_loop.trajectory.x,
+            "open_loop_u": self.open_loop.trajectory.u, "open_loop_t": self.open_loop.t,
+            "open_loop_rtn": linear_model(self.instance).rtn(self.open_loop.trajectory.x),
+            "samples_per_interval": np.array(self.samples_per_interval),
+        }  # fmt: skip
+        out.update({f"replan_{k}": v for k, v in table(self.replans).items()})
+        out.update({f"compare_{k}": v for k, v in table(self.comparisons).items()})
+        return out
+
+
+# ======================================================================================
+# the pieces of the loop
+# ======================================================================================
+def mean_state(
+    x_chief: np.ndarray, x_deputy: np.ndarray, j2: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean classical elements of the target (6,) and mean scaled ROE [m] (6,) of the servicer
+    from their osculating ECI states (6,) each.
+
+    With J2 both are averaged over their own draconitic period
+    (:func:`~scpformer.dynamics.mean_elements.osculating_to_mean_qns`), the definition of the
+    mean elements that the verification's consistent initial state inverts; without J2 mean
+    and osculating coincide.
+    """
+    x = np.stack([x_chief, x_deputy])
+    oe = eci_to_oe(x[:, :3], x[:, 3:])
+    if not j2:
+        return oe[0], oe_to_roe(oe[0], oe[1]) * oe[0, 0]
+    rates = j2_secular_rates(oe)
+    periods = 2.0 * math.pi / (rates[1] + rates[2])
+    m = osculating_to_mean_qns(x, periods, MEAN_SAMPLES, MEAN_SUBSTEPS)
+    roe = qns_offset_to_roe(m[0], qns_difference(m[1], m[0])) * m[0, 0]
+    return qns_to_oe(m[0]), roe
+
+
+def remaining_instance(
+    instance: RendezvousInstance, k: int, roe_m: np.ndarray, target_oe: np.ndarray
+) -> RendezvousInstance:
+    """Problem 3 from node ``k``: ``N - k`` impulses of the same time step to ``t_N``.
+
+    ``roe_m`` (6,) is the initial mean scaled ROE [m] and ``target_oe`` (6,) the target's mean
+    classical elements (radians) at ``t_k``. The waypoint stays ``waypoint_offset`` intervals
+    before docking, i.e. at the same node ``N_wp``; the scenario's horizon range is widened to
+    the remaining horizon.
+
+    Raises
+    ------
+    ValueError
+        When fewer than ``waypoint_offset + 2`` intervals remain, or the instance is invalid
+        (e.g. the estimated initial position lies inside the keep-out zone).
+    """
+    sc = instance.scenario
+    n_rem = sc.n_nodes - k
+    if n_rem < sc.waypoint_offset + 2:
+        raise ValueError(
+            f"node {k}: {n_rem} intervals remain, the problem needs waypoint_offset + 2 = "
+            f"{sc.waypoint_offset + 2}"
+        )
+    deg = np.degrees(target_oe[2:])
+    target = TargetOrbit(a_m=float(target_oe[0]), e=float(target_oe[1]), i_deg=float(deg[0]),
+                         raan_deg=float(deg[1]), argp_deg=float(deg[2]),
+                         M_deg=float(deg[3]))  # fmt: skip
+    dt = instance.horizon_s / sc.n_nodes
+    horizon = n_rem * dt / target.period_s
+    lo, hi = sc.horizon_range_orbits
+    scenario = replace(sc, n_nodes=n_rem, horizon_range_orbits=(min(lo, horizon), max(hi, horizon)))
+    return RendezvousInstance(roe0_m=tuple(float(v) for v in roe_m), horizon_orbits=horizon,
+                              target=target, scenario=scenario)  # fmt: skip
+
+
+def replan_nodes(n_nodes: int, waypoint_offset: int, replan_every: int) -> list[int]:
+    """Nodes of the re-plans: ``K, 2K, ...`` up to the last node that still poses the
+    family's problem, ``N - waypoint_offset - 2``, which is added when any re-plan happens.
+
+    Node 0 flies the open-loop plan, solved from the instance's own (true, known) initial
+    state. ``K >= N - waypoint_offset - 1`` gives no re-plan: the open-loop plan is flown.
+    """
+    last = n_nodes - waypoint_offset - 2
+    nodes = list(range(replan_every, last + 1, replan_every))
+    if nodes and nodes[-1] != last:
+        nodes.append(last)
+    return nodes
+
+
+def shifted_plan(plan: Solution, shift: int) -> GivenWarmStart:
+    """The plan's states and impulses from its node ``shift`` on: the warm start ``previous``."""
+    x, u = plan.trajectory.x[shift:], plan.trajectory.u[shift:]
+    return GivenWarmStart(Trajectory(x=np.array(x), u=np.array(u), p=np.zeros(0)), "previous")
+
+
+def _accepted(sol: Solution, accept_max_iterations: bool) -> bool:
+    if sol.trajectory is None or sol.verification is None or not sol.verification.passed:
+        return False
+    ok = (Status.CONVERGED, Status.MAX_ITERATIONS) if accept_max_iterations else (
+        Status.CONVERGED,)  # fmt: skip
+    return sol.status in ok
+
+
+def _replan(
+    sub: RendezvousInstance | None, error: str, k: int, name: str, previous: Solution,
+    shift: int, cfg: MPCConfig,
+) -> tuple[ReplanRecord, Solution | None]:  # fmt: skip
+    if sub is None:
+        return ReplanRecord(k, name, False, "invalid_instance", math.nan, 0, 0.0, error), None
+    warm = shifted_plan(previous, shift) if name == "previous" else None
+    start = time.perf_counter()
+    sol = solve(sub, cfg.solver, warmstart=warm)
+    wall = time.perf_counter() - start
+    ok = _accepted(sol, cfg.accept_max_iterations)
+    record = ReplanRecord(k, name, ok, sol.status.value, float(sol.cost), sol.iterations, wall,
+                          sol.message)  # fmt: skip
+    return record, sol
+
+
+def open_loop_plan(instance: RendezvousInstance, config: MPCConfig | None = None) -> Solution:
+    """The open-loop plan: Problem 3 of the nominal instance from the family's default start.
+
+    Raises
+    ------
+    ValueError
+        When it fails (no verified trajectory): there is nothing to fly.
+    """
+    cfg = config or MPCConfig()
+    sol = solve(instance, cfg.solver)
+    if not _accepted(sol, cfg.accept_max_iterations):
+        raise ValueError(f"the open-loop plan failed ({sol.status.value}): {sol.message}")
+    return sol
+
+
+def fly(
+    instance: RendezvousInstance,
+    config: MPCConfig | None = None,
+    *,
+    seed: int = 0,
+    open_loop: Solution | None = None,
+) -> ClosedLoopResult:
+    """Fly ``instance`` in closed loop (see the module docstring).
+
+    Parameters
+    ----------
+    instance
+        The rendezvous; its nominal initial state is the truth's (consistent osculating
+        state, :func:`osculating_initial_state`).
+    config
+        Re-planning period, warm start, errors, tolerance.
+    seed
+        Seed of the error draws. The draws are standard normal numbers drawn up front per
+        node (navigation 6, actuation 3, process 6), so two warm starts flown with the same
+        seed see the same errors (common random numbers).
+    open_loop
+        The open-loop plan (:func:`open_loop_plan`), solved when not given.
+    """
+    cfg = config or MPCConfig()
+    check_int("seed", seed, least=0)
+    if not isinstance(instance, RendezvousInstance):
+        raise ValueError(f"instance must be a RendezvousInstance, got {type(instance).__name__}")
+    open_loop = open_loop or open_loop_plan(instance, cfg)
+    sc, errors, m = instance.scenario, cfg.errors, cfg.samples_per_interval
+    n = sc.n_nodes
+    t_nodes = instance.times()
+    model = linear_model(instance)  # mean target elements and Psi at the nodes (process noise)
+    rng = np.random.default_rng(seed)
+    z_nav, z_act, z_proc = (rng.standard_normal((n, d)) for d in (6, 3, 6))
+    chol_q = np.linalg.cholesky(errors.process_noise.matrix) if errors.process_noise else None
+
+    oe_c, rtn = osculating_initial_state(instance)
+    plan, plan_start = open_loop, 0
+    schedule = replan_nodes(n, sc.waypoint_offset, cfg.replan_every)
+    t_out, rtn_out = [], []
+    dv_planned, dv_applied = np.zeros((n, 3)), np.zeros((n, 3))
+    replans: list[ReplanRecord] = []
+    comparisons: list[ReplanRecord] = []
+    estimates, truths = [], []
+    for k in range(n):
+        if chol_q is not None:  # process noise at every node (Table 2), first order via Psi
+            rtn = rtn + model.Psi[k] @ (chol_q @ z_proc[k])
+        if k in schedule:
+            r_c, v_c = _chief_eci(oe_c)
+            r_d, v_d = rtn_to_eci(r_c, v_c, rtn)
+            target_oe, roe = mean_state(np.r_[r_c, v_c], np.r_[r_d, v_d], sc.j2)
+            estimate = roe.copy()
+            if errors.navigation is not None:
+                rho = float(np.linalg.norm((psi_matrix(target_oe) @ roe)[:3]))
+                estimate = roe + rho * errors.navigation.scale(rho) * z_nav[k]
+            truths.append(roe)
+            estimates.append(estimate)
+            try:
+                sub, error = remaining_instance(instance, k, estimate, target_oe), ""
+            except ValueError as err:
+                sub, error = None, str(err)
+            record, sol = _replan(sub, error, k, cfg.warmstart, plan, k - plan_start, cfg)
+            replans.append(record)
+            for other in cfg.compare:
+                comparisons.append(_replan(sub, error, k, other, plan, k - plan_start, cfg)[0])
+            if record.accepted and sol is not None:
+                plan, plan_start = sol, k
+        dv = np.asarray(plan.trajectory.u[k - plan_start], dtype=float)
+        dv_planned[k] = dv
+        dv_exec = dv.copy()
+        if errors.actuation is not None and np.linalg.norm(dv) >= cfg.burn_threshold_m_s:
+            dv_exec = dv + burn_frame(dv) @ (_gates_sd(errors.actuation, dv) * z_act[k])
+        dv_applied[k] = dv_exec
+        dt = t_nodes[k + 1] - t_nodes[k]
+        times = t_nodes[k] + dt * np.arange(m + 1) / m
+        res = propagate_relative(oe_c, rtn, [t_nodes[k]], dv_exec[None], t_out=times, j2=sc.j2)
+        t_out.append(times[:-1])
+        rtn_out.append(res.rtn[:-1])
+        rtn = np.array(res.rtn[-1])
+        oe_c = eci_to_oe(res.x_chief[-1, :3], res.x_chief[-1, 3:])
+    t_out.append(t_nodes[-1:])
+    rtn_out.append(rtn[None])
+    tolerance = cfg.tolerance or DockingTolerance.derive(instance, errors, cfg.solver.verification)
+    return ClosedLoopResult(
+        instance=instance, config=cfg, tolerance=tolerance, open_loop=open_loop,
+        t=np.concatenate(t_out), rtn=np.concatenate(rtn_out), dv_planned=dv_planned,
+        dv_applied=dv_applied, replans=replans, comparisons=comparisons,
+        estimates=np.array(estimates).reshape(-1, 6), truth_roe=np.array(truths).reshape(-1, 6),
+        samples_per_interval=m,
+    )  # fmt: skip
+
+
+def _chief_eci(oe_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r, v = oe_to_eci(oe_c)
+    return np.asarray(r), np.asarray(v)
+
+
+def _gates_sd(model: GatesModel, dv: np.ndarray) -> np.ndarray:
+    """Burn-frame standard deviations (magnitude, two pointing) of Eq. 12 [m/s], (3,)."""
+    dv2 = float(dv @ dv)
+    par = math.sqrt(model.sigma_r**2 + dv2 * model.sigma_s**2)
+    perp = math.sqrt(model.sigma_a**2 + dv2 * model.sigma_p**2)
+    return np.array([par, perp, perp])
