@@ -77,6 +77,10 @@ COMMANDS: dict[tuple[str, str], tuple[str, str]] = {
         "export a run's networks to ONNX and check them against PyTorch",
         "scpformer.cli.export:add_export_parser",
     ),
+    ("", "simulate"): (
+        "fly a problem family in closed loop (model predictive control) through its truth model",
+        "scpformer.cli.parsers.simulate:add_simulate_parser",
+    ),
 }
 
 

@@ -1,0 +1,76 @@
+"""Flags of ``scpformer simulate rendezvous`` (handler: :mod:`scpformer.cli.simulate`).
+
+Built without importing the library: the choices are spelled here and checked against
+:mod:`scpformer.guidance` by the tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from scpformer.cli.argtypes import count, positive
+from scpformer.cli.commands import command_help, lazy_handler
+from scpformer.cli.dataclass_args import with_default
+
+WARMSTARTS = ("cold", "previous")  # scpformer.guidance.WARMSTARTS
+INSTANCES = ("default", "sampled")  # scpformer.guidance.campaign.INSTANCES
+ERRORS = ("table2", "none")
+
+
+def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
+    """Register ``simulate rendezvous`` on the top-level subparsers."""
+    simulate = commands.add_parser("simulate", help=command_help("", "simulate"))
+    families = simulate.add_subparsers(dest="family", required=True, metavar="FAMILY")
+    parser = families.add_parser(
+        "rendezvous",
+        help="shrinking-horizon MPC of the ISS rendezvous through the two-body + J2 truth",
+        description=(
+            "Fly the rendezvous in closed loop: re-plan Problem 3 every K impulses from a "
+            "navigation estimate and apply the plan through the truth model with navigation, "
+            "actuation and process errors (robust ART paper, Table 2). Writes DIR/runs.csv "
+            "(one row per run; a rerun resumes), DIR/run-NNNN.npz and DIR/simulate.png."
+        ),
+    )
+    parser.add_argument(
+        "--warmstart",
+        choices=WARMSTARTS,
+        default="cold",
+        help=with_default(
+            "warm start of each re-plan: cold (the convex Problem 2) or previous (the last "
+            "accepted plan shifted in time); the learned ART start cannot start mid-horizon",
+            "cold",
+        ),
+    )
+    parser.add_argument(
+        "--compare",
+        choices=WARMSTARTS,
+        default=None,
+        help="also solve each re-plan with this warm start, for comparison only (not flown)",
+    )
+    parser.add_argument("--replan-every", type=positive, default=10, metavar="K",
+                        help=with_default("impulses flown between re-plans", 10))  # fmt: skip
+    parser.add_argument("--runs", type=positive, default=20, metavar="N",
+                        help=with_default("number of runs", 20))  # fmt: skip
+    parser.add_argument("--seed", type=count, default=0, metavar="S",
+                        help=with_default("seed of the errors (and sampled instances)", 0))  # fmt: skip
+    parser.add_argument(
+        "--instances",
+        choices=INSTANCES,
+        default="default",
+        help=with_default(
+            "default: every run flies the Table 1 default instance; sampled: one sampled "
+            "Table 1 instance per run",
+            "default",
+        ),
+    )
+    parser.add_argument(
+        "--errors",
+        choices=ERRORS,
+        default="table2",
+        help=with_default("navigation, actuation and process errors: table2 or none", "table2"),
+    )
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    parser.add_argument("--no-figure", action="store_true", help="do not draw DIR/simulate.png")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(handler=lazy_handler("scpformer.cli.simulate:run_simulate"))
