@@ -1,4 +1,12 @@
-"""scpformer: sequential convex programming for spacecraft, with learned warm starts."""
+"""scpformer: sequential convex programming for spacecraft, with learned warm starts.
+
+Each problem family is one module (:data:`FAMILIES`) with one entry point,
+``solve(instance, config=None, *, method=..., warmstart=None, verify=True)``: the same
+signature in every family (``scpformer.pdg6dof``, ``scpformer.rendezvous``,
+``scpformer.robust_rendezvous``), only the default ``method`` differs. Importing a family
+module registers the learned warm starts (:mod:`scpformer.warmstart`), so that their names
+resolve.
+"""
 
 from __future__ import annotations
 

@@ -1,10 +1,6 @@
 """The chance-constrained, passively safe rendezvous in LEO (robust ART paper):
-one entry point, :func:`solve`.
-
-``solve(instance, config=None, *, method="three_stage", warmstart=None, verify=True)``, the
-same signature in every family (``scpformer.pdg6dof``, ``scpformer.rendezvous``,
-``scpformer.robust_rendezvous``). Importing this module registers the learned warm starts
-(:mod:`scpformer.warmstart`), so that their names resolve.
+one entry point, :func:`solve` (``method="three_stage"`` by default), as in every family
+(see :mod:`scpformer`).
 """
 
 from __future__ import annotations
