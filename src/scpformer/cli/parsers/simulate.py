@@ -52,8 +52,13 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
                         help=with_default("impulses flown between re-plans", 10))  # fmt: skip
     parser.add_argument("--runs", type=positive, default=20, metavar="N",
                         help=with_default("number of runs", 20))  # fmt: skip
-    parser.add_argument("--seed", type=count, default=0, metavar="S",
-                        help=with_default("seed of the errors (and sampled instances)", 0))  # fmt: skip
+    parser.add_argument(
+        "--seed",
+        type=count,
+        default=0,
+        metavar="S",
+        help=with_default("seed of the errors (and sampled instances)", 0),
+    )
     parser.add_argument(
         "--instances",
         choices=INSTANCES,
