@@ -49,7 +49,6 @@ SOURCES: dict[str, str] = {
     "robust.target": "scpformer.problems.robust_rendezvous.scenario:robust_target",
     "robust.ranges": "scpformer.problems.robust_rendezvous.instance:RobustSampleRanges",
     "train": "scpformer.train.config:TrainConfig",
-    "train.small": "scpformer.train.config:TRAIN_PRESETS['small']",
 }
 
 #: snapshot name -> ``"module:expression"`` of a named value the parsers need (choices and
