@@ -126,13 +126,14 @@ class PDGProblem:
         cheap = self.least_change(z, evaluation, candidate, candidate_evaluation, eta, lambda_)
         if cheap is not None:
             return cheap
-        return self.conic_correction(candidate, candidate_evaluation, eta, lambda_, solver)
+        return self.conic_correction(z, candidate, candidate_evaluation, eta, lambda_, solver)
 
     def conic_correction(
-        self, candidate: Candidate, ev: Evaluation, eta: float, lambda_: float, solver: str
-    ) -> Candidate:
-        """The subproblem about the iterate of the candidate's solve, its affine term shifted
-        by the defects of the candidate (whose evaluation is ``ev``)."""
+        self, z: Trajectory, candidate: Candidate, ev: Evaluation, eta: float, lambda_: float,
+        solver: str,
+    ) -> Candidate:  # fmt: skip
+        """The subproblem about ``z``, the iterate of the candidate's solve, its affine term
+        shifted by the defects of the candidate (whose evaluation is ``ev``)."""
         disc = ev.linearization
         assert isinstance(disc, FOHDiscretization) and candidate.trajectory is not None
         self.subproblem.shift_affine_term(disc.defects(candidate.trajectory.x))

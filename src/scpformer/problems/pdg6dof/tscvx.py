@@ -356,27 +356,23 @@ class TscvxProblem(PDGProblem):
         self.subproblem.set_linearization(evaluation.linearization, z.x, z.u, float(z.p[0]))
         return self._reduced(z, eta, lambda_, solver)
 
-    def solve_correction(
-        self,
-        z: Trajectory,
-        evaluation: Evaluation,
-        candidate: Candidate,
-        candidate_evaluation: Evaluation,
-        eta: float,
-        lambda_: float,
-        solver: str,
-    ) -> Candidate:
-        cheap = self.least_change(z, evaluation, candidate, candidate_evaluation, eta, lambda_)
+    def least_change(self, *args: Any) -> Candidate | None:
+        """:meth:`PDGProblem.least_change`, logged when it alone corrects the candidate."""
+        cheap = super().least_change(*args)
         if cheap is not None:  # no conic solve: logged with the rows of the last one
             self._log_solve(LEAST_CHANGE, self.log.rows_kept[-1], 0, 0)
-            return cheap
+        return cheap
+
+    def conic_correction(
+        self, z: Trajectory, candidate: Candidate, ev: Evaluation, eta: float, lambda_: float,
+        solver: str,
+    ) -> Candidate:  # fmt: skip
+        """The correction of :meth:`PDGProblem.conic_correction` on the reduced subproblem (the
+        full one in full mode)."""
         if self.full_mode:
-            return self._full(
-                self.conic_correction(candidate, candidate_evaluation, eta, lambda_, solver),
-                "full correction",
-            )
-        disc = candidate_evaluation.linearization
-        self.subproblem.shift_affine_term(disc.defects(candidate.trajectory.x))
+            full = super().conic_correction(z, candidate, ev, eta, lambda_, solver)
+            return self._full(full, "full correction")
+        self.subproblem.shift_affine_term(ev.linearization.defects(candidate.trajectory.x))
         return self._reduced(z, eta, lambda_, solver, "correction")
 
     def _kept_before(self, iteration: int) -> np.ndarray:
