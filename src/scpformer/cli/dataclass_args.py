@@ -392,6 +392,15 @@ def overrides(args: argparse.Namespace, cls: type, prefix: str = "") -> dict[str
     return out
 
 
+def nested_overrides(args: argparse.Namespace, cls: type, sections: dict[str, str]) -> Any:
+    """``cls`` with the command-line overrides of its own fields and, for each nested dataclass
+    field ``name`` of ``sections``, of that field's class under the prefix ``sections[name]``."""
+    hints = typing.get_type_hints(cls)
+    nested = {name: hints[name](**overrides(args, hints[name], prefix))
+              for name, prefix in sections.items()}  # fmt: skip
+    return cls(**nested, **overrides(args, cls))
+
+
 def with_overrides(base: Any, args: argparse.Namespace, cls: type, prefix: str = "") -> Any:
     """``base`` (an instance of the dataclass ``cls``) with the command-line overrides applied."""
     changes = overrides(args, cls, prefix)

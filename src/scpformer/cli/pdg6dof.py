@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scpformer.cli.dataclass_args import overrides
+from scpformer.cli.dataclass_args import nested_overrides, overrides
 from scpformer.cli.outputs import check_solve_outputs, print_rows, timing_rows, write_csv
 from scpformer.files import check_output_file
 from scpformer.pdg6dof import solve
@@ -20,14 +20,12 @@ from scpformer.problems.pdg6dof.constants import VehicleConstants
 from scpformer.problems.pdg6dof.instance import PDGInstance, constants_from_dict
 from scpformer.problems.pdg6dof.metrics import propellant_gap, solve_reference
 from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
-from scpformer.scp.scvx import SCvxParameters
 from scpformer.scp.solution import Solution, Status
 
 
 def config_from_args(args: argparse.Namespace) -> PDGSolverConfig:
     """The solver configuration with the command-line overrides applied."""
-    scvx = SCvxParameters(**overrides(args, SCvxParameters, "scvx"))
-    return PDGSolverConfig(scvx=scvx, **overrides(args, PDGSolverConfig))
+    return nested_overrides(args, PDGSolverConfig, {"scvx": "scvx"})
 
 
 def instance_from_args(args: argparse.Namespace) -> PDGInstance:

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.cli.dataclass_args import overrides, with_overrides
+from scpformer.cli.dataclass_args import nested_overrides, with_overrides
 from scpformer.cli.outputs import check_solve_outputs, print_rows, timing_rows, write_csv
 from scpformer.cli.warmstart import (
     art_provider,
@@ -27,9 +27,7 @@ from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.problems.rendezvous.scenario import (
     RendezvousScenario,
     RendezvousSolverConfig,
-    SCPParameters,
     TargetOrbit,
-    VerificationTolerances,
 )
 from scpformer.scp.solution import Solution, Status
 from scpformer.warmstart import RendezvousConvexWarmStart, WarmStartResult
@@ -40,11 +38,7 @@ from scpformer.warmstart import RendezvousConvexWarmStart, WarmStartResult
 # ======================================================================================
 def config_from_args(args: argparse.Namespace) -> RendezvousSolverConfig:
     """The solver configuration with the command-line overrides applied."""
-    return RendezvousSolverConfig(
-        scp=SCPParameters(**overrides(args, SCPParameters, "scp")),
-        verification=VerificationTolerances(**overrides(args, VerificationTolerances, "verify")),
-        **overrides(args, RendezvousSolverConfig),
-    )
+    return nested_overrides(args, RendezvousSolverConfig, {"scp": "scp", "verification": "verify"})
 
 
 def scenario_from_args(

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from scpformer.cli.dataclass_args import overrides, with_overrides
+from scpformer.cli.dataclass_args import nested_overrides, with_overrides
 from scpformer.cli.outputs import check_solve_outputs, print_rows, write_csv
 from scpformer.cli.warmstart import (
     art_provider,
@@ -25,11 +25,9 @@ from scpformer.problems.robust_rendezvous.instance import RobustInstance, sample
 from scpformer.problems.robust_rendezvous.scenario import (
     RobustScenario,
     RobustSolverConfig,
-    RobustVerification,
     robust_target,
 )
 from scpformer.problems.robust_rendezvous.tpbvp import solve_tpbvp
-from scpformer.scp.scvx_star import SCvxStarParameters
 from scpformer.scp.solution import Solution, Status
 
 
@@ -38,11 +36,8 @@ from scpformer.scp.solution import Solution, Status
 # ======================================================================================
 def config_from_args(args: argparse.Namespace) -> RobustSolverConfig:
     """The solver configuration with the command-line overrides applied."""
-    return RobustSolverConfig(
-        scvx=SCvxStarParameters(**overrides(args, SCvxStarParameters, "scvx-star")),
-        verification=RobustVerification(**overrides(args, RobustVerification, "verify")),
-        **overrides(args, RobustSolverConfig),
-    )
+    sections = {"scvx": "scvx-star", "verification": "verify"}
+    return nested_overrides(args, RobustSolverConfig, sections)
 
 
 def common_from_args(args: argparse.Namespace, base: RobustInstance | None) -> dict[str, Any]:
