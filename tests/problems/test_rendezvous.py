@@ -378,8 +378,8 @@ def test_infeasible_scp_subproblem_is_reported_as_solver_failed():
 def _patched_status(monkeypatch, status: str) -> None:
     original = subproblems.RendezvousSubproblem.solve
 
-    def solve_with_status(self, solver="clarabel"):
-        sol = original(self, solver)
+    def solve_with_status(self, solver="clarabel", settings=None):
+        sol = original(self, solver, settings)
         if status == subproblems.INACCURATE:
             return dataclasses.replace(sol, status=status)
         return subproblems.SubproblemSolution.failed(status, sol.wall_time, sol.solver_time)

@@ -46,6 +46,7 @@ from scpformer.cache import cached_pickle
 
 _Sub = TypeVar("_Sub")
 
+ConicSettings = dict[str, dict[str, Any]]  # solver name -> that solver's settings
 SOLVERS: dict[str, str] = {"clarabel": cp.CLARABEL, "ecos": cp.ECOS, "qoco": cp.QOCO}
 SOLVED = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)  # statuses with a usable primal solution
 # Settings under which a solver accepts in-place data updates (Clarabel refuses them when its
@@ -149,7 +150,7 @@ def solve_timed(
     problem: cp.Problem,
     solver: str,
     reuse: bool = False,
-    settings: dict[str, dict[str, Any]] | None = None,
+    settings: ConicSettings | None = None,
     primal: VariableSlices | None = None,
 ) -> ConicCall:
     """Solve ``problem`` with its current parameter values and time the solver call alone.
@@ -268,7 +269,7 @@ def primal_value(x: np.ndarray, slices: VariableSlices, key: str) -> np.ndarray:
 
 
 def solver_options(
-    solver: str, in_place: bool = False, settings: dict[str, dict[str, Any]] | None = None
+    solver: str, in_place: bool = False, settings: ConicSettings | None = None
 ) -> dict[str, Any]:
     """``settings[solver]`` (a family's own), with :data:`REUSE_OPTIONS` when the solver
     object is to be updated in place."""

@@ -32,6 +32,7 @@ import cvxpy as cp
 import numpy as np
 
 from scpformer.scp.conic import (
+    ConicSettings,
     SubproblemSolution,
     assign,
     batched_matvec,
@@ -124,12 +125,15 @@ class RendezvousSubproblem:
         assign(self.zeta, zeta)
 
     # -- solve ---------------------------------------------------------------------------
-    def solve(self, solver: str = "clarabel") -> SubproblemSolution:
+    def solve(
+        self, solver: str = "clarabel", settings: ConicSettings | None = None
+    ) -> SubproblemSolution:
         """Solve with the current parameter values; a failing solve is a status, not a raise.
 
-        See :func:`scpformer.scp.conic.solve_timed` for how the solver call is timed.
+        ``settings`` maps a solver name to settings other than the solver's defaults. See
+        :func:`scpformer.scp.conic.solve_timed` for how the solver call is timed.
         """
-        call = solve_timed(self.problem, solver)
+        call = solve_timed(self.problem, solver, settings=settings)
         if not call.solved or self.X.value is None:
             return SubproblemSolution.failed(call.status, call.wall_time, call.solver_time)
         dv = self.U.value / U_SCALE

@@ -53,8 +53,14 @@ class RendezvousConvexWarmStart:
         start = time.perf_counter()
         config = self.config or RendezvousSolverConfig()
         solution = solve_convex(instance, self.kind, config, verify=False)
-        ctg = math.nan
-        if solution.trajectory is not None:
-            rtn = linear_model(instance).rtn(solution.trajectory.x)
-            ctg = float(constraint_to_go(rtn, instance.scenario)[0])
+        ctg = initial_constraint_to_go(instance, solution)
         return convex_result(self.kind, solution, ctg, start)
+
+
+def initial_constraint_to_go(instance: RendezvousInstance, solution: Solution) -> float:
+    """``C(t_1)`` of ``solution``'s trajectory (the ART paper's constraint-to-go at the first
+    node, Eq. 5), NaN without a trajectory."""
+    if solution.trajectory is None:
+        return math.nan
+    rtn = linear_model(instance).rtn(solution.trajectory.x)
+    return float(constraint_to_go(rtn, instance.scenario)[0])
