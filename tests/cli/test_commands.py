@@ -66,7 +66,8 @@ def test_commands_are_listed_in_their_registration_order(capsys):
     assert main(["no-such-command"]) == 2
     err = capsys.readouterr().err
     expected = (
-        "'solve', 'bench', 'generate', 'dataset', 'train', 'experiment', 'report', 'demo', 'export'"
+        "'solve', 'bench', 'generate', 'dataset', 'train', 'experiment', 'report', 'demo', "
+        "'export', 'simulate'"
     )
     assert f"invalid choice: 'no-such-command' (choose from {expected})" in err
 
