@@ -37,6 +37,7 @@ from scpformer.experiments.runner import (
     open_study,
     read_fields,
     require_n,
+    result_columns,
     run_tasks,
     select_test_instances,
     series,
@@ -46,15 +47,8 @@ from scpformer.experiments.runner import (
 NAME = "art-conditioning"
 SWEEP = 9  # requested values per parameter
 COST_OUTSIDE = (0.5, 0.75, 1.25, 1.5)  # requested costs outside the range, x (min, min, max, max)
-COLUMNS = (
-    KEY,
-    "j_cvx",
-    "ctg_requested",
-    "ctg_realized",
-    "cost_requested_m_s",
-    "cost_realized_m_s",
-    "status",
-    "message",
+COLUMNS = result_columns(
+    "j_cvx", "ctg_requested", "ctg_realized", "cost_requested_m_s", "cost_realized_m_s"
 )
 
 

@@ -38,6 +38,7 @@ from scpformer.experiments.runner import (
     open_study,
     read_fields,
     require_n,
+    result_columns,
     run_tasks,
     select_test_instances,
     settings_dict,
@@ -125,15 +126,8 @@ def label(mode: str, kind: str) -> str:
 def columns(kinds: tuple[str, ...]) -> tuple[str, ...]:
     per = (*METRICS, "time_s")
     combos = [label(m, k) for m in MODES for k in kinds]
-    return (
-        KEY,
-        "j_cvx",
-        "true_cost_mm_s",
-        "true_time_s",
-        *(f"{c}_{name}" for c in combos for name in per),
-        "status",
-        "message",
-    )
+    cells = (f"{c}_{name}" for c in combos for name in per)
+    return result_columns("j_cvx", "true_cost_mm_s", "true_time_s", *cells)
 
 
 @dataclass(frozen=True)

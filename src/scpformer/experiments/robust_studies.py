@@ -44,6 +44,7 @@ from scpformer.experiments.runner import (
     column,
     open_study,
     require_n,
+    result_columns,
     run_tasks,
     select_test_instances,
     settings_dict,
@@ -78,7 +79,7 @@ def sources(frames: tuple[str, ...]) -> tuple[str, ...]:
 def columns(frames: tuple[str, ...], modes: tuple[str, ...] = tuple(MODES)) -> tuple[str, ...]:
     per = [f"{m}_{s}_{name}" for m in modes for s in sources(frames) for name in PER_SOURCE]
     budgets = [f"{m}_c_cvx_t1" for m in modes]
-    return (KEY, "j_cvx", *budgets, *per, "status", "message")
+    return result_columns("j_cvx", *budgets, *per)
 
 
 def label(mode: str, source: str) -> str:

@@ -346,6 +346,12 @@ class ModelSolver:
         return instance_from_theta(theta, config.scenario)
 
 
+def result_columns(*columns: str) -> tuple[str, ...]:
+    """The columns of a ``results.csv``: the instance's :data:`KEY`, ``columns``, then the
+    ``status`` and ``message`` of every row (a failed instance's: :func:`failure_row`)."""
+    return (KEY, *columns, "status", "message")
+
+
 def failure_row(key: int, status: str, message: str) -> dict[str, Any]:
     """The row of an instance whose work did not return (error, timeout, crash)."""
     return {KEY: key, "status": status, "message": message}

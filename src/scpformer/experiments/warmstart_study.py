@@ -48,6 +48,7 @@ from scpformer.experiments.runner import (
     join_series,
     open_study,
     require_n,
+    result_columns,
     run_tasks,
     select_test_instances,
     series,
@@ -77,14 +78,11 @@ PER_WS = (
     "feasible",
     "history",
 )
-COLUMNS = (
-    KEY,
+COLUMNS = result_columns(
     "c_cvx_t1",
     "j_cvx",
     "art_generation_s",
     *(f"{ws}_{name}" for ws in WARMSTARTS for name in PER_WS),
-    "status",
-    "message",
 )
 
 

@@ -26,6 +26,7 @@ from scpformer.experiments.runner import (
     dataset_commands,
     require_data,
     require_models,
+    result_columns,
     run_tasks,
     settings_dict,
     theta_tasks,
@@ -245,7 +246,7 @@ def method_columns(method: str, solution: Any, wall: float, instance: Any, cold:
 def columns_for(methods: Sequence[str], extra: Sequence[str] = ()) -> tuple[str, ...]:
     """The results table of a solve study over ``methods``."""
     cells = tuple(f"{m}_{name}" for m in methods for name in PER_METHOD)
-    return (KEY, *extra, *cells, "status", "message")
+    return result_columns(*extra, *cells)
 
 
 def solve_rows(
