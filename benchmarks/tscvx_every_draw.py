@@ -13,13 +13,20 @@ the ratios on the draws both solve, and one line per draw that either fails. Row
 appended to ``--out`` (JSON lines) as they finish; a rerun with the same file skips the
 draws already in it.
 
+``--ranges outside`` draws instead from Table 2's ranges around the feasible box (altitude
+1.5-10, East/North 0-10, velocity -2-0 up and +-2 across, the other parameters as the
+feasible preset, with its consistency and propellant checks) and keeps only the draws with
+an initial position or velocity outside the feasible box: instances unlike any the networks
+were trained on, but inside Table 2.
+
 Usage: python benchmarks/tscvx_every_draw.py --seed 31337 --n 40 [--model RUN]
-       [--out tscvx-every-draw.jsonl]
+       [--ranges feasible|outside] [--out tscvx-every-draw.jsonl]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -28,9 +35,34 @@ import numpy as np
 import torch
 
 import scpformer.pdg6dof as pdg
+from scpformer.problems.pdg6dof.instance import PDGInstance
 from scpformer.problems.pdg6dof.sampling import PDGSampleRanges, sample_instances
 
 TIE = 1.05  # per-draw time ratios within this factor are ties
+
+
+def outside_box(instance: PDGInstance, box: PDGSampleRanges) -> bool:
+    """Whether the initial position or velocity lies outside the sampler's box."""
+    state = [*instance.r0, *instance.v0]
+    bounds = [*box.r0, *box.v0]
+    return any(not lo <= value <= hi for value, (lo, hi) in zip(state, bounds, strict=True))
+
+
+def draw_instances(seed: int, n: int, ranges: str) -> list[PDGInstance]:
+    """``n`` draws of the feasible sampler, or of the ``outside`` ranges (module docstring)."""
+    rng = np.random.default_rng(seed)
+    box = PDGSampleRanges.feasible()
+    if ranges == "feasible":
+        return sample_instances(rng, n, box)
+    wide = dataclasses.replace(
+        box,
+        r0=((1.5, 10.0), (0.0, 10.0), (0.0, 10.0)),
+        v0=((-2.0, -0.1), (-2.0, 2.0), (-2.0, 2.0)),
+    )
+    found: list[PDGInstance] = []
+    while len(found) < n:
+        found += [i for i in sample_instances(rng, n, wide) if outside_box(i, box)]
+    return found[:n]
 
 
 def solve_row(instance, method: str, warmstart) -> dict:
@@ -53,16 +85,14 @@ def measure(args: argparse.Namespace, done: set[int]) -> None:
         from scpformer.warmstart.tscvx import TscvxWarmStart
 
         warmstart = TscvxWarmStart.from_checkpoint(args.model)
-    instances = sample_instances(
-        np.random.default_rng(args.seed), args.n, PDGSampleRanges.feasible()
-    )
+    instances = draw_instances(args.seed, args.n, args.ranges)
     pdg.solve(instances[0], method="tscvx", warmstart=warmstart, verify=False)  # load, compile
     with args.out.open("a") as fh:
         for index, instance in enumerate(instances):
             if index in done:
                 continue
             order = ("scvx", "tscvx") if index % 2 == 0 else ("tscvx", "scvx")
-            row = {"seed": args.seed, "draw": index}
+            row = {"seed": args.seed, "ranges": args.ranges, "draw": index}
             for method in order:
                 row[method] = solve_row(instance, method, warmstart if method == "tscvx" else None)
             fh.write(json.dumps(row) + "\n")
@@ -114,16 +144,18 @@ def main() -> None:
     parser.add_argument("--seed", type=int, required=True, help="sampler seed (a fresh one)")
     parser.add_argument("--n", type=int, default=40, help="draws (default: 40)")
     parser.add_argument("--model", type=Path, help="T-SCvx run folder (default: shipped)")
+    parser.add_argument("--ranges", choices=("feasible", "outside"), default="feasible")
     parser.add_argument("--out", type=Path, default=Path("tscvx-every-draw.jsonl"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     rows = []
     if args.out.exists():
         rows = [json.loads(line) for line in args.out.read_text().splitlines() if line]
-        rows = [r for r in rows if r["seed"] == args.seed]
+        rows = [r for r in rows if r["seed"] == args.seed and r.get("ranges") == args.ranges]
     measure(args, {r["draw"] for r in rows})
     rows = [json.loads(line) for line in args.out.read_text().splitlines() if line]
-    summarize(sorted((r for r in rows if r["seed"] == args.seed), key=lambda r: r["draw"]))
+    mine = [r for r in rows if r["seed"] == args.seed and r.get("ranges") == args.ranges]
+    summarize(sorted(mine, key=lambda r: r["draw"]))
     print(f"torch threads {torch.get_num_threads()}")
 
 
