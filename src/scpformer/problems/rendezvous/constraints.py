@@ -60,8 +60,8 @@ def cone_slack(r: np.ndarray, scenario: RendezvousScenario) -> np.ndarray:
 
 def constraint_index(scenario: RendezvousScenario) -> list[tuple[str, int]]:
     """Stable ``(name, node)`` label of every inequality row (order of the tight flags)."""
-    kw, n = scenario.n_waypoint, scenario.n_nodes
-    return [("keep_out", k) for k in range(kw + 1)] + [("approach_cone", k) for k in range(kw, n)]
+    nk, kc, n = scenario.n_keep_out, scenario.cone_start, scenario.n_nodes
+    return [("keep_out", k) for k in range(nk)] + [("approach_cone", k) for k in range(kc, n)]
 
 
 def tight_flags(rtn: np.ndarray, scenario: RendezvousScenario, tol: float) -> np.ndarray:
@@ -69,9 +69,9 @@ def tight_flags(rtn: np.ndarray, scenario: RendezvousScenario, tol: float) -> np
 
     ``rtn`` holds the relative states of all nodes, (N+1, >=3).
     """
-    kw, n = scenario.n_waypoint, scenario.n_nodes
-    koz = keep_out_slack(rtn[: kw + 1], scenario) <= tol
-    return np.concatenate([koz, cone_slack(rtn[kw:n], scenario) <= tol])
+    nk, kc, n = scenario.n_keep_out, scenario.cone_start, scenario.n_nodes
+    koz = keep_out_slack(rtn[:nk], scenario) <= tol
+    return np.concatenate([koz, cone_slack(rtn[kc:n], scenario) <= tol])
 
 
 def reward_to_go(dv: np.ndarray) -> np.ndarray:
@@ -100,6 +100,6 @@ def constraint_to_go(
     """
     rtn = np.asarray(rtn, dtype=float)
     flags = np.zeros(rtn.shape[0], dtype=int)
-    kw = scenario.n_waypoint
-    flags[: kw + 1] = keep_out_slack(rtn[: kw + 1], scenario) < -tol
+    nk = scenario.n_keep_out  # 0 once the waypoint is passed
+    flags[:nk] = keep_out_slack(rtn[:nk], scenario) < -tol
     return np.cumsum(flags[::-1])[::-1].copy()

@@ -66,6 +66,8 @@ class RendezvousInstance:
                 f"horizon_orbits must lie in [{lo}, {hi}] orbits (Table 1), got {horizon}"
             )
         object.__setattr__(self, "horizon_orbits", horizon)
+        if self.scenario.waypoint_passed:  # the approach corridor: no keep-out zone any more
+            return
         metric = float(self.scenario.koz_metric(self.rtn0_linear[:3]))
         if metric < 1.0:
             r = ", ".join(f"{v:.1f}" for v in self.rtn0_linear[:3])

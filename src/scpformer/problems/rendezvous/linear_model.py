@@ -71,8 +71,8 @@ class BoundaryData:
 
     x_init: np.ndarray  # (6,) x_0 [m]
     x_dock: np.ndarray  # (6,) Psi_N^{-1} (dr_dp, 0) [m]
-    x_wp: np.ndarray  # (6,) Psi_{N_wp}^{-1} (dr_wp, 0) [m]
-    cone_A: np.ndarray  # (n_cone, 3, 6) D Psi_k, k = N_wp..N-1 (Eq. 13)
+    x_wp: np.ndarray  # (6,) Psi_{N_wp}^{-1} (dr_wp, 0) [m]; nan once the waypoint is passed
+    cone_A: np.ndarray  # (n_cone, 3, 6) D Psi_k, k = cone_start..N-1 (Eq. 13)
     cone_c: np.ndarray  # (n_cone, 6) n^T D Psi_k / cos gamma
     cone_b: np.ndarray  # (3,) -apex
     cone_d: float  # -n^T apex / cos gamma
@@ -84,11 +84,15 @@ def boundary_data(instance: RendezvousInstance, model: LinearModel) -> BoundaryD
     kw, n = sc.n_waypoint, sc.n_nodes
     axis, apex = np.asarray(sc.approach_axis), sc.cone_vertex_m
     cos_g = math.cos(math.radians(sc.cone_half_angle_deg))
-    A = model.Psi[kw:n, :3, :]
+    A = model.Psi[sc.cone_start : n, :3, :]
+    if sc.waypoint_passed:
+        x_wp = np.full(6, np.nan)
+    else:
+        x_wp = np.linalg.solve(model.Psi[kw], np.r_[sc.waypoint_m, 0.0, 0.0, 0.0])
     return BoundaryData(
         x_init=instance.roe0,
         x_dock=np.linalg.solve(model.Psi[n], np.r_[sc.dock_port_m, 0.0, 0.0, 0.0]),
-        x_wp=np.linalg.solve(model.Psi[kw], np.r_[sc.waypoint_m, 0.0, 0.0, 0.0]),
+        x_wp=x_wp,
         cone_A=A,
         cone_c=np.einsum("r,krj->kj", axis, A) / cos_g,
         cone_b=-apex,

@@ -20,6 +20,12 @@ Node indexing. Times are ``t_0 .. t_N`` (N intervals, N + 1 nodes, 0-based). The
 precedes docking by ``waypoint_offset`` intervals (as in the ART reference code; the paper's
 1-based ``t_{N_wp}`` with ``N_wp = N - 10`` would be index ``N - 11``). The keep-out constraint
 applies at nodes ``0 .. n_waypoint`` and the approach cone at nodes ``n_waypoint .. N-1``.
+
+A remaining-horizon problem of closed-loop guidance may start at or after the waypoint node
+(``waypoint_offset >= N``, ``n_waypoint <= 0``, :attr:`RendezvousScenario.waypoint_passed`):
+it has no waypoint condition and no keep-out constraint, and the cone applies at nodes
+``0 .. N-1``. ``n_waypoint = 1`` is refused (one impulse cannot reach the waypoint's six
+conditions), as is a passed waypoint with fewer than two impulses.
 """
 
 from __future__ import annotations
@@ -69,6 +75,9 @@ def _vector(name: str, value: Any, size: int) -> tuple[float, ...]:
 
 
 MAX_NODES = 1000  # largest number of impulses N accepted (memory and time, not physics)
+#: Fewest impulses of a problem whose waypoint is passed: docking fixes the 6 ROE at t_N, which
+#: a single 3-D impulse cannot reach from a given state in general.
+MIN_PASSED_NODES = 2
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -170,9 +179,11 @@ class RendezvousScenario:
         object.__setattr__(self, "waypoint_offset", offset)
         if self.waypoint_offset < 2:
             raise ValueError(f"scenario.waypoint_offset must be >= 2, got {self.waypoint_offset}")
-        if self.n_nodes < self.waypoint_offset + 2:
+        if self.n_nodes < MIN_PASSED_NODES or self.n_nodes == self.waypoint_offset + 1:
             raise ValueError(
-                f"scenario.n_nodes must be >= waypoint_offset + 2 = {self.waypoint_offset + 2}, "
+                f"scenario.n_nodes must be >= waypoint_offset + 2 = {self.waypoint_offset + 2} "
+                f"(the waypoint at node 2 or later) or between {MIN_PASSED_NODES} and "
+                f"waypoint_offset = {self.waypoint_offset} (the waypoint passed), "
                 f"got {self.n_nodes}"
             )
         for name in ("w_iss_m", "l_iss_m", "h_iss_m", "waypoint_distance_m"):
@@ -228,6 +239,28 @@ class RendezvousScenario:
     def n_waypoint(self) -> int:
         """0-based node index of the waypoint, ``N - waypoint_offset`` (see module docstring)."""
         return self.n_nodes - self.waypoint_offset
+
+    @property
+    def waypoint_passed(self) -> bool:
+        """Whether the waypoint lies at or before node 0 (``waypoint_offset >= n_nodes``).
+
+        Such a scenario poses the remaining horizon of the final approach (closed-loop
+        re-planning at or after the waypoint node, :mod:`scpformer.guidance.rendezvous_mpc`):
+        no waypoint condition, the approach cone (Eq. 13) at every node ``0 .. N-1`` and no
+        keep-out constraint (every node after the waypoint lies in the approach corridor,
+        inside the keep-out ellipsoid, which no longer applies there).
+        """
+        return self.n_waypoint <= 0
+
+    @property
+    def n_keep_out(self) -> int:
+        """Number of keep-out nodes ``0 .. n_waypoint`` (0 once the waypoint is passed)."""
+        return 0 if self.waypoint_passed else self.n_waypoint + 1
+
+    @property
+    def cone_start(self) -> int:
+        """First node of the approach cone: ``n_waypoint``, or 0 once the waypoint is passed."""
+        return max(self.n_waypoint, 0)
 
     @property
     def waypoint_m(self) -> np.ndarray:

@@ -120,7 +120,7 @@ def _record(
 
 def _koz_penalty(rtn: np.ndarray, sc: RendezvousScenario) -> float:
     """Sum of keep-out violations ``max(0, 1 - |E_koz dr_k|)`` of the model trajectory."""
-    return float(np.maximum(-keep_out_slack(rtn[: sc.n_waypoint + 1], sc), 0.0).sum())
+    return float(np.maximum(-keep_out_slack(rtn[: sc.n_keep_out], sc), 0.0).sum())
 
 
 def _convex(
@@ -160,7 +160,7 @@ def run_scp(
     listed in the message; verification then checks their linear-dynamics residual.
     """
     scp, sc = setup.config.scp, setup.instance.scenario
-    kw = sc.n_waypoint
+    nk = sc.n_keep_out  # nodes 0 .. N_wp; none once the waypoint is passed
     sub = _subproblem(setup, "scp")
     x_warm = np.array(x_warm, dtype=float)
     x_warm[0] = setup.bounds.x_init  # node 0 is fixed; the trust region holds trivially there
@@ -170,8 +170,8 @@ def run_scp(
     inaccurate: list[int] = []
     while True:
         start = time.perf_counter()
-        a, b = keep_out_cut(setup.model.Psi[: kw + 1], sc, state.x_ref[: kw + 1])
-        sub.set_keep_out(a, b, state.x_ref[: kw + 1], state.zeta)
+        a, b = keep_out_cut(setup.model.Psi[:nk], sc, state.x_ref[:nk])
+        sub.set_keep_out(a, b, state.x_ref[:nk], state.zeta)
         t_disc = time.perf_counter() - start
         sol = sub.solve(scp.solver)
         step = float(np.linalg.norm(sol.x - state.x_ref, axis=1).max()) if sol.ok else math.nan

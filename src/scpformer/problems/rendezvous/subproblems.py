@@ -16,6 +16,12 @@ Notation: nodes ``k = 0 .. N`` (see :mod:`.scenario`), state ``x_k = a dalpha(t_
   constraint ``a_k^T x_k >= b_k`` and the trust region ``|x_k - x_bar_k|_2 <= zeta`` for
   ``k = 0 .. N_wp``.
 
+``n_waypoint <= 0`` poses the remaining horizon after the waypoint (closed-loop re-planning in
+the final approach, :attr:`~.scenario.RendezvousScenario.waypoint_passed`): no waypoint row,
+the cone for ``k = 0 .. N-1``, and no keep-out cut or trust region (``"scp"`` is then
+Problem 2 again, which the SCP solves in one or two iterations). All such problems of ``N``
+impulses share one structure, compiled under ``n_waypoint = 0``.
+
 ``Psi x = y`` boundary conditions (Eq. 12, 14) are imposed as ``x = Psi^{-1} y`` (``Psi`` is
 invertible), computed by the caller. Every number that depends on the instance or on the SCP
 iterate is a ``cvxpy.Parameter`` (DPP): the problem is canonicalized once per structure and
@@ -52,11 +58,15 @@ class RendezvousSubproblem:
     def __init__(self, kind: str, n_nodes: int, n_waypoint: int) -> None:
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-        if not 1 <= n_waypoint <= n_nodes - 2:
-            raise ValueError(f"n_waypoint must lie in [1, n_nodes - 2], got {n_waypoint}")
-        self.kind, self.n_nodes, self.n_waypoint = kind, n_nodes, n_waypoint
-        n, kw = n_nodes, n_waypoint
-        n_cone, n_koz = n - kw, kw + 1
+        if not (1 <= n_waypoint <= n_nodes - 2 or (n_waypoint <= 0 and n_nodes >= 2)):
+            raise ValueError(
+                "n_waypoint must lie in [1, n_nodes - 2], or be <= 0 (the waypoint passed) with "
+                f"n_nodes >= 2, got n_waypoint = {n_waypoint}, n_nodes = {n_nodes}"
+            )
+        self.passed = n_waypoint <= 0
+        self.kind, self.n_nodes, self.n_waypoint = kind, n_nodes, max(n_waypoint, 0)
+        n, kw = n_nodes, self.n_waypoint
+        n_cone, n_koz = n - kw, (0 if self.passed else kw + 1)
         P = cp.Parameter
         self.phi = P((n, 36), name="Phi")  # row-major Phi_k
         self.gamma = P((n, 18), name="Phi_B")  # row-major Phi_k B_k / U_SCALE
@@ -67,9 +77,10 @@ class RendezvousSubproblem:
         self.cone_c = P((n_cone, 6), name="c_ac")
         self.cone_b = P(3, name="b_ac")
         self.cone_d = P(name="d_ac")
-        self.koz_a = P((n_koz, 6), name="a_koz")
-        self.koz_b = P(n_koz, name="b_koz")
-        self.x_ref = P((n_koz, 6), name="x_bar")
+        if n_koz:
+            self.koz_a = P((n_koz, 6), name="a_koz")
+            self.koz_b = P(n_koz, name="b_koz")
+            self.x_ref = P((n_koz, 6), name="x_bar")
         self.zeta = P(nonneg=True, name="zeta")
         self.X = cp.Variable((n + 1, 6), name="X")
         self.U = cp.Variable((n, 3), name="U")
@@ -83,8 +94,9 @@ class RendezvousSubproblem:
             position = batched_matvec(self.cone_A, X[kw:n], 3, 6)  # D Psi_k x_k, (n_cone, 3)
             lhs = cp.norm(position + self.cone_b[None, :], 2, axis=1)
             rhs = cp.sum(cp.multiply(self.cone_c, X[kw:n]), axis=1) + self.cone_d
-            constraints += [X[kw] == self.x_wp, lhs <= rhs]
-        if self.kind == "scp":
+            waypoint = [] if self.passed else [X[kw] == self.x_wp]
+            constraints += [*waypoint, lhs <= rhs]
+        if self.kind == "scp" and not self.passed:
             constraints += [
                 cp.sum(cp.multiply(self.koz_a, X[: kw + 1]), axis=1) >= self.koz_b,  # Eq. 15
                 cp.norm(X[: kw + 1] - self.x_ref, 2, axis=1) <= self.zeta,  # Eq. 17
@@ -106,19 +118,24 @@ class RendezvousSubproblem:
     def set_final_approach(
         self, x_wp: np.ndarray, A: np.ndarray, c: np.ndarray, b: np.ndarray, d: float
     ) -> None:
-        """Write the waypoint ROE and the cone rows of Eq. 13 for nodes ``N_wp .. N-1``.
+        """Write the waypoint ROE and the cone rows of Eq. 13 for nodes ``N_wp .. N-1``
+        (once the waypoint is passed: ``x_wp`` is not used, the rows are nodes ``0 .. N-1``).
 
         ``A`` (n_cone, 3, 6) = ``D Psi_k``, ``c`` (n_cone, 6) = ``n^T D Psi_k / cos gamma``,
         ``b`` (3,) = ``-apex``, ``d`` = ``-n^T apex / cos gamma``.
         """
-        assign(self.x_wp, x_wp)
+        if not self.passed:
+            assign(self.x_wp, x_wp)
         assign(self.cone_A, np.asarray(A).reshape(A.shape[0], 18))
         assign(self.cone_c, c)
         assign(self.cone_b, b)
         assign(self.cone_d, d)
 
     def set_keep_out(self, a: np.ndarray, b: np.ndarray, x_ref: np.ndarray, zeta: float) -> None:
-        """Write the cut ``a_k^T x_k >= b_k`` (Eqs. 15-16) and the trust region (Eq. 17)."""
+        """Write the cut ``a_k^T x_k >= b_k`` (Eqs. 15-16) and the trust region (Eq. 17);
+        nothing once the waypoint is passed (no keep-out node)."""
+        if self.passed:
+            return
         assign(self.koz_a, a)
         assign(self.koz_b, b)
         assign(self.x_ref, x_ref)
@@ -147,7 +164,6 @@ class RendezvousSubproblem:
         )
 
 
-@functools.lru_cache(maxsize=16)
 def compiled_subproblem(
     kind: str, n_nodes: int, n_waypoint: int, solver: str = "clarabel"
 ) -> RendezvousSubproblem:
@@ -155,8 +171,15 @@ def compiled_subproblem(
 
     Canonicalization takes about 1.3 s for ``"scp"`` and 0.3 s for the others at N = 100; it is
     cached on disk keyed by the structure, the solver, the cvxpy and scpformer versions and this
-    module's source.
+    module's source. Every ``n_waypoint <= 0`` (the waypoint passed) is one structure.
     """
+    return _compiled_subproblem(kind, n_nodes, max(n_waypoint, 0), solver)
+
+
+@functools.lru_cache(maxsize=32)
+def _compiled_subproblem(
+    kind: str, n_nodes: int, n_waypoint: int, solver: str
+) -> RendezvousSubproblem:
     check_solver(solver)
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")

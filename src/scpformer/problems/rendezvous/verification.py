@@ -126,10 +126,16 @@ def replay(
     return propagate_relative(oe_c, rtn0, t[:-1], kicks, t_out=t_out, j2=instance.scenario.j2)
 
 
-def _checks(kind: str) -> tuple[str, ...]:
+def _checks(kind: str, passed: bool = False) -> tuple[str, ...]:
+    """The checks of ``kind``; once the waypoint is passed, neither the waypoint nor the
+    keep-out zone (every node lies in the approach corridor) is checked."""
     base = ("terminal_position_m", "terminal_velocity_m_s", "model_residual_m")
+    if kind == "tpbvp":
+        return base
+    if passed:
+        return (*base, "cone_m")
     approach = ("waypoint_position_m", "waypoint_velocity_m_s", "cone_m")
-    return base + (approach if kind != "tpbvp" else ()) + (("keep_out",) if kind == "scp" else ())
+    return base + approach + (("keep_out",) if kind == "scp" else ())
 
 
 def verify_solution(
@@ -148,11 +154,13 @@ def verify_solution(
     ``node_violations``: keep-out (``1 - |E_koz dr|``), cone [m] and waypoint misses of the
     replay at the nodes, and the residual of the linear dynamics [m] (which catches an
     inaccurate conic solution). ``path_violations``: keep-out and cone between the nodes.
-    Pass/fail uses the constraints of ``kind`` only (Problem 1 has no waypoint, cone or KOZ).
+    Pass/fail uses the constraints of ``kind`` only (Problem 1 has no waypoint, cone or KOZ; a
+    problem whose waypoint is passed has no waypoint or KOZ, and its waypoint misses read 0).
     """
     tol = tol or VerificationTolerances()
     sc = instance.scenario
     m, kw, n = tol.samples_per_interval, sc.n_waypoint, sc.n_nodes
+    nk, kc = sc.n_keep_out, sc.cone_start  # keep-out nodes 0 .. nk-1, cone nodes kc .. N-1
     try:
         truth = replay(instance, dv, tol)
     except (ArithmeticError, RuntimeError, ValueError) as err:  # e.g. an escaping orbit
@@ -160,7 +168,8 @@ def verify_solution(
     nodes, dense = truth.rtn[::m], truth.rtn
     gap = nodes - model.rtn(x)
     miss = nodes[n] - np.r_[sc.dock_port_m, 0.0, 0.0, 0.0]
-    wp_miss = nodes[kw] - np.r_[sc.waypoint_m, 0.0, 0.0, 0.0]
+    # once the waypoint is passed there is no waypoint condition: its misses read 0
+    wp_miss = np.zeros(6) if sc.waypoint_passed else nodes[kw] - np.r_[sc.waypoint_m, 0, 0, 0]
     terminal = {
         "position_m": float(np.linalg.norm(miss[:3])),
         "velocity_m_s": float(np.linalg.norm(miss[3:])),
@@ -168,15 +177,15 @@ def verify_solution(
     terminal.update({f"{c}_m": float(v) for c, v in zip("rtn", miss[:3], strict=True)})
     terminal.update({f"v{c}_m_s": float(v) for c, v in zip("rtn", miss[3:], strict=True)})
     node = {
-        "keep_out": _worst(-keep_out_slack(nodes[: kw + 1], sc)),
-        "cone_m": _worst(-cone_slack(nodes[kw:n], sc)),
+        "keep_out": _worst(-keep_out_slack(nodes[:nk], sc)),
+        "cone_m": _worst(-cone_slack(nodes[kc:n], sc)),
         "waypoint_position_m": float(np.linalg.norm(wp_miss[:3])),
         "waypoint_velocity_m_s": float(np.linalg.norm(wp_miss[3:])),
         "model_residual_m": max(model.residual(x, dv), float(np.abs(x[0] - instance.roe0).max())),
     }
     path = {
-        "keep_out": _worst(-keep_out_slack(dense[: kw * m + 1], sc)),
-        "cone_m": _worst(-cone_slack(dense[kw * m : n * m], sc)),
+        "keep_out": _worst(-keep_out_slack(dense[: (nk - 1) * m + 1 if nk else 0], sc)),
+        "cone_m": _worst(-cone_slack(dense[kc * m : n * m], sc)),
     }
     measured = {
         **node,
@@ -185,7 +194,7 @@ def verify_solution(
     }
     problems = [
         f"{name} {measured[name]:.3g} > {getattr(tol, name):.3g}"
-        for name in _checks(kind)
+        for name in _checks(kind, sc.waypoint_passed)
         if measured[name] > getattr(tol, name)
     ]
     gap_v = float(np.linalg.norm(gap[:, 3:], axis=1).max())
