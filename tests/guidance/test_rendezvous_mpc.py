@@ -20,6 +20,7 @@ from scpformer.guidance import (
 )
 from scpformer.guidance.campaign import COLUMNS, INSTANCES, Campaign, run_campaign
 from scpformer.guidance.rendezvous_mpc import replan_nodes
+from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.rendezvous import RendezvousInstance, RendezvousSolverConfig
 
 INSTANCE = RendezvousInstance()
@@ -51,11 +52,11 @@ def test_with_no_error_and_no_replan_the_loop_flies_the_open_loop_plan(plan):
 def test_with_no_error_the_replans_keep_the_delta_v_and_correct_the_model_error(plan):
     """Re-plans from the true state remove the plan's model error (the mean-ROE model vs the
     truth, up to the verification's 2 m): the miss shrinks (0.45 m -> 0.05 m), the delta-v
-    barely moves (+0.11% measured). Correcting often keeps it cheap: with K = 30 the last
-    re-plan, 2 intervals before the waypoint, removes 28 intervals of model drift (+1.3%)."""
+    barely moves (+0.11% measured); the last re-plan, at the waypoint node, re-plans the final
+    approach."""
     cfg = MPCConfig(replan_every=10, errors=ErrorModels.none())
     result = fly(INSTANCE, cfg, seed=0, open_loop=plan)
-    assert [r.node for r in result.replans] == [10, 20, 30, 40, 50, 60, 70, 80, 88]
+    assert [r.node for r in result.replans] == [10, 20, 30, 40, 50, 60, 70, 80, 90]
     assert all(r.accepted for r in result.replans)
     np.testing.assert_allclose(result.estimates, result.truth_roe)
     assert result.terminal_position_error < plan.verification.terminal_error["position_m"]
@@ -74,21 +75,43 @@ def test_with_table2_errors_seeded_runs_dock(plan, seed):
 
 
 def test_the_previous_plan_warm_starts_the_replans(plan):
-    cfg = MPCConfig(replan_every=40, warmstart="previous", compare=("cold",))
+    cfg = MPCConfig(replan_every=45, warmstart="previous", compare=("cold",))
     result = fly(INSTANCE, cfg, seed=3, open_loop=plan)
-    assert [r.warmstart for r in result.replans] == ["previous"] * 3
-    assert [r.warmstart for r in result.comparisons] == ["cold"] * 3
+    assert [r.node for r in result.replans] == [45, 90]  # 90: the final approach
+    assert [r.warmstart for r in result.replans] == ["previous"] * 2
+    assert [r.warmstart for r in result.comparisons] == ["cold"] * 2
     assert all(r.accepted for r in result.replans)
     for flown, other in zip(result.replans, result.comparisons, strict=True):
         assert abs(flown.cost - other.cost) <= 1e-3 * other.cost  # one optimum, two starts
 
 
-def test_replan_nodes_end_at_the_last_node_that_poses_the_problem():
-    assert replan_nodes(100, 10, 10) == [10, 20, 30, 40, 50, 60, 70, 80, 88]
+def test_replan_nodes_run_through_the_final_approach_to_two_nodes_before_the_end():
+    assert replan_nodes(100, 10, 10) == [10, 20, 30, 40, 50, 60, 70, 80, 90]
+    assert replan_nodes(100, 10, 30) == [30, 60, 90]
     assert replan_nodes(100, 10, 88) == [88]
-    assert replan_nodes(100, 10, 89) == []
-    with pytest.raises(ValueError, match="waypoint_offset \\+ 2 = 12"):
-        remaining_instance(INSTANCE, 89, INSTANCE.roe0, INSTANCE.target.oe.to_array())
+    assert replan_nodes(100, 10, 89) == [88]  # 89 = N_wp - 1: one impulse to the waypoint
+    assert replan_nodes(100, 10, 98) == [98] and replan_nodes(100, 10, 99) == []
+    assert replan_nodes(100, 10, 1)[-11:] == [87, 88, 90, 91, 92, 93, 94, 95, 96, 97, 98]
+    oe = INSTANCE.target.oe.to_array()
+    with pytest.raises(ValueError, match="waypoint_offset \\+ 2 = 12 or more"):
+        remaining_instance(INSTANCE, 89, INSTANCE.roe0, oe)
+    with pytest.raises(ValueError, match="2 to waypoint_offset"):
+        remaining_instance(INSTANCE, 99, INSTANCE.roe0, oe)
+
+
+def test_the_loop_replans_the_final_approach_after_the_waypoint(plan):
+    """K = 3: re-plans at 90 (the waypoint node), 93, 96 pose the final approach (no waypoint,
+    no keep-out zone: the states lie inside it), are accepted and flown."""
+    result = fly(INSTANCE, MPCConfig(replan_every=3), seed=1, open_loop=plan)
+    final = [r for r in result.replans if r.node >= INSTANCE.scenario.n_waypoint]
+    assert [r.node for r in final] == [90, 93, 96]
+    assert all(r.accepted for r in result.replans), [r.message for r in result.replans]
+    assert result.success, result.summary()
+    # the plan flown after the last re-plan is that re-plan's: its impulses from node 96 on
+    assert np.abs(result.dv_planned[96:]).max() > 0.0
+    sub = remaining_instance(INSTANCE, 96, result.estimates[-1], linear_model(INSTANCE).oe[96])
+    assert sub.scenario.waypoint_passed and sub.n_nodes == 4
+    assert sub.scenario.koz_metric(sub.rtn0_linear[:3]) < 1.0  # inside the keep-out ellipsoid
 
 
 def test_the_derived_tolerance_is_written_down():

@@ -16,7 +16,10 @@ instance. The loop then flies it through the truth model and re-plans on board:
    impulses whose target elements are the target's mean elements at ``t_k``
    (:func:`remaining_instance`), and solved by the family's public ``solve`` with the
    chosen warm start; the plan is checked like any solution (its nonlinear replay,
-   :mod:`scpformer.problems.rendezvous.verification`);
+   :mod:`scpformer.problems.rendezvous.verification`). From the waypoint node on
+   (``k >= N_wp``) the remaining problem is the final approach: the waypoint is passed, the
+   approach cone holds from node ``k`` on and the keep-out zone no longer applies
+   (:attr:`~scpformer.problems.rendezvous.scenario.RendezvousScenario.waypoint_passed`);
 3. the plan's next ``K`` impulses are applied through the truth model (two-body + J2 of
    :func:`scpformer.dynamics.truth.propagate_relative`, as the verification and the robust
    family's truth replay do), each with a Gates execution error (Eqs. 12-13,
@@ -25,13 +28,10 @@ instance. The loop then flies it through the truth model and re-plans on board:
    robust family's Monte Carlo check does).
 
 A re-plan that fails (no trajectory, or a trajectory whose verification fails) is recorded,
-and the last accepted plan keeps being flown. The last re-plan is at node
-``N - waypoint_offset - 2`` (:func:`replan_nodes`): the family's instance needs at least two
-intervals before the waypoint hold (``RendezvousScenario``), so the last
-``waypoint_offset + 2`` intervals (the arrival at the waypoint, the hold and the final
-approach in the cone; 12 of 100 by default) are flown on the last accepted plan. Re-planning
-the final approach would need a problem without the waypoint (or with the waypoint at the
-current node), which the family's instance cannot pose.
+and the last accepted plan keeps being flown. Re-plans continue through the final approach,
+up to ``N - 2`` (:func:`replan_nodes`: two impulses still reach the docking conditions); the
+node ``N_wp - 1`` poses no problem (one impulse cannot reach the waypoint hold) and is
+replaced by ``N_wp - 2``.
 
 Warm starts of a re-plan (:data:`WARMSTARTS`): ``cold`` is the family's default start (the
 convex Problem 2 solved from the estimate); ``previous`` the last accepted plan shifted in
@@ -62,7 +62,7 @@ from scpformer.dynamics.truth import propagate_relative
 from scpformer.dynamics.uncertainty import GatesModel, NavigationModel, ProcessNoise, burn_frame
 from scpformer.problems.rendezvous.constraints import cone_slack, keep_out_slack
 from scpformer.problems.rendezvous.linear_model import linear_model
-from scpformer.problems.rendezvous.scenario import TargetOrbit
+from scpformer.problems.rendezvous.scenario import MIN_PASSED_NODES, TargetOrbit
 from scpformer.problems.rendezvous.verification import osculating_initial_state
 from scpformer.rendezvous import (
     RendezvousInstance,
@@ -90,8 +90,8 @@ UNSUPPORTED = {
 #: Accuracy of the mean elements of a navigation fix: samples per orbit of the averaging and
 #: RK4 steps per sample (those of :func:`osculating_to_mean_qns`, ~2 mm in the ROE).
 MEAN_SAMPLES, MEAN_SUBSTEPS = 48, 12
-#: Burns of the default open-loop plan after its last re-plan node: at the waypoint node
-#: N_wp and the final one at N - 1 (measured: nodes 90 and 99 of its 7 burns).
+#: Burns of the default plan after its last re-plan node (K = 10: node 90 = N_wp): at the
+#: waypoint node N_wp and the final one at N - 1 (measured: nodes 90 and 99 of its 7 burns).
 TAIL_BURNS = 2
 
 
@@ -204,10 +204,10 @@ class DockingTolerance:
     ) -> DockingTolerance:
         """The tolerance of a closed-loop docking, from the approach geometry and the errors.
 
-        The last re-plan is at ``N - waypoint_offset - 2`` (:func:`replan_nodes`), just before
-        the waypoint ``dr_wp`` (104 m from the target, Table 1); the last
-        ``waypoint_offset + 2`` intervals (hold at the waypoint, final approach in the cone)
-        are flown open loop on that plan. Every term below is one source's error at ``t_N``:
+        With ``K = 10`` the last re-plan is at the waypoint node ``N_wp`` (:func:`replan_nodes`),
+        at the waypoint ``dr_wp`` (104 m from the target, Table 1); the last
+        ``waypoint_offset`` intervals (the final approach in the cone) are flown on that plan.
+        Every term below is one source's error at ``t_N``:
 
         * the plan's own model error: the verification's ``terminal_position_m`` (2 m) and
           ``terminal_velocity_m_s`` (2 mm/s) of a nominal replay (measured maxima 0.68 m and
@@ -216,7 +216,7 @@ class DockingTolerance:
           3-sigma RTN position error (Eqs. 10-11, Table 2 ``s_2``: 0.57 m 1-sigma at 104 m,
           :func:`navigation_position_sigma`) and its velocity counterpart ``n x`` that, at the
           target's mean motion ``n``;
-        * the execution errors of the burns of the open-loop tail (``tail_burns``: 2, the
+        * the execution errors of the burns after the last re-plan (``tail_burns``: 2, the
           default plan's burns at the waypoint node and at ``N - 1``), each persisting to
           ``t_N`` as a velocity error: 3-sigma of Eq. 12's fixed terms,
           ``sqrt(sigma_r^2 + 2 sigma_a^2)`` = 0.52 mm/s 1-sigma in 3-D.
@@ -257,9 +257,9 @@ class MPCConfig:
     ----------
     replan_every
         ``K``, impulses flown between re-plans (>= 1); re-plans happen at nodes
-        ``K, 2K, ...`` and at the last node that still poses the problem
-        (:func:`replan_nodes`). Default 10 (the waypoint offset of Table 1): 9 re-plans over
-        the N = 100 impulses, at nodes 10, 20, ..., 80 and 88.
+        ``K, 2K, ...`` up to ``N - 2``, through the final approach (:func:`replan_nodes`).
+        Default 10 (the waypoint offset of Table 1): 9 re-plans over the N = 100 impulses, at
+        nodes 10, 20, ..., 90 (the last at the waypoint node, re-planning the final approach).
     warmstart
         Warm start of every re-plan, one of :data:`WARMSTARTS`.
     compare
@@ -499,21 +499,25 @@ def remaining_instance(
 
     ``roe_m`` (6,) is the initial mean scaled ROE [m] and ``target_oe`` (6,) the target's mean
     classical elements (radians) at ``t_k``. The waypoint stays ``waypoint_offset`` intervals
-    before docking, i.e. at the same node ``N_wp``; the scenario's horizon range is widened to
-    the remaining horizon.
+    before docking, i.e. at the same node ``N_wp``; from ``N_wp`` on (``k >= N_wp``) it is
+    passed: the remaining problem is the final approach, in the cone, without the waypoint and
+    the keep-out zone (``RendezvousScenario.waypoint_passed``). The scenario's horizon range
+    is widened to the remaining horizon.
 
     Raises
     ------
     ValueError
-        When fewer than ``waypoint_offset + 2`` intervals remain, or the instance is invalid
-        (e.g. the estimated initial position lies inside the keep-out zone).
+        When the remaining problem cannot be posed (``k = N_wp - 1``: one impulse to the
+        waypoint hold; fewer than 2 intervals left), or the instance is invalid (e.g. the
+        estimated initial position lies inside the keep-out zone before the waypoint).
     """
     sc = instance.scenario
     n_rem = sc.n_nodes - k
-    if n_rem < sc.waypoint_offset + 2:
+    if not poses_problem(sc.n_nodes, sc.waypoint_offset, k):
         raise ValueError(
             f"node {k}: {n_rem} intervals remain, the problem needs waypoint_offset + 2 = "
-            f"{sc.waypoint_offset + 2}"
+            f"{sc.waypoint_offset + 2} or more (the waypoint ahead), or {MIN_PASSED_NODES} to "
+            f"waypoint_offset = {sc.waypoint_offset} (the waypoint passed)"
         )
     deg = np.degrees(target_oe[2:])
     target = TargetOrbit(a_m=float(target_oe[0]), e=float(target_oe[1]), i_deg=float(deg[0]),
@@ -527,17 +531,29 @@ def remaining_instance(
                               target=target, scenario=scenario)  # fmt: skip
 
 
-def replan_nodes(n_nodes: int, waypoint_offset: int, replan_every: int) -> list[int]:
-    """Nodes of the re-plans: ``K, 2K, ...`` up to the last node that still poses the
-    family's problem, ``N - waypoint_offset - 2``, which is added when any re-plan happens.
+def poses_problem(n_nodes: int, waypoint_offset: int, k: int) -> bool:
+    """Whether node ``0 < k < N`` poses a remaining problem: at least two intervals to the
+    waypoint (``k <= N_wp - 2``), or the waypoint passed (``k >= N_wp``) with at least
+    :data:`MIN_PASSED_NODES` intervals left (``RendezvousScenario``)."""
+    n_rem = n_nodes - k
+    return 0 < k and (n_rem >= waypoint_offset + 2 or MIN_PASSED_NODES <= n_rem <= waypoint_offset)
 
-    Node 0 flies the open-loop plan, solved from the instance's own (true, known) initial
-    state. ``K >= N - waypoint_offset - 1`` gives no re-plan: the open-loop plan is flown.
+
+def replan_nodes(n_nodes: int, waypoint_offset: int, replan_every: int) -> list[int]:
+    """Nodes of the re-plans: ``K, 2K, ...`` up to ``N - MIN_PASSED_NODES`` (= N - 2), through
+    the final approach after the waypoint node ``N_wp = N - waypoint_offset``.
+
+    The node ``N_wp - 1`` poses no problem (:func:`poses_problem`: one impulse cannot reach
+    the waypoint hold); a re-plan due there happens at ``N_wp - 2`` instead. Node 0 flies the
+    open-loop plan, solved from the instance's own (true, known) initial state.
+    ``K > N - 2`` gives no re-plan: the open-loop plan is flown.
     """
-    last = n_nodes - waypoint_offset - 2
-    nodes = list(range(replan_every, last + 1, replan_every))
-    if nodes and nodes[-1] != last:
-        nodes.append(last)
+    nodes: list[int] = []
+    for k in range(replan_every, n_nodes - MIN_PASSED_NODES + 1, replan_every):
+        if not poses_problem(n_nodes, waypoint_offset, k):
+            k -= 1
+        if poses_problem(n_nodes, waypoint_offset, k) and k not in nodes:
+            nodes.append(k)
     return nodes
 
 
