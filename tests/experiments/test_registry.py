@@ -12,6 +12,7 @@ PAPER_ITEMS = {
     "robust-warmstart": "Figs. 5-6",
     "robust-trajectory": "Figs. 7-8",
     "robust-posthoc": "Figs. 9-10",
+    "mpc-rendezvous": "closed-loop MPC: warm-start gains",
     "tscvx-training": "Table 3",
     "tscvx-solve-time": "Fig. 2",
     "tscvx-trajectory": "Fig. 3",

@@ -176,6 +176,20 @@ EXPERIMENTS: dict[str, Experiment] = {
             depends_on=(*_ROBUST_STUDY, "src/scpformer/experiments/robust_posthoc.py"),
         ),
         Experiment(
+            name="mpc-rendezvous",
+            reproduces="Celestini et al. (RA-L 2024), closed-loop MPC: warm-start gains",
+            summary="closed-loop rendezvous Monte Carlo: cold vs previous-plan re-plans",
+            module="scpformer.experiments.mpc_rendezvous",
+            default_n=40,
+            models="none (the learned start cannot start mid-horizon)",
+            depends_on=(
+                "src/scpformer/experiments/mpc_rendezvous.py",
+                "src/scpformer/guidance",
+                *_RENDEZVOUS_FAMILY,
+                "src/scpformer/scp",
+            ),
+        ),
+        Experiment(
             name="tscvx-training",
             reproduces=f"{_TSCVX} Table 3",
             summary="T-SCvx networks: losses, test accuracy vs all-zeros/ones, precision/recall",
