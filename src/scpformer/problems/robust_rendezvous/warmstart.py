@@ -13,6 +13,7 @@ from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.safety import trajectory_violations
 from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig, check_mode
 from scpformer.problems.robust_rendezvous.tpbvp import solve_tpbvp
+from scpformer.scp.solution import Solution
 from scpformer.scp.warmstart import WarmStartResult, check_instance
 
 
@@ -33,8 +34,14 @@ class RobustTpbvpWarmStart:
         check_instance(instance, RobustInstance, "robust-rendezvous")
         start = time.perf_counter()
         solution = solve_tpbvp(instance, self.config)
-        ctg = math.nan
-        if solution.trajectory is not None:
-            z = solution.trajectory
-            ctg = float(trajectory_violations(instance, z.x, z.u, self.mode)[0])
+        ctg = initial_budget(instance, solution, self.mode)
         return convex_result("tpbvp", solution, ctg, start)
+
+
+def initial_budget(instance: RobustInstance, solution: Solution, mode: str) -> float:
+    """``C(t_1)`` of ``solution``'s trajectory: its Eq. 7 constraint-violation budget under
+    ``mode`` (``chance`` or ``deterministic``), NaN without a trajectory."""
+    if solution.trajectory is None:
+        return math.nan
+    z = solution.trajectory
+    return float(trajectory_violations(instance, z.x, z.u, check_mode(mode))[0])
