@@ -1,4 +1,5 @@
-"""``scpformer simulate rendezvous``: closed-loop runs into a folder (:mod:`scpformer.guidance`)."""
+"""``scpformer simulate rendezvous|pdg6dof``: closed-loop runs into a folder
+(:mod:`scpformer.guidance`)."""
 
 from __future__ import annotations
 
@@ -21,21 +22,32 @@ def run_simulate(args: argparse.Namespace) -> int:
     )
 
     folder = check_output_folder(args.out, "--out")
-    config = MPCConfig(
-        replan_every=args.replan_every,
-        warmstart=args.warmstart,
-        compare=(args.compare,) if args.compare else (),
-        errors=ErrorModels() if args.errors == "table2" else ErrorModels.none(),
-    )
+    family = getattr(args, "family", "rendezvous")
+    if family == "pdg6dof":
+        from scpformer.guidance import pdg6dof_mpc as pdg
+
+        config: Any = pdg.MPCConfig(
+            replan_every=args.replan_every,
+            warmstart=args.warmstart,
+            compare=(args.compare,) if args.compare else (),
+            errors=pdg.ErrorModels() if args.errors == "default" else pdg.ErrorModels.none(),
+        )
+    else:
+        config = MPCConfig(
+            replan_every=args.replan_every,
+            warmstart=args.warmstart,
+            compare=(args.compare,) if args.compare else (),
+            errors=ErrorModels() if args.errors == "table2" else ErrorModels.none(),
+        )
     campaign = Campaign(runs=args.runs, seed=args.seed, instances=args.instances, config=config)
     bar = _Bar(args.quiet)
     try:
         rows = run_campaign(campaign, folder, on_start=bar.start, on_run=bar.update)
     finally:
         bar.close()
-    print(summary_text(summarize(rows, folder)))
+    print(summary_text(summarize(rows, folder, campaign.family)))
     if not args.no_figure and rows:
-        path = plot_campaign(rows, folder, folder / "simulate.png")
+        path = plot_campaign(rows, folder, folder / "simulate.png", campaign.family)
         print(f"figure: {path}")
     print(f"runs: {folder / 'runs.csv'}")
     return 0

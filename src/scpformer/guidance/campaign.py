@@ -1,14 +1,20 @@
-"""Seeded closed-loop runs into a folder: the engine of ``scpformer simulate rendezvous``.
+"""Seeded closed-loop runs into a folder: the engine of ``scpformer simulate FAMILY``.
 
-``DIR/runs.csv`` holds one row per finished run (:data:`COLUMNS`), rewritten atomically after
-each run; ``DIR/run-NNNN.npz`` the run's flown states, impulses and re-plans
-(:meth:`~scpformer.guidance.rendezvous_mpc.ClosedLoopResult.arrays`); ``DIR/settings.json``
-the settings the folder was started with. A rerun with the same settings skips the runs
-already in the CSV; other settings are refused (the rows would not be comparable).
+The families (:data:`FAMILIES`): ``rendezvous`` (:mod:`.rendezvous_mpc`) and ``pdg6dof``
+(:mod:`.pdg6dof_mpc`); a :class:`Campaign` flies the family of its ``config`` (the family's
+``MPCConfig``) through the family's ``fly`` and ``open_loop_plan``.
+
+``DIR/runs.csv`` holds one row per finished run (:data:`COLUMNS`, :data:`PDG_COLUMNS`),
+rewritten atomically after each run; ``DIR/run-NNNN.npz`` the run's flown states, controls
+and re-plans (the family's ``ClosedLoopResult.arrays``); ``DIR/settings.json`` the settings
+the folder was started with. A rerun with the same settings skips the runs already in the
+CSV; other settings are refused (the rows would not be comparable).
 
 Run ``r`` of seed ``S`` flies with the error seed drawn from ``SeedSequence([S, r])``: two
 warm starts run with the same ``S`` see the same errors run by run (common random numbers),
-and, with ``instances="sampled"``, the same instance (Table 1 sampler, seed ``[S, r]``).
+and the same instance: with ``instances="sampled"`` one of the family's sampler (seed
+``[S, r]``); for ``pdg6dof`` with ``instances="default"`` the default instance with the
+initial-state dispersion of the errors drawn from seed ``[S, r]``.
 """
 
 from __future__ import annotations
@@ -25,7 +31,9 @@ from typing import Any
 import numpy as np
 
 from scpformer.files import atomic_path, save_npz_atomic, write_text_atomic
+from scpformer.guidance import pdg6dof_mpc as pdg
 from scpformer.guidance.rendezvous_mpc import MPCConfig, fly, open_loop_plan
+from scpformer.pdg6dof import PDGInstance
 from scpformer.rendezvous import RendezvousInstance, sample_instances
 from scpformer.validation import check_int
 
@@ -36,15 +44,47 @@ COLUMNS = (
     "replan_time_median_s", "replan_time_p99_s", "replan_period_s",
     "replan_iterations_median", "violations", "keep_out_violation", "cone_violation_m",
 )  # fmt: skip
+#: Columns of ``runs.csv`` of the landing; units: U_L, U_L/U_T, deg, U_M (propellant), U_T
+#: (``replan_period_s``, the median time between re-plans in the nondimensional time of
+#: Table 1, to compare with the re-plans' wall time in seconds), seconds (wall times).
+PDG_COLUMNS = (
+    "run", "seed", "warmstart", "success", "terminal_position_error",
+    "terminal_velocity_error", "terminal_tilt_deg", "terminal_rate_deg", "fuel",
+    "open_loop_fuel", "replans", "replans_failed", "replan_time_median_s",
+    "replan_time_p99_s", "replan_period_s", "replan_iterations_median", "tscvx_fallbacks",
+    "violations", "flight_time",
+)  # fmt: skip
 INSTANCES = ("default", "sampled")
 #: Cost difference below which two re-plans tie [m/s]: the SCP's cost tolerance J_tol of
 #: Eq. 19 (Table 1, 1e-6 m/s).
 TIE_M_S = 1e-6
+#: The families a campaign flies, by the type of its config.
+FAMILIES = ("rendezvous", "pdg6dof")
+
+
+def family_of(config: Any) -> str:
+    """The family whose ``MPCConfig`` ``config`` is; ``ValueError`` for anything else."""
+    if isinstance(config, MPCConfig):
+        return "rendezvous"
+    if isinstance(config, pdg.MPCConfig):
+        return "pdg6dof"
+    raise ValueError(f"config must be an MPCConfig (rendezvous or pdg6dof), got "
+                     f"{type(config).__name__}")  # fmt: skip
+
+
+def columns(family: str) -> tuple[str, ...]:
+    """The columns of ``runs.csv`` of ``family``."""
+    return PDG_COLUMNS if family == "pdg6dof" else COLUMNS
+
+
+def tie(family: str) -> float:
+    """Cost difference below which two re-plans tie, in the family's cost unit."""
+    return pdg.TIE_U_M if family == "pdg6dof" else TIE_M_S
 
 
 @dataclass(frozen=True, kw_only=True)
 class Campaign:
-    """What ``scpformer simulate rendezvous`` runs.
+    """What ``scpformer simulate FAMILY`` runs (the family of ``config``).
 
     Attributes
     ----------
@@ -53,10 +93,12 @@ class Campaign:
     seed
         Seed of the error draws (and of the sampled instances), >= 0.
     instances
-        ``"default"``: every run flies the default instance (Table 1, the ART paper's
-        nominal case); ``"sampled"``: run ``r`` flies an instance of the Table 1 sampler.
+        ``"default"``: every run flies the default instance (rendezvous: Table 1, the ART
+        paper's nominal case; pdg6dof: Table 1 of the T-SCvx paper with the run's initial-state
+        dispersion); ``"sampled"``: run ``r`` flies an instance of the family's sampler.
     config
-        The loop's configuration (warm start, re-planning period, errors).
+        The loop's configuration (warm start, re-planning period, errors): the
+        ``MPCConfig`` of :mod:`.rendezvous_mpc` or of :mod:`.pdg6dof_mpc`.
     """
 
     runs: int
@@ -70,12 +112,28 @@ class Campaign:
         if self.instances not in INSTANCES:
             raise ValueError(f"instances must be one of {', '.join(INSTANCES)}, "
                              f"got {self.instances!r}")  # fmt: skip
-        if not isinstance(self.config, MPCConfig):
-            raise ValueError(f"config must be an MPCConfig, got {type(self.config).__name__}")
+        family_of(self.config)
+
+    @property
+    def family(self) -> str:
+        return family_of(self.config)
 
     def settings(self) -> dict[str, Any]:
         """What must match for a folder to be resumed (the run count may grow)."""
         cfg = self.config
+        if self.family == "pdg6dof":
+            errors = cfg.errors
+            return {
+                "family": "pdg6dof", "seed": self.seed, "instances": self.instances,
+                "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,
+                "min_remaining_time": cfg.min_remaining_time, "compare": list(cfg.compare),
+                "errors": {
+                    name: getattr(errors, name) for name in (
+                        "thrust_magnitude", "pointing_deg", "mass_fraction",
+                        "inertia_fraction", "aero_fraction")
+                } | {"navigation": errors.navigation is not None,
+                     "dispersion": errors.dispersion is not None},
+            }  # fmt: skip
         return {
             "family": "rendezvous", "seed": self.seed, "instances": self.instances,
             "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,
@@ -89,11 +147,25 @@ class Campaign:
     def run_seed(self, run: int) -> int:
         return int(np.random.SeedSequence([self.seed, run]).generate_state(1)[0])
 
-    def instance(self, run: int) -> RendezvousInstance:
+    def instance(self, run: int) -> Any:
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, run]))
+        if self.family == "pdg6dof":
+            if self.instances == "default":
+                return pdg.dispersed_instance(PDGInstance(), self.config.errors.dispersion, rng)
+            return pdg.sampled_instance(rng)
         if self.instances == "default":
             return RendezvousInstance()
-        rng = np.random.default_rng(np.random.SeedSequence([self.seed, run]))
         return sample_instances(rng, 1)[0]
+
+    def open_loop_plan(self, instance: Any) -> Any:
+        if self.family == "pdg6dof":
+            return pdg.open_loop_plan(instance, self.config)
+        return open_loop_plan(instance, self.config)
+
+    def fly(self, instance: Any, seed: int, plan: Any) -> Any:
+        if self.family == "pdg6dof":
+            return pdg.fly(instance, self.config, seed=seed, open_loop=plan)
+        return fly(instance, self.config, seed=seed, open_loop=plan)
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:
@@ -104,9 +176,10 @@ def read_rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-def _csv_text(rows: Iterable[dict[str, Any]]) -> str:
+def _csv_text(rows: Iterable[dict[str, Any]], fieldnames: tuple[str, ...] = COLUMNS) -> str:
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
+    writer = csv.DictWriter(buf, fieldnames=fieldnames, extrasaction="ignore",
+                            lineterminator="\n")  # fmt: skip
     writer.writeheader()
     for row in rows:
         writer.writerow({k: _cell(v) for k, v in row.items()})
@@ -160,18 +233,18 @@ def run_campaign(
     todo = [r for r in range(campaign.runs) if r not in done]
     if on_start is not None:
         on_start(campaign.runs - len(todo), campaign.runs)
-    plans: dict[RendezvousInstance, Any] = {}
+    plans: dict[Any, Any] = {}
     for run in todo:
         instance = campaign.instance(run)
         if instance not in plans:
-            plans = {instance: open_loop_plan(instance, campaign.config)}
+            plans = {instance: campaign.open_loop_plan(instance)}
         seed = campaign.run_seed(run)
-        result = fly(instance, campaign.config, seed=seed, open_loop=plans[instance])
+        result = campaign.fly(instance, seed, plans[instance])
         save_npz_atomic(folder / f"run-{run:04d}.npz", result.arrays())
         row = {"run": run, "seed": seed, **result.summary()}
         rows.append({k: str(_cell(v)) for k, v in row.items()})
         rows.sort(key=lambda r: int(r["run"]))
-        write_text_atomic(csv_path, _csv_text(rows))
+        write_text_atomic(csv_path, _csv_text(rows, columns(campaign.family)))
         if on_run is not None:
             on_run(row)
     return [r for r in rows if int(r["run"]) < campaign.runs]
@@ -187,7 +260,7 @@ def _truthy(text: str) -> bool:
 def _replan_tables(folder: Path, runs: Iterable[int]) -> dict[str, np.ndarray]:
     keys = ("replan_wall_s", "replan_iterations", "replan_cost", "replan_node",
             "compare_wall_s", "compare_iterations", "compare_cost", "compare_node",
-            "compare_warmstart")  # fmt: skip
+            "compare_warmstart", "replan_accepted", "compare_accepted")  # fmt: skip
     parts: dict[str, list[np.ndarray]] = {k: [] for k in keys}
     for run in runs:
         path = folder / f"run-{run:04d}.npz"
@@ -195,18 +268,24 @@ def _replan_tables(folder: Path, runs: Iterable[int]) -> dict[str, np.ndarray]:
             continue
         with np.load(path) as data:
             for k in keys:
-                parts[k].append(np.asarray(data[k]))
+                if k in data:
+                    parts[k].append(np.asarray(data[k]))
     return {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
 
 
-def summarize(rows: list[dict[str, str]], folder: str | Path) -> dict[str, Any]:
-    """Success rate, median delta-v vs open loop, re-plan iterations and wall times (median,
-    p99 over every re-plan of every run) and, with comparison solves, the per-re-plan
-    win/tie/loss of the flown warm start against each compared one (cost, tie within
-    :data:`TIE_M_S`) with their iterations and times."""
+def summarize(
+    rows: list[dict[str, str]], folder: str | Path, family: str = "rendezvous"
+) -> dict[str, Any]:
+    """Success rate, median fuel (delta-v; propellant for ``pdg6dof``) vs open loop, re-plan
+    iterations and wall times (median, p99 over every re-plan of every run) and, with
+    comparison solves, the per-re-plan win/tie/loss of the flown warm start against each
+    compared one (cost, tie within :func:`tie`) with their iterations and times. For
+    ``pdg6dof`` a re-plan that was not accepted (not converged, or not verified) counts as
+    failed in the comparison, whatever its cost."""
     folder = Path(folder)
     if not rows:
         return {"runs": 0}
+    tie_cost = tie(family)
     fuel = np.array([float(r["fuel"]) for r in rows])
     open_fuel = np.array([float(r["open_loop_fuel"]) for r in rows])
     tables = _replan_tables(folder, (int(r["run"]) for r in rows))
@@ -232,7 +311,13 @@ def summarize(rows: list[dict[str, str]], folder: str | Path) -> dict[str, Any]:
         "replan_time_p99_s": float(np.percentile(wall, 99)) if wall.size else math.nan,
         "replan_period_s": float(np.median([float(r["replan_period_s"]) for r in rows])),
         "violations": int(sum(int(r["violations"]) for r in rows)),
+        "family": family,
     }
+    if family == "pdg6dof":
+        for key in ("terminal_tilt_deg", "terminal_rate_deg"):
+            out[f"{key}_median"] = float(np.median([float(r[key]) for r in rows]))
+        out["tscvx_fallbacks"] = int(sum(int(r["tscvx_fallbacks"]) for r in rows))
+        out["failed_runs"] = [int(r["run"]) for r in rows if not _truthy(r["success"])]
     names = tables["compare_warmstart"]
     for name in sorted(set(names.tolist())):
         sel = names == name
@@ -241,12 +326,15 @@ def summarize(rows: list[dict[str, str]], folder: str | Path) -> dict[str, Any]:
         flown = tables["replan_cost"]
         if flown.size != cost.size:
             continue
+        if family == "pdg6dof" and tables["replan_accepted"].size == flown.size:
+            flown = np.where(tables["replan_accepted"], flown, np.nan)
+            cost = np.where(tables["compare_accepted"][sel], cost, np.nan)
         ok = np.isfinite(flown) & np.isfinite(cost)
         diff = flown[ok] - cost[ok]
         out[f"vs_{name}"] = {
-            "win": int((diff < -TIE_M_S).sum()),
-            "tie": int((np.abs(diff) <= TIE_M_S).sum()),
-            "loss": int((diff > TIE_M_S).sum()),
+            "win": int((diff < -tie_cost).sum()),
+            "tie": int((np.abs(diff) <= tie_cost).sum()),
+            "loss": int((diff > tie_cost).sum()),
             "failed_flown": int((~np.isfinite(flown)).sum()),
             "failed_other": int((~np.isfinite(cost)).sum()),
             "iterations_median": float(np.median(tables["compare_iterations"][sel])),
@@ -262,6 +350,8 @@ def summary_text(summary: dict[str, Any]) -> str:
     if not summary.get("runs"):
         return "no runs"
     s = summary
+    if s.get("family") == "pdg6dof":
+        return _pdg_summary_text(s)
     lines = [
         f"{s['runs']} runs, warm start {s['warmstart']}: success {100 * s['success_rate']:.0f}%",
         f"delta-v median {1e3 * s['fuel_median']:.2f} mm/s vs open loop "
@@ -285,9 +375,48 @@ def summary_text(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def plot_campaign(rows: list[dict[str, str]], folder: str | Path, path: str | Path) -> Path:
-    """Closed-loop trajectories (T-R and T-N planes) vs the open-loop plan, and the histogram
-    of re-plan wall times against the re-planning period; written atomically to ``path``."""
+def _comparison_lines(s: dict[str, Any]) -> list[str]:
+    lines = []
+    for key, value in s.items():
+        if key.startswith("vs_"):
+            lines.append(
+                f"{s['warmstart']} vs {key[3:]} per re-plan (cost): {value['win']} win, "
+                f"{value['tie']} tie, {value['loss']} loss ({value['failed_flown']} failed "
+                f"{s['warmstart']}, {value['failed_other']} failed {key[3:]}); {key[3:]}: "
+                f"iterations median {value['iterations_median']:g}, p99 "
+                f"{value['iterations_p99']:g}, wall time median {value['time_median_s']:.3f} s, "
+                f"p99 {value['time_p99_s']:.3f} s"
+            )
+    return lines
+
+
+def _pdg_summary_text(s: dict[str, Any]) -> str:
+    lines = [
+        f"{s['runs']} runs, warm start {s['warmstart']}: success {100 * s['success_rate']:.0f}%"
+        + (f" (failed runs: {', '.join(map(str, s['failed_runs']))})" if s["failed_runs"]
+           else ""),
+        f"propellant median {s['fuel_median']:.4f} U_M vs open loop "
+        f"{s['open_loop_fuel_median']:.4f} U_M (ratio median {s['fuel_ratio_median']:.4f})",
+        f"touchdown error median {s['terminal_position_error_median']:.4f} U_L, "
+        f"{s['terminal_velocity_error_median']:.4f} U_L/U_T, tilt "
+        f"{s['terminal_tilt_deg_median']:.2f} deg, rate {s['terminal_rate_deg_median']:.2f} "
+        "deg/U_T",
+        f"{s['replans']} re-plans ({s['replans_failed']} failed, {s['tscvx_fallbacks']} T-SCvx "
+        f"fallbacks to cold SCvx): iterations median {s['replan_iterations_median']:g}, p99 "
+        f"{s['replan_iterations_p99']:g}; wall time median {s['replan_time_median_s']:.3f} s, "
+        f"p99 {s['replan_time_p99_s']:.3f} s (re-planning period {s['replan_period_s']:.3f} "
+        "U_T, median over runs)",
+        f"constraint violations along the flown trajectories: {s['violations']} samples",
+    ]  # fmt: skip
+    return "\n".join(lines + _comparison_lines(s))
+
+
+def plot_campaign(
+    rows: list[dict[str, str]], folder: str | Path, path: str | Path, family: str = "rendezvous"
+) -> Path:
+    """Closed-loop trajectories (rendezvous: T-R and T-N planes; pdg6dof: altitude against
+    horizontal distance and tilt against time) vs the open-loop plan, and the histogram of
+    re-plan wall times against the re-planning period; written atomically to ``path``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -295,6 +424,10 @@ def plot_campaign(rows: list[dict[str, str]], folder: str | Path, path: str | Pa
     fig = Figure(figsize=(15.0, 4.8))
     FigureCanvasAgg(fig)
     ax_tr, ax_tn, ax_h = (fig.add_subplot(1, 3, i) for i in (1, 2, 3))
+    if family == "pdg6dof":
+        _plot_pdg(rows, folder, ax_tr, ax_tn)
+        _plot_wall_times(rows, folder, ax_h, "U_T")
+        return _save(fig, path)
     planned = False
     for row in rows:
         path_run = folder / f"run-{int(row['run']):04d}.npz"
@@ -317,17 +450,57 @@ def plot_campaign(rows: list[dict[str, str]], folder: str | Path, path: str | Pa
         ax.grid(alpha=0.3)
     ax_tr.legend(loc="best", fontsize=8)
     ax_tr.set_title("flown (blue: success, red: failure)")
+    _plot_wall_times(rows, folder, ax_h, "s")
+    return _save(fig, path)
+
+
+def _plot_wall_times(rows: list[dict[str, str]], folder: Path, ax_h: Any, unit: str) -> None:
     tables = _replan_tables(folder, (int(r["run"]) for r in rows))
     wall = tables["replan_wall_s"]
     if wall.size:
         period = float(np.median([float(r["replan_period_s"]) for r in rows]))
         bins = np.logspace(np.log10(max(wall.min(), 1e-3)), np.log10(max(period, wall.max())), 40)
         ax_h.hist(wall, bins=bins, color="C0")
-        ax_h.axvline(period, color="C3", label=f"re-planning period {period:.0f} s")
+        label = f"{period:.0f} s" if unit == "s" else f"{period:.3f} {unit}"
+        ax_h.axvline(period, color="C3", label=f"re-planning period {label}")
         ax_h.set_xscale("log")
         ax_h.legend(loc="best", fontsize=8)
     ax_h.set_xlabel("re-plan wall time [s]")
     ax_h.set_ylabel("re-plans")
+
+
+def _plot_pdg(rows: list[dict[str, str]], folder: Path, ax_alt: Any, ax_tilt: Any) -> None:
+    planned = False
+    for row in rows:
+        path_run = folder / f"run-{int(row['run']):04d}.npz"
+        if not path_run.exists():
+            continue
+        with np.load(path_run) as data:
+            x, t = np.asarray(data["x"]), np.asarray(data["t"])
+            if not planned:  # the first run's open-loop plan
+                plan, t_plan = np.asarray(data["open_loop_x"]), np.asarray(data["open_loop_t"])
+                ax_alt.plot(np.linalg.norm(plan[:, 1:3], axis=1), plan[:, 0], "k--", lw=1.5,
+                            label="open-loop plan (run 0)")  # fmt: skip
+                ax_tilt.plot(t_plan, _tilt_deg(plan), "k--", lw=1.5)
+                planned = True
+        color = "C0" if _truthy(row["success"]) else "C3"
+        ax_alt.plot(np.linalg.norm(x[:, 1:3], axis=1), x[:, 0], lw=0.7, alpha=0.6, color=color)
+        ax_tilt.plot(t, _tilt_deg(x), lw=0.7, alpha=0.6, color=color)
+    ax_alt.set_xlabel("horizontal distance [U_L]")
+    ax_alt.set_ylabel("altitude [U_L]")
+    ax_alt.set_title("flown (blue: success, red: failure)")
+    ax_alt.legend(loc="best", fontsize=8)
+    ax_tilt.set_xlabel("t [U_T]")
+    ax_tilt.set_ylabel("tilt [deg]")
+    for ax in (ax_alt, ax_tilt):
+        ax.grid(alpha=0.3)
+
+
+def _tilt_deg(x: np.ndarray) -> np.ndarray:
+    return np.degrees(np.arccos(np.clip(1.0 - 2.0 * (x[:, 8] ** 2 + x[:, 9] ** 2), -1.0, 1.0)))
+
+
+def _save(fig: Any, path: str | Path) -> Path:
     fig.tight_layout()
     path = Path(path)
     with atomic_path(path, suffix=path.suffix or ".png") as tmp:

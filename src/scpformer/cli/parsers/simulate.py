@@ -1,4 +1,4 @@
-"""Flags of ``scpformer simulate rendezvous`` (handler: :mod:`scpformer.cli.simulate`).
+"""Flags of ``scpformer simulate rendezvous|pdg6dof`` (handler: :mod:`scpformer.cli.simulate`).
 
 Built without importing the library: the choices are spelled here and checked against
 :mod:`scpformer.guidance` by the tests.
@@ -16,10 +16,12 @@ from scpformer.cli.dataclass_args import with_default
 WARMSTARTS = ("cold", "previous")  # scpformer.guidance.WARMSTARTS
 INSTANCES = ("default", "sampled")  # scpformer.guidance.campaign.INSTANCES
 ERRORS = ("table2", "none")
+PDG_WARMSTARTS = ("cold", "previous", "tscvx")  # scpformer.guidance.pdg6dof_mpc.WARMSTARTS
+PDG_ERRORS = ("default", "none")
 
 
 def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
-    """Register ``simulate rendezvous`` on the top-level subparsers."""
+    """Register ``simulate rendezvous`` and ``simulate pdg6dof`` on the top-level subparsers."""
     simulate = commands.add_parser("simulate", help=command_help("", "simulate"))
     families = simulate.add_subparsers(dest="family", required=True, metavar="FAMILY")
     parser = families.add_parser(
@@ -74,6 +76,75 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
         choices=ERRORS,
         default="table2",
         help=with_default("navigation, actuation and process errors: table2 or none", "table2"),
+    )
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    parser.add_argument("--no-figure", action="store_true", help="do not draw DIR/simulate.png")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(handler=lazy_handler("scpformer.cli.simulate:run_simulate"))
+    _add_pdg6dof(families)
+
+
+def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
+    parser = families.add_parser(
+        "pdg6dof",
+        help="re-planned free-final-time SCvx of the 6-DoF Mars landing through the truth model",
+        description=(
+            "Fly the 6-DoF powered descent in closed loop: every K intervals of the current "
+            "plan, re-solve the free-final-time problem from a navigation estimate and apply "
+            "the plan's first-order-hold thrust through the truth model with thrust magnitude "
+            "and pointing errors, mass, inertia and aerodynamic mismatch and an initial-state "
+            "dispersion per run (scpformer.guidance.pdg6dof_mpc). Writes DIR/runs.csv (one row "
+            "per run; a rerun resumes), DIR/run-NNNN.npz and DIR/simulate.png."
+        ),
+    )
+    parser.add_argument(
+        "--warmstart",
+        choices=PDG_WARMSTARTS,
+        default="cold",
+        help=with_default(
+            "warm start of each re-plan: cold (SCvx from the cubic profile), previous (SCvx "
+            "from the last accepted plan shifted in time and re-timed) or tscvx (T-SCvx with "
+            "the shipped networks at the current state)",
+            "cold",
+        ),
+    )
+    parser.add_argument(
+        "--compare",
+        choices=PDG_WARMSTARTS,
+        default=None,
+        help="also solve each re-plan with this warm start, for comparison only (not flown)",
+    )
+    parser.add_argument("--replan-every", type=positive, default=5, metavar="K",
+                        help=with_default("intervals of the current plan flown between "
+                                          "re-plans", 5))  # fmt: skip
+    parser.add_argument("--runs", type=positive, default=20, metavar="N",
+                        help=with_default("number of runs", 20))  # fmt: skip
+    parser.add_argument(
+        "--seed",
+        type=count,
+        default=0,
+        metavar="S",
+        help=with_default("seed of the errors, dispersions (and sampled instances)", 0),
+    )
+    parser.add_argument(
+        "--instances",
+        choices=INSTANCES,
+        default="default",
+        help=with_default(
+            "default: the Table 1 instance with a dispersed initial state per run; sampled: "
+            "one instance of the nominal sampler per run",
+            "default",
+        ),
+    )
+    parser.add_argument(
+        "--errors",
+        choices=PDG_ERRORS,
+        default="default",
+        help=with_default(
+            "default: thrust 1%% and 0.1 deg, mass 1%%, inertia 5%%, aerodynamic coefficient "
+            "20%%, navigation and initial dispersion (1 sigma); none: no error",
+            "default",
+        ),
     )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     parser.add_argument("--no-figure", action="store_true", help="do not draw DIR/simulate.png")
