@@ -69,17 +69,17 @@ def test_a_remaining_problem_after_the_waypoint_is_solved_and_verified(plan, k):
     problem: the re-posed problem finds its cost, and its replay passes the checks."""
     instance = remaining(plan, k)
     sc = instance.scenario
-    assert sc.waypoint_passed and (sc.n_keep_out, sc.cone_start) == (0, 0)
+    assert sc.waypoint_passed and (sc.n_keep_out, sc.cone_start) == (0, 1)
     sol = solve(instance)
     assert sol.status is Status.CONVERGED and sol.verification.passed, sol.message
     tail = float(np.linalg.norm(plan.trajectory.u[k:], axis=1).sum())
     assert sol.cost == pytest.approx(tail, rel=1e-5, abs=J_TOL)
     assert sol.iterations <= 2  # no keep-out zone: Problem 2 again, solved by its first cut
     rtn = linear_model(instance).rtn(sol.trajectory.x)
-    assert cone_slack(rtn[: sc.n_nodes], sc).min() >= -1e-6  # the cone from node k on
+    assert cone_slack(rtn[1 : sc.n_nodes], sc).min() >= -1e-6  # the cone after node k
     assert np.linalg.norm(rtn[-1] - np.r_[sc.dock_port_m, 0, 0, 0]) < 1e-6
-    assert constraint_index(sc) == [("approach_cone", j) for j in range(sc.n_nodes)]
-    assert tight_flags(rtn, sc, 1e-5).shape == (sc.n_nodes,)
+    assert constraint_index(sc) == [("approach_cone", j) for j in range(1, sc.n_nodes)]
+    assert tight_flags(rtn, sc, 1e-5).shape == (sc.n_nodes - 1,)
     assert not constraint_to_go(rtn, sc).any()  # no keep-out node counts
     checked = sol.verification.node_violations
     assert checked["waypoint_position_m"] == 0.0 and checked["keep_out"] == 0.0
@@ -115,3 +115,24 @@ def test_every_passed_waypoint_shares_one_compiled_structure():
     assert compiled_subproblem("convex", 7, -3) is compiled_subproblem("convex", 7, 0)
     with pytest.raises(ValueError, match="n_waypoint must lie in"):
         RendezvousSubproblem("scp", 1, 0)
+
+
+def test_an_estimate_just_outside_the_cone_still_poses_a_feasible_final_approach(plan):
+    """The current state is given: no cone row holds it (navigation errors put estimates
+    ~0.3 m outside the cone near the port, measured in closed loop); the plan re-enters the
+    cone from the next node on."""
+    instance = remaining(plan, 95)
+    sc = instance.scenario
+    model = linear_model(instance)
+    rtn0 = instance.rtn0_linear
+    lateral = np.array([1.0, 0.0, 0.0])  # R, across the approach axis (T)
+    d = rtn0[:3] - sc.cone_vertex_m
+    radius = np.tan(np.radians(sc.cone_half_angle_deg)) * d[1]
+    shifted = rtn0.copy()
+    shifted[:3] += lateral * (radius - d[0] + 0.3)  # 0.3 m outside the cone
+    assert cone_slack(shifted, sc) < 0.0
+    outside = dataclasses.replace(instance, roe0_m=tuple(np.linalg.solve(model.Psi[0], shifted)))
+    sol = solve(outside)
+    assert sol.status is Status.CONVERGED and sol.verification.passed, sol.message
+    rtn = linear_model(outside).rtn(sol.trajectory.x)
+    assert cone_slack(rtn[1 : sc.n_nodes], sc).min() >= -1e-6

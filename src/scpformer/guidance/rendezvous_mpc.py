@@ -18,7 +18,8 @@ instance. The loop then flies it through the truth model and re-plans on board:
    chosen warm start; the plan is checked like any solution (its nonlinear replay,
    :mod:`scpformer.problems.rendezvous.verification`). From the waypoint node on
    (``k >= N_wp``) the remaining problem is the final approach: the waypoint is passed, the
-   approach cone holds from node ``k`` on and the keep-out zone no longer applies
+   approach cone holds from node ``k + 1`` on (the estimate at ``k`` is given and may lie
+   just outside it) and the keep-out zone no longer applies
    (:attr:`~scpformer.problems.rendezvous.scenario.RendezvousScenario.waypoint_passed`);
 3. the plan's next ``K`` impulses are applied through the truth model (two-body + J2 of
    :func:`scpformer.dynamics.truth.propagate_relative`, as the verification and the robust

@@ -24,8 +24,10 @@ applies at nodes ``0 .. n_waypoint`` and the approach cone at nodes ``n_waypoint
 A remaining-horizon problem of closed-loop guidance may start at or after the waypoint node
 (``waypoint_offset >= N``, ``n_waypoint <= 0``, :attr:`RendezvousScenario.waypoint_passed`):
 it has no waypoint condition and no keep-out constraint, and the cone applies at nodes
-``0 .. N-1``. ``n_waypoint = 1`` is refused (one impulse cannot reach the waypoint's six
-conditions), as is a passed waypoint with fewer than two impulses.
+``1 .. N-1`` (node 0's position is given: a row there could only make the problem infeasible,
+when a navigation estimate lies just outside the cone). ``n_waypoint = 1`` is refused (one
+impulse cannot reach the waypoint's six conditions), as is a passed waypoint with fewer than
+two impulses.
 """
 
 from __future__ import annotations
@@ -246,9 +248,10 @@ class RendezvousScenario:
 
         Such a scenario poses the remaining horizon of the final approach (closed-loop
         re-planning at or after the waypoint node, :mod:`scpformer.guidance.rendezvous_mpc`):
-        no waypoint condition, the approach cone (Eq. 13) at every node ``0 .. N-1`` and no
-        keep-out constraint (every node after the waypoint lies in the approach corridor,
-        inside the keep-out ellipsoid, which no longer applies there).
+        no waypoint condition, the approach cone (Eq. 13) at every node the plan moves,
+        ``1 .. N-1`` (:attr:`cone_start`), and no keep-out constraint (every node after the
+        waypoint lies in the approach corridor, inside the keep-out ellipsoid, which no longer
+        applies there).
         """
         return self.n_waypoint <= 0
 
@@ -259,8 +262,13 @@ class RendezvousScenario:
 
     @property
     def cone_start(self) -> int:
-        """First node of the approach cone: ``n_waypoint``, or 0 once the waypoint is passed."""
-        return max(self.n_waypoint, 0)
+        """First node of the approach cone: ``n_waypoint``, or 1 once the waypoint is passed.
+
+        Once passed, node 0 is the current state (a navigation estimate), which no impulse
+        moves: like the keep-out check of an initial state, a cone row there could only make
+        the problem infeasible (measured: estimates 0.3 m outside the cone near the port).
+        """
+        return 1 if self.waypoint_passed else self.n_waypoint
 
     @property
     def waypoint_m(self) -> np.ndarray:

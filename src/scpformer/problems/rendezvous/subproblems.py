@@ -18,9 +18,9 @@ Notation: nodes ``k = 0 .. N`` (see :mod:`.scenario`), state ``x_k = a dalpha(t_
 
 ``n_waypoint <= 0`` poses the remaining horizon after the waypoint (closed-loop re-planning in
 the final approach, :attr:`~.scenario.RendezvousScenario.waypoint_passed`): no waypoint row,
-the cone for ``k = 0 .. N-1``, and no keep-out cut or trust region (``"scp"`` is then
-Problem 2 again, which the SCP solves in one or two iterations). All such problems of ``N``
-impulses share one structure, compiled under ``n_waypoint = 0``.
+the cone for ``k = 1 .. N-1`` (``x_0`` is given), and no keep-out cut or trust region
+(``"scp"`` is then Problem 2 again, which the SCP solves in one or two iterations). All such
+problems of ``N`` impulses share one structure, compiled under ``n_waypoint = 0``.
 
 ``Psi x = y`` boundary conditions (Eq. 12, 14) are imposed as ``x = Psi^{-1} y`` (``Psi`` is
 invertible), computed by the caller. Every number that depends on the instance or on the SCP
@@ -66,14 +66,15 @@ class RendezvousSubproblem:
         self.passed = n_waypoint <= 0
         self.kind, self.n_nodes, self.n_waypoint = kind, n_nodes, max(n_waypoint, 0)
         n, kw = n_nodes, self.n_waypoint
-        n_cone, n_koz = n - kw, (0 if self.passed else kw + 1)
+        self.cone_start = 1 if self.passed else kw  # passed: x_0 is given, no row there
+        n_cone, n_koz = n - self.cone_start, (0 if self.passed else kw + 1)
         P = cp.Parameter
         self.phi = P((n, 36), name="Phi")  # row-major Phi_k
         self.gamma = P((n, 18), name="Phi_B")  # row-major Phi_k B_k / U_SCALE
         self.x_init = P(6, name="x_init")
         self.x_dock = P(6, name="x_dock")
         self.x_wp = P(6, name="x_wp")
-        self.cone_A = P((n_cone, 18), name="A_ac")  # row-major D Psi_k, k = N_wp..N-1
+        self.cone_A = P((n_cone, 18), name="A_ac")  # row-major D Psi_k, k = cone_start..N-1
         self.cone_c = P((n_cone, 6), name="c_ac")
         self.cone_b = P(3, name="b_ac")
         self.cone_d = P(name="d_ac")
@@ -91,9 +92,10 @@ class RendezvousSubproblem:
         dynamics = batched_matvec(self.phi, X[:-1], 6, 6) + batched_matvec(self.gamma, U, 6, 3)
         constraints = [X[1:] == dynamics, X[0] == self.x_init, X[n] == self.x_dock]
         if self.kind in ("convex", "scp"):
-            position = batched_matvec(self.cone_A, X[kw:n], 3, 6)  # D Psi_k x_k, (n_cone, 3)
+            kc = self.cone_start
+            position = batched_matvec(self.cone_A, X[kc:n], 3, 6)  # D Psi_k x_k, (n_cone, 3)
             lhs = cp.norm(position + self.cone_b[None, :], 2, axis=1)
-            rhs = cp.sum(cp.multiply(self.cone_c, X[kw:n]), axis=1) + self.cone_d
+            rhs = cp.sum(cp.multiply(self.cone_c, X[kc:n]), axis=1) + self.cone_d
             waypoint = [] if self.passed else [X[kw] == self.x_wp]
             constraints += [*waypoint, lhs <= rhs]
         if self.kind == "scp" and not self.passed:
@@ -119,7 +121,7 @@ class RendezvousSubproblem:
         self, x_wp: np.ndarray, A: np.ndarray, c: np.ndarray, b: np.ndarray, d: float
     ) -> None:
         """Write the waypoint ROE and the cone rows of Eq. 13 for nodes ``N_wp .. N-1``
-        (once the waypoint is passed: ``x_wp`` is not used, the rows are nodes ``0 .. N-1``).
+        (once the waypoint is passed: ``x_wp`` is not used, the rows are nodes ``1 .. N-1``).
 
         ``A`` (n_cone, 3, 6) = ``D Psi_k``, ``c`` (n_cone, 6) = ``n^T D Psi_k / cos gamma``,
         ``b`` (3,) = ``-apex``, ``d`` = ``-n^T apex / cos gamma``.
