@@ -180,7 +180,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces="Celestini et al. (RA-L 2024), closed-loop MPC: warm-start gains",
             summary="closed-loop rendezvous Monte Carlo: cold vs previous-plan re-plans",
             module="scpformer.experiments.mpc_rendezvous",
-            default_n=100,  # about 5 min on two busy cores (3:18 for 40 runs measured)
+            default_n=100,  # about 9 min on two busy cores (9:02 measured at load 3-5)
             models="none (the learned start cannot start mid-horizon)",
             depends_on=(
                 "src/scpformer/experiments/mpc_rendezvous.py",
