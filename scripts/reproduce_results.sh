@@ -185,5 +185,8 @@ done
 run scpformer experiment run tscvx-lookup --model "$RUNS/tscvx-small" --model "$RUNS/kdtree" \
   --model "$RUNS/interp" "${pdg[@]}" --out "$OUT/tscvx-lookup"
 
+# 6. Closed-loop guidance: the rendezvous MPC on 100 fresh sampled instances per warm start
+run scpformer experiment run mpc-rendezvous --out "$OUT/mpc-rendezvous"
+
 # one page: the paper's numbers beside ours for every experiment above
 run scpformer report --results "$OUT" --out "$(dirname "$OUT")/RESULTS.md"
