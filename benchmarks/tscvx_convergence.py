@@ -22,7 +22,7 @@ value and until converged; writes ``convergence.csv`` (one row per instance and 
 ``convergence_profile.png`` (share of instances within each tolerance, and converged, against
 conic solves) into ``--out``.
 
-Usage (the held-out set of the issue's experiment, about 10 minutes on one core)::
+Usage (the held-out set of the tscvx-solve-time experiment, about 10 minutes on one core)::
 
     PYTHONPATH=src python benchmarks/tscvx_convergence.py --data r8 --n 688 --out conv
 """
@@ -95,7 +95,7 @@ def tolerance_column(tol: float) -> str:
 
 
 def run(args: Any) -> list[dict[str, Any]]:
-    """Solve the selected instances with both methods (the issue experiment's
+    """Solve the selected instances with both methods (the tscvx-solve-time experiment's
     :class:`~scpformer.experiments.tscvx.common.SolveTimeSolver`); the rows of
     :func:`instance_rows`."""
     from scpformer.data.storage import read_manifest

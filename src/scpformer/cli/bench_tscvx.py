@@ -7,7 +7,7 @@ median over ``--repeats`` calls after ``--warmup`` untimed ones (batch-1 calls a
 between two thetas, so that the predictor's cached standardization of the last theta, which
 T-SCvx's per-iteration ``predict_tight`` calls reuse, is not timed; "same theta" times that
 reuse), on ``--threads`` torch threads
-(one by default, as the issue's <= 1 ms goal states; the T-SCvx paper reports 4.6-4.9 ms on
+(one by default, the setting of the project's <= 1 ms goal; the T-SCvx paper reports 4.6-4.9 ms on
 its hardware). The predictor is warmed up first (:meth:`TscvxPredictor.warm_up`: batch-1
 calls then run through traced networks, as in the T-SCvx studies). Random weights of a preset
 unless ``--model`` gives a trained run. torch is imported when the command runs.

@@ -25,7 +25,7 @@ memory                 bytes of the fitted arrays (``predictor.memory_bytes()``,
                        of one query above what was allocated before it (max over a few)
 =====================  ======================================================================
 
-The caller fixes the thread count (the issue asks for one CPU thread) before measuring.
+The caller fixes the thread count (one CPU thread, as the benchmarks use) before measuring.
 """
 
 from __future__ import annotations

@@ -77,7 +77,7 @@ from scpformer.validation import check_bool, check_int, check_positive
 
 #: Warm starts of a re-plan that the loop implements.
 WARMSTARTS = ("cold", "previous")
-#: Warm starts of the closed-loop issue that are not implemented, and why.
+#: Warm starts a user may ask for that the loop does not implement, and why.
 UNSUPPORTED = {
     "art": (
         "the shipped ART model cannot start mid-horizon: generation "
@@ -98,7 +98,7 @@ TAIL_BURNS = 2
 
 def check_warmstart(name: Any) -> str:
     """``name`` when it is a warm start of :data:`WARMSTARTS`; ``ValueError`` otherwise
-    (naming why an unimplemented one of the issue is missing)."""
+    (naming why an unimplemented one is missing)."""
     if name in UNSUPPORTED:
         raise ValueError(f"warmstart {name!r} is not available: {UNSUPPORTED[name]}")
     if name not in WARMSTARTS:
