@@ -93,7 +93,7 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
             "plan, re-solve the free-final-time problem from a navigation estimate and apply "
             "the plan's first-order-hold thrust through the truth model with thrust magnitude "
             "and pointing errors, mass, inertia and aerodynamic mismatch and an initial-state "
-            "dispersion per run (scpformer.guidance.pdg6dof_mpc). Writes DIR/runs.csv (one row "
+            "dispersion per run. Writes DIR/runs.csv (one row "
             "per run; a rerun resumes), DIR/run-NNNN.npz and DIR/simulate.png."
         ),
     )
