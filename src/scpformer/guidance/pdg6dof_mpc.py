@@ -48,6 +48,7 @@ import numpy as np
 
 from scpformer.dynamics import powered_descent_truth as truth
 from scpformer.dynamics import quaternion as quat
+from scpformer.guidance.records import replan_statistics, replan_tables
 from scpformer.pdg6dof import PDGInstance, PDGSolverConfig, sample_instances, solve
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.scp.solution import Solution, Status, Trajectory
@@ -515,8 +516,6 @@ class ClosedLoopResult:
 
     def summary(self) -> dict[str, Any]:
         """The row of ``runs.csv`` (without the run number)."""
-        times = np.array([r.wall_s for r in self.replans])
-        iters = np.array([r.iterations for r in self.replans])
         violations = self.path_violations()
         return {
             "warmstart": self.config.warmstart,
@@ -527,12 +526,8 @@ class ClosedLoopResult:
             "terminal_rate_deg": self.terminal_rate_deg,
             "fuel": self.fuel,
             "open_loop_fuel": self.open_loop_fuel,
-            "replans": len(self.replans),
-            "replans_failed": sum(not r.accepted for r in self.replans),
-            "replan_time_median_s": float(np.median(times)) if times.size else math.nan,
-            "replan_time_p99_s": float(np.percentile(times, 99)) if times.size else math.nan,
+            **replan_statistics(self.replans),
             "replan_period_s": self.replan_period,
-            "replan_iterations_median": float(np.median(iters)) if iters.size else math.nan,
             "tscvx_fallbacks": sum(bool(r.fallback) for r in self.replans),
             "violations": violations["count"],
             "flight_time": float(self.t[-1]),
@@ -541,29 +536,13 @@ class ClosedLoopResult:
     def arrays(self) -> dict[str, np.ndarray]:
         """Arrays of ``run-NNNN.npz``: flown states and thrust, re-plans and comparisons."""
 
-        def table(records: list[ReplanRecord]) -> dict[str, np.ndarray]:
-            return {
-                "node": np.array([r.node for r in records], dtype=int),
-                "time": np.array([r.time for r in records], dtype=float),
-                "warmstart": np.array([r.warmstart for r in records], dtype=str),
-                "accepted": np.array([r.accepted for r in records], dtype=bool),
-                "status": np.array([r.status for r in records], dtype=str),
-                "cost": np.array([r.cost for r in records], dtype=float),
-                "iterations": np.array([r.iterations for r in records], dtype=int),
-                "wall_s": np.array([r.wall_s for r in records], dtype=float),
-                "period": np.array([r.period for r in records], dtype=float),
-                "fallback": np.array([r.fallback for r in records], dtype=str),
-            }
-
         z = self.open_loop.trajectory
         out = {
             "t": self.t, "x": self.x, "u_cmd": self.u_cmd, "u_exec": self.u_exec,
             "estimates": self.estimates, "truths": self.truths, "open_loop_x": z.x,
             "open_loop_u": z.u, "open_loop_t": np.asarray(self.open_loop.t),
         }  # fmt: skip
-        out.update({f"replan_{k}": v for k, v in table(self.replans).items()})
-        out.update({f"compare_{k}": v for k, v in table(self.comparisons).items()})
-        return out
+        return out | replan_tables(self.replans, self.comparisons, ReplanRecord)
 
 
 # ======================================================================================

@@ -61,6 +61,7 @@ from scpformer.dynamics.orbits import (
 from scpformer.dynamics.roe import oe_to_roe, psi_matrix, qns_offset_to_roe
 from scpformer.dynamics.truth import propagate_relative
 from scpformer.dynamics.uncertainty import GatesModel, NavigationModel, ProcessNoise, burn_frame
+from scpformer.guidance.records import replan_statistics, replan_tables
 from scpformer.problems.rendezvous.constraints import cone_slack, keep_out_slack
 from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.problems.rendezvous.scenario import MIN_PASSED_NODES, TargetOrbit
@@ -420,8 +421,6 @@ class ClosedLoopResult:
 
     def summary(self) -> dict[str, Any]:
         """The row of ``runs.csv`` (without the run number)."""
-        times = np.array([r.wall_s for r in self.replans])
-        iters = np.array([r.iterations for r in self.replans])
         violations = self.path_violations()
         return {
             "warmstart": self.config.warmstart,
@@ -430,12 +429,8 @@ class ClosedLoopResult:
             "terminal_velocity_error": self.terminal_velocity_error,
             "fuel": self.fuel,
             "open_loop_fuel": self.open_loop_fuel,
-            "replans": len(self.replans),
-            "replans_failed": sum(not r.accepted for r in self.replans),
-            "replan_time_median_s": float(np.median(times)) if times.size else math.nan,
-            "replan_time_p99_s": float(np.percentile(times, 99)) if times.size else math.nan,
+            **replan_statistics(self.replans),
             "replan_period_s": self.replan_period_s,
-            "replan_iterations_median": float(np.median(iters)) if iters.size else math.nan,
             "violations": violations["count"],
             "keep_out_violation": violations["keep_out"],
             "cone_violation_m": violations["cone_m"],
@@ -443,17 +438,6 @@ class ClosedLoopResult:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Arrays of ``run-NNNN.npz``: flown states, impulses, re-plans and comparisons."""
-
-        def table(records: list[ReplanRecord]) -> dict[str, np.ndarray]:
-            return {
-                "node": np.array([r.node for r in records], dtype=int),
-                "warmstart": np.array([r.warmstart for r in records], dtype=str),
-                "accepted": np.array([r.accepted for r in records], dtype=bool),
-                "status": np.array([r.status for r in records], dtype=str),
-                "cost": np.array([r.cost for r in records], dtype=float),
-                "iterations": np.array([r.iterations for r in records], dtype=int),
-                "wall_s": np.array([r.wall_s for r in records], dtype=float),
-            }
 
         out = {
             "t": self.t, "rtn": self.rtn, "dv_planned": self.dv_planned,
@@ -463,9 +447,7 @@ class ClosedLoopResult:
             "open_loop_rtn": linear_model(self.instance).rtn(self.open_loop.trajectory.x),
             "samples_per_interval": np.array(self.samples_per_interval),
         }  # fmt: skip
-        out.update({f"replan_{k}": v for k, v in table(self.replans).items()})
-        out.update({f"compare_{k}": v for k, v in table(self.comparisons).items()})
-        return out
+        return out | replan_tables(self.replans, self.comparisons, ReplanRecord)
 
 
 # ======================================================================================

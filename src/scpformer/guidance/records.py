@@ -1,0 +1,57 @@
+"""What every family's closed loop keeps of its re-plans: the ``runs.csv`` statistics and the
+per-re-plan tables of ``run-NNNN.npz``.
+
+A family's re-plan record is a frozen dataclass with at least ``accepted`` (bool),
+``iterations`` (int) and ``wall_s`` (float, the wall time of the whole re-plan: warm start,
+solve and verification); :func:`record_table` turns a list of them into one array per field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+#: numpy dtype of a record field by its annotation (fields of other types are left out).
+_DTYPES = {"int": int, "float": float, "bool": bool, "str": str}
+#: Fields kept out of the npz tables (free text, read from the logs instead).
+_UNTABLED = ("message",)
+
+
+def replan_statistics(replans: Sequence[Any]) -> dict[str, float | int]:
+    """The re-plan columns of a run's ``runs.csv`` row: count, failures (not accepted), the
+    median and 99th percentile of the wall time [s] and the median SCP iterations (NaN
+    without a re-plan)."""
+    times = np.array([r.wall_s for r in replans], dtype=float)
+    iterations = np.array([r.iterations for r in replans], dtype=float)
+    some = times.size > 0
+    return {
+        "replans": len(replans),
+        "replans_failed": sum(not r.accepted for r in replans),
+        "replan_time_median_s": float(np.median(times)) if some else math.nan,
+        "replan_time_p99_s": float(np.percentile(times, 99)) if some else math.nan,
+        "replan_iterations_median": float(np.median(iterations)) if some else math.nan,
+    }
+
+
+def record_table(records: Sequence[Any], record_type: type) -> dict[str, np.ndarray]:
+    """One array per field of the dataclass ``record_type`` (its annotated int, float, bool
+    and str fields but ``message``), over ``records``; empty arrays of the right dtype when
+    there are none."""
+    return {
+        f.name: np.array([getattr(r, f.name) for r in records], dtype=_DTYPES[str(f.type)])
+        for f in dataclasses.fields(record_type)
+        if str(f.type) in _DTYPES and f.name not in _UNTABLED
+    }
+
+
+def replan_tables(
+    replans: Sequence[Any], comparisons: Sequence[Any], record_type: type
+) -> dict[str, np.ndarray]:
+    """The npz tables of a run: :func:`record_table` of the flown re-plans (``replan_*``) and
+    of the comparison solves of the same re-plan problems (``compare_*``)."""
+    tables = {f"replan_{k}": v for k, v in record_table(replans, record_type).items()}
+    return tables | {f"compare_{k}": v for k, v in record_table(comparisons, record_type).items()}
