@@ -103,13 +103,21 @@ def test_verify_reports_leftover_and_unlisted_files(tmp_path):
     assert any("shard-00002.h5: shard file not listed" in p for p in problems)
 
 
+@pytest.fixture
+def foreground_sigint():
+    """Python's own SIGINT handler for the test, as in a process started in the foreground (a
+    shell starts background jobs with SIGINT ignored, and an ignored signal stays ignored)."""
+    found = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, found)
+
+
 @pytest.mark.parametrize("kind", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
 def test_a_signal_between_shard_and_manifest_waits_until_the_manifest_lists_the_shard(
-    tmp_path, monkeypatch, kind
+    tmp_path, monkeypatch, kind, foreground_sigint
 ):
     empty = manifest_with(write(tmp_path)).without_shard("shard-00000.h5")
     real_write_shard = storage.write_shard
-    before = signal.getsignal(signal.SIGINT)  # SIG_IGN in a process started in the background
 
     def signalled_after_writing(*args, **kwargs):
         info = real_write_shard(*args, **kwargs)
@@ -123,7 +131,7 @@ def test_a_signal_between_shard_and_manifest_waits_until_the_manifest_lists_the_
         )
     listed = [s.file for s in storage.read_manifest(tmp_path).shards]
     assert listed == ["shard-00001.h5"]
-    assert signal.getsignal(signal.SIGINT) is before  # the handler it found is restored
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
 
 
 def test_reading_a_truncated_shard_lazily_is_a_clear_error(tmp_path):
