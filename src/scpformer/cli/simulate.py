@@ -42,7 +42,9 @@ def run_simulate(args: argparse.Namespace) -> int:
     campaign = Campaign(runs=args.runs, seed=args.seed, instances=args.instances, config=config)
     bar = _Bar(args.quiet)
     try:
-        rows = run_campaign(campaign, folder, on_start=bar.start, on_run=bar.update)
+        rows = run_campaign(
+            campaign, folder, on_start=bar.start, on_run=bar.update, workers=args.workers
+        )
     finally:
         bar.close()
     print(summary_text(summarize(rows, folder, campaign.family)))

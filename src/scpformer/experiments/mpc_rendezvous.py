@@ -94,9 +94,10 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
             print(f"{NAME}: {ws} run {row['run'] + 1}/{n}: success {row['success']}",
                   file=sys.stderr, flush=True)  # fmt: skip
 
-        rows[warmstart] = run_campaign(
-            campaign(n, options.seed, warmstart), folder, on_run=progress
-        )
+        rows[warmstart] = run_campaign(  # one worker unless asked: re-plan times are timed
+            campaign(n, options.seed, warmstart), folder, on_run=progress,
+            workers=options.workers or 1,
+        )  # fmt: skip
         summaries[warmstart] = summarize(rows[warmstart], folder)
         if rows[warmstart]:
             plot_campaign(rows[warmstart], folder, folder / "simulate.png")

@@ -23,7 +23,9 @@ import csv
 import io
 import json
 import math
-from collections.abc import Callable, Iterable
+import multiprocessing as mp
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -214,17 +216,22 @@ def run_campaign(
     *,
     on_run: Callable[[dict[str, Any]], None] | None = None,
     on_start: Callable[[int, int], None] | None = None,
+    workers: int = 1,
 ) -> list[dict[str, str]]:
     """Fly the runs not yet in ``folder/runs.csv``; return every row (old and new).
 
     ``on_start(done, total)`` is called once before the first new run, ``on_run(row)`` after
-    each (a progress bar). Open-loop plans are solved once per instance.
+    each (a progress bar). Open-loop plans are solved once per instance and process.
+    ``workers > 1`` flies runs in that many local processes (``forkserver``, as the dataset
+    engine's pool); a run's numbers do not depend on it (each run has its own seed), but the
+    re-plan wall times then share the cores: time with one worker.
 
     Raises
     ------
     ValueError
         When the folder holds runs of other settings, or an instance's open-loop plan fails.
     """
+    check_int("workers", workers, least=1)
     folder = Path(folder)
     csv_path = folder / "runs.csv"
     rows = read_rows(csv_path)
@@ -233,21 +240,44 @@ def run_campaign(
     todo = [r for r in range(campaign.runs) if r not in done]
     if on_start is not None:
         on_start(campaign.runs - len(todo), campaign.runs)
-    plans: dict[Any, Any] = {}
-    for run in todo:
-        instance = campaign.instance(run)
-        if instance not in plans:
-            plans = {instance: campaign.open_loop_plan(instance)}
-        seed = campaign.run_seed(run)
-        result = campaign.fly(instance, seed, plans[instance])
-        save_npz_atomic(folder / f"run-{run:04d}.npz", result.arrays())
-        row = {"run": run, "seed": seed, **result.summary()}
+    for row in _flown(campaign, folder, todo, workers):
         rows.append({k: str(_cell(v)) for k, v in row.items()})
         rows.sort(key=lambda r: int(r["run"]))
         write_text_atomic(csv_path, _csv_text(rows, columns(campaign.family)))
         if on_run is not None:
             on_run(row)
     return [r for r in rows if int(r["run"]) < campaign.runs]
+
+
+_PLANS: dict[Any, Any] = {}  # this process's open-loop plan of the last instance flown
+
+
+def fly_run(campaign: Campaign, folder: Path, run: int) -> dict[str, Any]:
+    """Fly run ``run`` of ``campaign``, write its ``run-NNNN.npz`` into ``folder`` and return
+    its ``runs.csv`` row (in any process)."""
+    instance = campaign.instance(run)
+    if instance not in _PLANS:
+        _PLANS.clear()
+        _PLANS[instance] = campaign.open_loop_plan(instance)
+    seed = campaign.run_seed(run)
+    result = campaign.fly(instance, seed, _PLANS[instance])
+    save_npz_atomic(folder / f"run-{run:04d}.npz", result.arrays())
+    return {"run": run, "seed": seed, **result.summary()}
+
+
+def _flown(
+    campaign: Campaign, folder: Path, runs: list[int], workers: int
+) -> Iterator[dict[str, Any]]:
+    """The rows of ``runs`` as they finish: in order in this process, or from a pool."""
+    if workers == 1 or len(runs) < 2:
+        for run in runs:
+            yield fly_run(campaign, folder, run)
+        return
+    context = mp.get_context("forkserver")
+    with ProcessPoolExecutor(min(workers, len(runs)), mp_context=context) as pool:
+        futures = [pool.submit(fly_run, campaign, folder, run) for run in runs]
+        for future in as_completed(futures):
+            yield future.result()
 
 
 # ======================================================================================

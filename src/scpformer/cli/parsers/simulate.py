@@ -77,10 +77,7 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
         default="table2",
         help=with_default("navigation, actuation and process errors: table2 or none", "table2"),
     )
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    parser.add_argument("--no-figure", action="store_true", help="do not draw DIR/simulate.png")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.set_defaults(handler=lazy_handler("scpformer.cli.simulate:run_simulate"))
+    _add_run_arguments(parser)
     _add_pdg6dof(families)
 
 
@@ -144,6 +141,22 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
             "default: thrust 1%% and 0.1 deg, mass 1%%, inertia 5%%, aerodynamic coefficient "
             "20%%, navigation and initial dispersion (1 sigma); none: no error",
             "default",
+        ),
+    )
+    _add_run_arguments(parser)
+
+
+def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """Where the runs go, how many processes fly them, and the handler (every family)."""
+    parser.add_argument(
+        "--workers",
+        type=positive,
+        default=1,
+        metavar="W",
+        help=with_default(
+            "local processes flying runs side by side (the numbers do not change; re-plan "
+            "wall times share the cores, so time with 1)",
+            1,
         ),
     )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
