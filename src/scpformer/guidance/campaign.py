@@ -394,29 +394,30 @@ def summary_text(summary: dict[str, Any]) -> str:
         f"(re-planning period {s['replan_period_s']:.0f} s, median over runs)",
         f"constraint violations along the flown trajectories: {s['violations']} samples",
     ]
-    for key, value in s.items():
-        if key.startswith("vs_"):
-            lines.append(
-                f"{s['warmstart']} vs {key[3:]} per re-plan (cost): {value['win']} win, "
-                f"{value['tie']} tie, {value['loss']} loss; {key[3:]}: iterations median "
-                f"{value['iterations_median']:g}, p99 {value['iterations_p99']:g}, wall time "
-                f"median {value['time_median_s']:.3f} s, p99 {value['time_p99_s']:.3f} s"
-            )
-    return "\n".join(lines)
+    return "\n".join(lines + _comparison_lines(s))
 
 
 def _comparison_lines(s: dict[str, Any]) -> list[str]:
+    """One line per comparison warm start (``vs_*``): per re-plan win / tie / loss of the
+    cost, the failures of each side where counted, and the other side's iterations and wall
+    time."""
     lines = []
     for key, value in s.items():
-        if key.startswith("vs_"):
-            lines.append(
-                f"{s['warmstart']} vs {key[3:]} per re-plan (cost): {value['win']} win, "
-                f"{value['tie']} tie, {value['loss']} loss ({value['failed_flown']} failed "
-                f"{s['warmstart']}, {value['failed_other']} failed {key[3:]}); {key[3:]}: "
-                f"iterations median {value['iterations_median']:g}, p99 "
-                f"{value['iterations_p99']:g}, wall time median {value['time_median_s']:.3f} s, "
-                f"p99 {value['time_p99_s']:.3f} s"
-            )
+        if not key.startswith("vs_"):
+            continue
+        other = key[3:]
+        failed = (
+            f" ({value['failed_flown']} failed {s['warmstart']}, {value['failed_other']} "
+            f"failed {other})"
+            if "failed_flown" in value
+            else ""
+        )
+        lines.append(
+            f"{s['warmstart']} vs {other} per re-plan (cost): {value['win']} win, "
+            f"{value['tie']} tie, {value['loss']} loss{failed}; {other}: iterations median "
+            f"{value['iterations_median']:g}, p99 {value['iterations_p99']:g}, wall time "
+            f"median {value['time_median_s']:.3f} s, p99 {value['time_p99_s']:.3f} s"
+        )
     return lines
 
 
@@ -484,6 +485,21 @@ def plot_campaign(
     return _save(fig, path)
 
 
+#: Legend of the dashed plan: runs of sampled instances each have their own.
+FIRST_PLAN = "open-loop plan (first run)"
+
+
+def _flown_runs(
+    rows: list[dict[str, str]], folder: Path
+) -> Iterator[tuple[dict[str, str], dict[str, np.ndarray]]]:
+    """``(row, arrays of its run-NNNN.npz)`` for every row whose file is in ``folder``."""
+    for row in rows:
+        path = folder / f"run-{int(row['run']):04d}.npz"
+        if path.exists():
+            with np.load(path) as data:
+                yield row, {key: np.asarray(data[key]) for key in data.files}
+
+
 def _plot_wall_times(rows: list[dict[str, str]], folder: Path, ax_h: Any, unit: str) -> None:
     tables = _replan_tables(folder, (int(r["run"]) for r in rows))
     wall = tables["replan_wall_s"]
@@ -501,18 +517,14 @@ def _plot_wall_times(rows: list[dict[str, str]], folder: Path, ax_h: Any, unit: 
 
 def _plot_pdg(rows: list[dict[str, str]], folder: Path, ax_alt: Any, ax_tilt: Any) -> None:
     planned = False
-    for row in rows:
-        path_run = folder / f"run-{int(row['run']):04d}.npz"
-        if not path_run.exists():
-            continue
-        with np.load(path_run) as data:
-            x, t = np.asarray(data["x"]), np.asarray(data["t"])
-            if not planned:  # the first run's open-loop plan
-                plan, t_plan = np.asarray(data["open_loop_x"]), np.asarray(data["open_loop_t"])
-                ax_alt.plot(np.linalg.norm(plan[:, 1:3], axis=1), plan[:, 0], "k--", lw=1.5,
-                            label="open-loop plan (run 0)")  # fmt: skip
-                ax_tilt.plot(t_plan, _tilt_deg(plan), "k--", lw=1.5)
-                planned = True
+    for row, data in _flown_runs(rows, folder):
+        x, t = data["x"], data["t"]
+        if not planned:  # the first run's open-loop plan
+            plan, t_plan = data["open_loop_x"], data["open_loop_t"]
+            ax_alt.plot(np.linalg.norm(plan[:, 1:3], axis=1), plan[:, 0], "k--", lw=1.5,
+                        label=FIRST_PLAN)  # fmt: skip
+            ax_tilt.plot(t_plan, _tilt_deg(plan), "k--", lw=1.5)
+            planned = True
         color = "C0" if _truthy(row["success"]) else "C3"
         ax_alt.plot(np.linalg.norm(x[:, 1:3], axis=1), x[:, 0], lw=0.7, alpha=0.6, color=color)
         ax_tilt.plot(t, _tilt_deg(x), lw=0.7, alpha=0.6, color=color)
