@@ -26,10 +26,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib
+import importlib.util
 import os
 import statistics
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -121,6 +120,15 @@ def print_sizes(problem: cp.Problem) -> None:
     )
 
 
+def compiled_extension(package: Path) -> Any:
+    """The compiled ``cpg_module`` extension of a CVXPYgen package, loaded from its file."""
+    (library,) = package.glob("cpg_module*.so")
+    spec = importlib.util.spec_from_file_location("cpg_module", library)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def generated_qoco(structure: Any, records: list[dict[str, np.ndarray]], folder: Path) -> None:
     """Build the subproblem with CVXPYgen for QOCO and compare first and repeated solves."""
     from cvxpygen import cpg  # optional: pip install cvxpygen
@@ -138,8 +146,7 @@ def generated_qoco(structure: Any, records: list[dict[str, np.ndarray]], folder:
             with contextlib.suppress(ModuleNotFoundError, SyntaxError):
                 cpg.generate_code(problem, code_dir=name, solver="QOCO", prefix=name)
             print(f"CVXPYgen + QOCO: generated and compiled in {time.perf_counter() - start:.0f} s")
-        sys.path.insert(0, str(folder / name))
-        module = importlib.import_module("cpg_module")
+        module = compiled_extension(folder / name)
     finally:
         os.chdir(previous)
     reference = []
