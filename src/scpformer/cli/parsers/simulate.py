@@ -34,32 +34,13 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
             "(one row per run; a rerun resumes), DIR/run-NNNN.npz and DIR/simulate.png."
         ),
     )
-    parser.add_argument(
-        "--warmstart",
-        choices=WARMSTARTS,
-        default="cold",
-        help=with_default(
-            "warm start of each re-plan: cold (the convex Problem 2) or previous (the last "
-            "accepted plan shifted in time); the learned ART start cannot start mid-horizon",
-            "cold",
-        ),
-    )
-    parser.add_argument(
-        "--compare",
-        choices=WARMSTARTS,
-        default=None,
-        help="also solve each re-plan with this warm start, for comparison only (not flown)",
-    )
-    parser.add_argument("--replan-every", type=positive, default=10, metavar="K",
-                        help=with_default("impulses flown between re-plans", 10))  # fmt: skip
-    parser.add_argument("--runs", type=positive, default=20, metavar="N",
-                        help=with_default("number of runs", 20))  # fmt: skip
-    parser.add_argument(
-        "--seed",
-        type=count,
-        default=0,
-        metavar="S",
-        help=with_default("seed of the errors (and sampled instances)", 0),
+    _add_loop_arguments(
+        parser,
+        WARMSTARTS,
+        "warm start of each re-plan: cold (the convex Problem 2) or previous (the last "
+        "accepted plan shifted in time); the learned ART start cannot start mid-horizon",
+        replan_every=(10, "impulses flown between re-plans"),
+        seed="seed of the errors (and sampled instances)",
     )
     parser.add_argument(
         "--instances",
@@ -94,34 +75,14 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
             "per run; a rerun resumes), DIR/run-NNNN.npz and DIR/simulate.png."
         ),
     )
-    parser.add_argument(
-        "--warmstart",
-        choices=PDG_WARMSTARTS,
-        default="cold",
-        help=with_default(
-            "warm start of each re-plan: cold (SCvx from the cubic profile), previous (SCvx "
-            "from the last accepted plan shifted in time and re-timed) or tscvx (T-SCvx with "
-            "the shipped networks at the current state)",
-            "cold",
-        ),
-    )
-    parser.add_argument(
-        "--compare",
-        choices=PDG_WARMSTARTS,
-        default=None,
-        help="also solve each re-plan with this warm start, for comparison only (not flown)",
-    )
-    parser.add_argument("--replan-every", type=positive, default=5, metavar="K",
-                        help=with_default("intervals of the current plan flown between "
-                                          "re-plans", 5))  # fmt: skip
-    parser.add_argument("--runs", type=positive, default=20, metavar="N",
-                        help=with_default("number of runs", 20))  # fmt: skip
-    parser.add_argument(
-        "--seed",
-        type=count,
-        default=0,
-        metavar="S",
-        help=with_default("seed of the errors, dispersions (and sampled instances)", 0),
+    _add_loop_arguments(
+        parser,
+        PDG_WARMSTARTS,
+        "warm start of each re-plan: cold (SCvx from the cubic profile), previous (SCvx "
+        "from the last accepted plan shifted in time and re-timed) or tscvx (T-SCvx with "
+        "the shipped networks at the current state)",
+        replan_every=(5, "intervals of the current plan flown between re-plans"),
+        seed="seed of the errors, dispersions (and sampled instances)",
     )
     parser.add_argument(
         "--instances",
@@ -144,6 +105,33 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
         ),
     )
     _add_run_arguments(parser)
+
+
+def _add_loop_arguments(
+    parser: argparse.ArgumentParser,
+    warmstarts: tuple[str, ...],
+    warmstart_help: str,
+    *,
+    replan_every: tuple[int, str],
+    seed: str,
+) -> None:
+    """The warm start, comparison, re-planning period, run count and seed of a family's loop
+    (``replan_every``: the default and what K counts)."""
+    parser.add_argument("--warmstart", choices=warmstarts, default="cold",
+                        help=with_default(warmstart_help, "cold"))  # fmt: skip
+    parser.add_argument(
+        "--compare",
+        choices=warmstarts,
+        default=None,
+        help="also solve each re-plan with this warm start, for comparison only (not flown)",
+    )
+    default, unit = replan_every
+    parser.add_argument("--replan-every", type=positive, default=default, metavar="K",
+                        help=with_default(unit, default))  # fmt: skip
+    parser.add_argument("--runs", type=positive, default=20, metavar="N",
+                        help=with_default("number of runs", 20))  # fmt: skip
+    parser.add_argument("--seed", type=count, default=0, metavar="S",
+                        help=with_default(seed, 0))  # fmt: skip
 
 
 def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
