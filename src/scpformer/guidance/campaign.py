@@ -287,19 +287,16 @@ def _truthy(text: str) -> bool:
     return text.strip().lower() in ("true", "1")
 
 
-def _replan_tables(folder: Path, runs: Iterable[int]) -> dict[str, np.ndarray]:
+def _replan_tables(rows: list[dict[str, str]], folder: Path) -> dict[str, np.ndarray]:
+    """The re-plan and comparison tables of every flown run, concatenated."""
     keys = ("replan_wall_s", "replan_iterations", "replan_cost", "replan_node",
             "compare_wall_s", "compare_iterations", "compare_cost", "compare_node",
             "compare_warmstart", "replan_accepted", "compare_accepted")  # fmt: skip
     parts: dict[str, list[np.ndarray]] = {k: [] for k in keys}
-    for run in runs:
-        path = folder / f"run-{run:04d}.npz"
-        if not path.exists():
-            continue
-        with np.load(path) as data:
-            for k in keys:
-                if k in data:
-                    parts[k].append(np.asarray(data[k]))
+    for _, data in _flown_runs(rows, folder):
+        for k in keys:
+            if k in data:
+                parts[k].append(data[k])
     return {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
 
 
@@ -318,7 +315,7 @@ def summarize(
     tie_cost = tie(family)
     fuel = np.array([float(r["fuel"]) for r in rows])
     open_fuel = np.array([float(r["open_loop_fuel"]) for r in rows])
-    tables = _replan_tables(folder, (int(r["run"]) for r in rows))
+    tables = _replan_tables(rows, folder)
     wall, iters = tables["replan_wall_s"], tables["replan_iterations"]
     out: dict[str, Any] = {
         "runs": len(rows),
@@ -501,7 +498,7 @@ def _flown_runs(
 
 
 def _plot_wall_times(rows: list[dict[str, str]], folder: Path, ax_h: Any, unit: str) -> None:
-    tables = _replan_tables(folder, (int(r["run"]) for r in rows))
+    tables = _replan_tables(rows, folder)
     wall = tables["replan_wall_s"]
     if wall.size:
         period = float(np.median([float(r["replan_period_s"]) for r in rows]))
