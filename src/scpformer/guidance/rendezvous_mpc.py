@@ -45,7 +45,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -165,6 +166,32 @@ def navigation_position_sigma(nav: NavigationModel, rho: float) -> float:
     return float(math.sqrt(var_r + var_t + var_n))
 
 
+def terminal_tolerance(
+    plan_position_m: float, plan_velocity_m_s: float, rho: float, errors: ErrorModels,
+    period_s: float, tail_burns: int,
+) -> tuple[float, float]:  # fmt: skip
+    """Terminal miss [m] and velocity [m/s] a closed loop may leave, from its error sources.
+
+    ``plan_*``: the plan's own model error (a nominal replay's verification thresholds);
+    ``rho`` [m]: the range of the last navigation fix, whose 3-sigma RTN position error
+    ``3 sigma(rho)`` (:func:`navigation_position_sigma`) and velocity counterpart
+    ``3 n sigma(rho)`` (``n = 2 pi / period_s``) reach ``t_N``; ``tail_burns``: burns flown
+    after the last re-plan, each leaving the 3-sigma of Eq. 12's fixed terms,
+    ``sqrt(sigma_r^2 + 2 sigma_a^2)``, as a velocity error. Returns
+    ``(sqrt(p^2 + (3 sigma)^2), sqrt(v^2 + tail (3 sigma_act)^2 + (3 n sigma)^2))``.
+    """
+    sigma_pos = navigation_position_sigma(errors.navigation, rho) if errors.navigation else 0.0
+    act = errors.actuation
+    sigma_act = math.sqrt(act.sigma_r**2 + 2.0 * act.sigma_a**2) if act else 0.0
+    n_mean = 2.0 * math.pi / period_s
+    position = math.hypot(plan_position_m, 3.0 * sigma_pos)
+    velocity = math.sqrt(
+        plan_velocity_m_s**2 + tail_burns * (3.0 * sigma_act) ** 2
+        + (3.0 * n_mean * sigma_pos) ** 2
+    )  # fmt: skip
+    return position, velocity
+
+
 @dataclass(frozen=True, kw_only=True)
 class DockingTolerance:
     """Success thresholds of a flown rendezvous (not in the papers; derived in :meth:`derive`).
@@ -234,19 +261,13 @@ class DockingTolerance:
         tol = verification or VerificationTolerances()
         check_int("tail_burns", tail_burns, least=0)
         sc = instance.scenario
-        rho = float(np.linalg.norm(sc.waypoint_m))
-        sigma_pos = navigation_position_sigma(errors.navigation, rho) if errors.navigation else 0.0
-        position = math.hypot(tol.terminal_position_m, 3.0 * sigma_pos)
+        position, velocity = terminal_tolerance(
+            tol.terminal_position_m, tol.terminal_velocity_m_s,
+            float(np.linalg.norm(sc.waypoint_m)), errors, instance.target.period_s, tail_burns,
+        )  # fmt: skip
         cone_radius = sc.cone_vertex_setback_m * math.tan(math.radians(sc.cone_half_angle_deg))
         if cone_radius > 0.0:
             position = min(position, max(cone_radius, tol.terminal_position_m))
-        n_mean = 2.0 * math.pi / instance.target.period_s
-        act = errors.actuation
-        sigma_act = math.sqrt(act.sigma_r**2 + 2.0 * act.sigma_a**2) if act else 0.0
-        velocity = math.sqrt(
-            tol.terminal_velocity_m_s**2 + tail_burns * (3.0 * sigma_act) ** 2
-            + (3.0 * n_mean * sigma_pos) ** 2
-        )  # fmt: skip
         return cls(position_m=position, velocity_m_s=velocity, keep_out=tol.keep_out,
                    cone_m=tol.cone_m)  # fmt: skip
 
@@ -554,20 +575,44 @@ def _accepted(sol: Solution, accept_max_iterations: bool) -> bool:
     return sol.status in ok
 
 
-def _replan(
-    sub: RendezvousInstance | None, error: str, k: int, name: str, previous: Solution,
-    shift: int, cfg: MPCConfig,
+def replan_once(
+    sub: Any, error: str, k: int, name: str, solve_with: Callable[[str], Solution],
+    accepted: Callable[[Solution], bool],
 ) -> tuple[ReplanRecord, Solution | None]:  # fmt: skip
+    """One re-plan (or comparison solve) of the remaining problem ``sub`` from node ``k`` with
+    warm start ``name``: ``solve_with(name)`` timed (warm start, solve and verification) and
+    recorded; ``sub`` None records the ``error`` that kept the node from posing a problem."""
     if sub is None:
         return ReplanRecord(k, name, False, "invalid_instance", math.nan, 0, 0.0, error), None
-    warm = shifted_plan(previous, shift) if name == "previous" else None
     start = time.perf_counter()
-    sol = solve(sub, cfg.solver, warmstart=warm)
+    sol = solve_with(name)
     wall = time.perf_counter() - start
-    ok = _accepted(sol, cfg.accept_max_iterations)
-    record = ReplanRecord(k, name, ok, sol.status.value, float(sol.cost), sol.iterations, wall,
-                          sol.message)  # fmt: skip
+    record = ReplanRecord(k, name, accepted(sol), sol.status.value, float(sol.cost),
+                          sol.iterations, wall, sol.message)  # fmt: skip
     return record, sol
+
+
+def replan_compared(
+    sub: Any, error: str, k: int, flown: str, compare: tuple[str, ...],
+    solve_with: Callable[[str], Solution], accepted: Callable[[Solution], bool],
+) -> tuple[ReplanRecord, list[ReplanRecord], Solution | None]:  # fmt: skip
+    """The flown re-plan (:func:`replan_once` with ``flown``), then the comparison solves of
+    the same problem with each warm start of ``compare`` (recorded, never flown)."""
+    record, sol = replan_once(sub, error, k, flown, solve_with, accepted)
+    others = [replan_once(sub, error, k, name, solve_with, accepted)[0] for name in compare]
+    return record, others, sol
+
+
+def _solver(
+    sub: RendezvousInstance | None, previous: Solution, shift: int, cfg: MPCConfig
+) -> Callable[[str], Solution]:
+    """``solve_with(name)`` of a re-plan: the family's solve from the warm start ``name``."""
+
+    def solve_with(name: str) -> Solution:
+        warm = shifted_plan(previous, shift) if name == "previous" else None
+        return solve(sub, cfg.solver, warmstart=warm)
+
+    return solve_with
 
 
 def open_loop_plan(instance: RendezvousInstance, config: MPCConfig | None = None) -> Solution:
@@ -613,8 +658,85 @@ def fly(
     if not isinstance(instance, RendezvousInstance):
         raise ValueError(f"instance must be a RendezvousInstance, got {type(instance).__name__}")
     open_loop = open_loop or open_loop_plan(instance, cfg)
-    sc, errors, m = instance.scenario, cfg.errors, cfg.samples_per_interval
-    n = sc.n_nodes
+    sc = instance.scenario
+
+    def replan(
+        k: int, estimate: np.ndarray, target_oe: np.ndarray, plan: Solution, shift: int
+    ) -> tuple[ReplanRecord, list[ReplanRecord], Solution | None]:
+        try:
+            sub, error = remaining_instance(instance, k, estimate, target_oe), ""
+        except ValueError as err:
+            sub, error = None, str(err)
+        return replan_compared(sub, error, k, cfg.warmstart, cfg.compare,
+                               _solver(sub, plan, shift, cfg),
+                               lambda sol: _accepted(sol, cfg.accept_max_iterations))  # fmt: skip
+
+    schedule = replan_nodes(sc.n_nodes, sc.waypoint_offset, cfg.replan_every)
+    flight = fly_truth(instance, open_loop, schedule, replan, cfg.errors, seed=seed,
+                       samples_per_interval=cfg.samples_per_interval,
+                       burn_threshold_m_s=cfg.burn_threshold_m_s)  # fmt: skip
+    tolerance = cfg.tolerance or DockingTolerance.derive(
+        instance, cfg.errors, cfg.solver.verification
+    )
+    return ClosedLoopResult(instance=instance, config=cfg, tolerance=tolerance,
+                            open_loop=open_loop, **flight.result_fields())  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Flight:
+    """What :func:`fly_truth` flew: the fields of a family's ``ClosedLoopResult`` (see
+    :class:`ClosedLoopResult`) and the osculating target elements ``chief_oe`` (N + 1, 6) at
+    the nodes (the chief of the truth, for checks from the flown states)."""
+
+    t: np.ndarray
+    rtn: np.ndarray
+    dv_planned: np.ndarray
+    dv_applied: np.ndarray
+    replans: list[ReplanRecord]
+    comparisons: list[ReplanRecord]
+    estimates: np.ndarray
+    truth_roe: np.ndarray
+    samples_per_interval: int
+    chief_oe: np.ndarray
+
+    def result_fields(self) -> dict[str, Any]:
+        """The fields of ``ClosedLoopResult`` (all but ``chief_oe``)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "chief_oe"}
+
+
+#: ``replan(k, estimate, target_oe, plan, shift) -> (flown record, comparison records,
+#: solution or None)`` of a family: pose the remaining problem from the estimate and solve it.
+Replanner = Callable[
+    [int, np.ndarray, np.ndarray, Solution, int],
+    tuple[ReplanRecord, list[ReplanRecord], Solution | None],
+]
+
+
+def fly_truth(
+    instance: Any,
+    open_loop: Solution,
+    schedule: list[int],
+    replan: Replanner,
+    errors: ErrorModels,
+    *,
+    seed: int,
+    samples_per_interval: int,
+    burn_threshold_m_s: float,
+) -> Flight:
+    """The truth flight of a shrinking-horizon loop, shared by the rendezvous families.
+
+    ``instance`` is a rendezvous or robust rendezvous instance (``times``, ``target``,
+    ``roe0`` and ``scenario.j2`` are read). From the consistent osculating initial state,
+    at every node ``k``: the process noise is added (Table 2, mapped to RTN by ``Psi(t_k)``);
+    at a node of ``schedule`` the navigation fix (mean elements of the truth plus
+    ``N(0, X_nav(rho))``) is handed to ``replan`` and its accepted plan replaces the flown one;
+    the flown plan's impulse ``k`` is executed with a Gates error (burns of at least
+    ``burn_threshold_m_s``) and the truth propagated to ``t_{k+1}`` (two-body + J2),
+    ``samples_per_interval`` outputs per interval. The draws are standard normal numbers
+    drawn up front per node (navigation 6, actuation 3, process 6) from ``seed``.
+    """
+    sc, m = instance.scenario, samples_per_interval
+    n = instance.n_nodes
     t_nodes = instance.times()
     model = linear_model(instance)  # mean target elements and Psi at the nodes (process noise)
     rng = np.random.default_rng(seed)
@@ -623,8 +745,7 @@ def fly(
 
     oe_c, rtn = osculating_initial_state(instance)
     plan, plan_start = open_loop, 0
-    schedule = replan_nodes(n, sc.waypoint_offset, cfg.replan_every)
-    t_out, rtn_out = [], []
+    t_out, rtn_out, chief_oe = [], [], [np.asarray(oe_c, dtype=float)]
     dv_planned, dv_applied = np.zeros((n, 3)), np.zeros((n, 3))
     replans: list[ReplanRecord] = []
     comparisons: list[ReplanRecord] = []
@@ -642,20 +763,15 @@ def fly(
                 estimate = roe + rho * errors.navigation.scale(rho) * z_nav[k]
             truths.append(roe)
             estimates.append(estimate)
-            try:
-                sub, error = remaining_instance(instance, k, estimate, target_oe), ""
-            except ValueError as err:
-                sub, error = None, str(err)
-            record, sol = _replan(sub, error, k, cfg.warmstart, plan, k - plan_start, cfg)
+            record, others, sol = replan(k, estimate, target_oe, plan, k - plan_start)
             replans.append(record)
-            for other in cfg.compare:
-                comparisons.append(_replan(sub, error, k, other, plan, k - plan_start, cfg)[0])
+            comparisons.extend(others)
             if record.accepted and sol is not None:
                 plan, plan_start = sol, k
         dv = np.asarray(plan.trajectory.u[k - plan_start], dtype=float)
         dv_planned[k] = dv
         dv_exec = dv.copy()
-        if errors.actuation is not None and np.linalg.norm(dv) >= cfg.burn_threshold_m_s:
+        if errors.actuation is not None and np.linalg.norm(dv) >= burn_threshold_m_s:
             dv_exec = dv + burn_frame(dv) @ (_gates_sd(errors.actuation, dv) * z_act[k])
         dv_applied[k] = dv_exec
         dt = t_nodes[k + 1] - t_nodes[k]
@@ -665,15 +781,14 @@ def fly(
         rtn_out.append(res.rtn[:-1])
         rtn = np.array(res.rtn[-1])
         oe_c = eci_to_oe(res.x_chief[-1, :3], res.x_chief[-1, 3:])
+        chief_oe.append(np.asarray(oe_c, dtype=float))
     t_out.append(t_nodes[-1:])
     rtn_out.append(rtn[None])
-    tolerance = cfg.tolerance or DockingTolerance.derive(instance, errors, cfg.solver.verification)
-    return ClosedLoopResult(
-        instance=instance, config=cfg, tolerance=tolerance, open_loop=open_loop,
+    return Flight(
         t=np.concatenate(t_out), rtn=np.concatenate(rtn_out), dv_planned=dv_planned,
         dv_applied=dv_applied, replans=replans, comparisons=comparisons,
         estimates=np.array(estimates).reshape(-1, 6), truth_roe=np.array(truths).reshape(-1, 6),
-        samples_per_interval=m,
+        samples_per_interval=m, chief_oe=np.array(chief_oe),
     )  # fmt: skip
 
 
