@@ -428,6 +428,37 @@ class TokenSequenceModel(nn.Module):
         cache.pending = action.clone()  # (B, a), encoded with the tokens it goes with
         cache.awaiting_action, cache.step = False, cache.step + 1
 
+    @_inference
+    def feed_prefix(
+        self, cache: StepCache, rtg: Tensor, ctg: Tensor, state: Tensor, action: Tensor
+    ) -> None:
+        """Feed the known steps ``0 .. k-1`` of a history into a fresh cache, in one pass.
+
+        ``rtg``, ``ctg`` (B, k, 1), ``state`` (B, k, s) and ``action`` (B, k, a) are
+        normalized, as in training (teacher forcing: the tokens ``[g] R C x u`` of every step
+        with their time-step embeddings, :meth:`TokenCodec.embed_sequence`). Afterwards the
+        cache stands at step ``k``: :meth:`predict_action` continues with step ``k``'s tokens,
+        as if the ``k`` steps had been generated one call at a time (the same tokens, up to
+        float rounding). ``k = 0`` feeds nothing.
+        """
+        if cache.step or cache.awaiting_action or cache.pending is not None:
+            raise ValueError("feed_prefix starts a fresh cache (from start()), at step 0")
+        if state.dim() != 3:
+            raise ValueError(f"state must be (B, k, {self.codec.state_dim}), got {_shape(state)}")
+        b, k = state.shape[:2]
+        if b != cache.batch_size:
+            raise ValueError(f"the prefix holds {b} sequences, the cache {cache.batch_size}")
+        if k >= cache.max_steps:
+            raise ValueError(f"a prefix of {k} steps leaves none of the cache's {cache.max_steps}")
+        if k == 0:
+            return
+        batch = {"rtg": rtg, "ctg": ctg, "state": state, "action": action}
+        if cache.target is not None:
+            batch["target"] = cache.target
+        self.codec.check_batch(batch)
+        self._feed(cache, self.codec.embed_sequence(batch))
+        cache.step = k
+
 
 def eq8_loss(predictions: Mapping[str, Tensor], batch: Mapping[str, Tensor]) -> Tensor:
     """ART paper Eq. 8 with teacher forcing: squared error of the next states and controls.

@@ -29,9 +29,13 @@ from scpformer.warmstart.art import (
     ART_MODES,
     Acceptance,
     AcceptanceCheck,
+    ArtPrefix,
     ArtRollout,
     ArtWarmStart,
+    FlownHistory,
+    flown_prefix,
     generate,
+    preferred_guess,
 )
 from scpformer.warmstart.families import ART_FAMILIES, ART_FRAMES
 from scpformer.warmstart.registry import register_learned
@@ -62,8 +66,10 @@ __all__ = [
     "Acceptance",
     "AcceptanceCheck",
     "AnalyticWarmStart",
+    "ArtPrefix",
     "ArtRollout",
     "ArtWarmStart",
+    "FlownHistory",
     "GivenWarmStart",
     "PrecomputedWarmStart",
     "RendezvousConvexWarmStart",
@@ -72,5 +78,7 @@ __all__ = [
     "WarmStartRecord",
     "WarmStartResult",
     "as_provider",
+    "flown_prefix",
     "generate",
+    "preferred_guess",
 ]

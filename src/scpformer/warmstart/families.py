@@ -116,11 +116,16 @@ class RendezvousArtFamily:
         return _stack(instances, models, x0, None, groups)
 
     def violations(self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``C_k`` of Eq. 21: 1 where node ``k <= N_wp`` lies inside the keep-out zone, (B,)."""
+        """``C_k`` of Eq. 21: 1 where node ``k <= N_wp`` lies inside the keep-out zone, (B,).
+
+        No node once the waypoint is passed (a remaining problem of the final approach:
+        ``RendezvousScenario.n_keep_out`` is 0), as in
+        :func:`~scpformer.problems.rendezvous.constraints.constraint_to_go`.
+        """
         flags = np.zeros(x.shape[0], dtype=int)
         rtn = batch.to_frame(k, x, "rtn")
         for idx, scenario in batch.groups:
-            if k <= scenario.n_waypoint:
+            if k < scenario.n_keep_out:
                 flags[idx] = keep_out_slack(rtn[idx], scenario) < -CTG_TOL
         return flags
 
