@@ -1,4 +1,4 @@
-"""``scpformer simulate rendezvous|pdg6dof``: closed-loop runs into a folder
+"""``scpformer simulate rendezvous|pdg6dof|robust-rendezvous``: closed-loop runs into a folder
 (:mod:`scpformer.guidance`)."""
 
 from __future__ import annotations
@@ -33,7 +33,10 @@ def run_simulate(args: argparse.Namespace) -> int:
             errors=pdg.ErrorModels() if args.errors == "default" else pdg.ErrorModels.none(),
         )
     else:
-        config = MPCConfig(
+        from scpformer.guidance import robust_rendezvous_mpc as robust
+
+        make = robust.MPCConfig if family == "robust-rendezvous" else MPCConfig
+        config = make(
             replan_every=args.replan_every,
             warmstart=args.warmstart,
             compare=(args.compare,) if args.compare else (),

@@ -1,7 +1,8 @@
 """Seeded closed-loop runs into a folder: the engine of ``scpformer simulate FAMILY``.
 
-The families (:data:`FAMILIES`): ``rendezvous`` (:mod:`.rendezvous_mpc`) and ``pdg6dof``
-(:mod:`.pdg6dof_mpc`); a :class:`Campaign` flies the family of its ``config`` (the family's
+The families (:data:`FAMILIES`): ``rendezvous`` (:mod:`.rendezvous_mpc`), ``pdg6dof``
+(:mod:`.pdg6dof_mpc`) and ``robust-rendezvous`` (:mod:`.robust_rendezvous_mpc`); a
+:class:`Campaign` flies the family of its ``config`` (the family's
 ``MPCConfig``) through the family's ``fly`` and ``open_loop_plan``.
 
 ``DIR/runs.csv`` holds one row per finished run (:data:`COLUMNS`, :data:`PDG_COLUMNS`),
@@ -34,9 +35,12 @@ import numpy as np
 
 from scpformer.files import atomic_path, save_npz_atomic, write_text_atomic
 from scpformer.guidance import pdg6dof_mpc as pdg
+from scpformer.guidance import robust_rendezvous_mpc as robust
 from scpformer.guidance.rendezvous_mpc import MPCConfig, fly, open_loop_plan
 from scpformer.pdg6dof import PDGInstance
 from scpformer.rendezvous import RendezvousInstance, sample_instances
+from scpformer.robust_rendezvous import RobustInstance
+from scpformer.robust_rendezvous import sample_instances as sample_robust
 from scpformer.validation import check_int
 
 #: Columns of ``runs.csv``; units: metres, m/s (delta-v), seconds.
@@ -56,12 +60,16 @@ PDG_COLUMNS = (
     "replan_time_p99_s", "replan_period_s", "replan_iterations_median", "tscvx_fallbacks",
     "violations", "flight_time",
 )  # fmt: skip
+#: Columns of ``runs.csv`` of the robust rendezvous: :data:`COLUMNS` (``cone_violation_m`` is
+#: 0, the problem has no cone) and the flown nodes failing the passive-safety Monte Carlo test
+#: and the largest violation probability of a node.
+ROBUST_COLUMNS = (*COLUMNS, "passive_safety_nodes", "passive_safety_p_max")
 INSTANCES = ("default", "sampled")
 #: Cost difference below which two re-plans tie [m/s]: the SCP's cost tolerance J_tol of
 #: Eq. 19 (Table 1, 1e-6 m/s).
 TIE_M_S = 1e-6
 #: The families a campaign flies, by the type of its config.
-FAMILIES = ("rendezvous", "pdg6dof")
+FAMILIES = ("rendezvous", "pdg6dof", "robust-rendezvous")
 
 
 def family_of(config: Any) -> str:
@@ -70,13 +78,15 @@ def family_of(config: Any) -> str:
         return "rendezvous"
     if isinstance(config, pdg.MPCConfig):
         return "pdg6dof"
-    raise ValueError(f"config must be an MPCConfig (rendezvous or pdg6dof), got "
+    if isinstance(config, robust.MPCConfig):
+        return "robust-rendezvous"
+    raise ValueError(f"config must be an MPCConfig (rendezvous, pdg6dof or robust-rendezvous), got "
                      f"{type(config).__name__}")  # fmt: skip
 
 
 def columns(family: str) -> tuple[str, ...]:
     """The columns of ``runs.csv`` of ``family``."""
-    return PDG_COLUMNS if family == "pdg6dof" else COLUMNS
+    return {"pdg6dof": PDG_COLUMNS, "robust-rendezvous": ROBUST_COLUMNS}.get(family, COLUMNS)
 
 
 def tie(family: str) -> float:
@@ -136,15 +146,16 @@ class Campaign:
                 } | {"navigation": errors.navigation is not None,
                      "dispersion": errors.dispersion is not None},
             }  # fmt: skip
+        robust_only = {"safety_samples": cfg.safety_samples} if self.family != "rendezvous" else {}
         return {
-            "family": "rendezvous", "seed": self.seed, "instances": self.instances,
+            "family": self.family, "seed": self.seed, "instances": self.instances,
             "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,
             "compare": list(cfg.compare),
             "errors": {
                 name: getattr(cfg.errors, name) is not None
                 for name in ("navigation", "actuation", "process_noise")
             },
-        }  # fmt: skip
+        } | robust_only  # fmt: skip
 
     def run_seed(self, run: int) -> int:
         return int(np.random.SeedSequence([self.seed, run]).generate_state(1)[0])
@@ -155,6 +166,8 @@ class Campaign:
             if self.instances == "default":
                 return pdg.dispersed_instance(PDGInstance(), self.config.errors.dispersion, rng)
             return pdg.sampled_instance(rng)
+        if self.family == "robust-rendezvous":
+            return RobustInstance() if self.instances == "default" else sample_robust(rng, 1)[0]
         if self.instances == "default":
             return RendezvousInstance()
         return sample_instances(rng, 1)[0]
@@ -162,11 +175,15 @@ class Campaign:
     def open_loop_plan(self, instance: Any) -> Any:
         if self.family == "pdg6dof":
             return pdg.open_loop_plan(instance, self.config)
+        if self.family == "robust-rendezvous":
+            return robust.open_loop_plan(instance, self.config)
         return open_loop_plan(instance, self.config)
 
     def fly(self, instance: Any, seed: int, plan: Any) -> Any:
         if self.family == "pdg6dof":
             return pdg.fly(instance, self.config, seed=seed, open_loop=plan)
+        if self.family == "robust-rendezvous":
+            return robust.fly(instance, self.config, seed=seed, open_loop=plan)
         return fly(instance, self.config, seed=seed, open_loop=plan)
 
 

@@ -1,4 +1,5 @@
-"""Flags of ``scpformer simulate rendezvous|pdg6dof`` (handler: :mod:`scpformer.cli.simulate`).
+"""Flags of ``scpformer simulate rendezvous|pdg6dof|robust-rendezvous``
+(handler: :mod:`scpformer.cli.simulate`).
 
 Built without importing the library: the choices are spelled here and checked against
 :mod:`scpformer.guidance` by the tests.
@@ -14,6 +15,7 @@ from scpformer.cli.commands import command_help, lazy_handler
 from scpformer.cli.dataclass_args import with_default
 
 WARMSTARTS = ("cold", "previous")  # scpformer.guidance.WARMSTARTS
+ROBUST_WARMSTARTS = ("cold", "previous")  # scpformer.guidance.robust_rendezvous_mpc.WARMSTARTS
 INSTANCES = ("default", "sampled")  # scpformer.guidance.campaign.INSTANCES
 ERRORS = ("table2", "none")
 PDG_WARMSTARTS = ("cold", "previous", "tscvx")  # scpformer.guidance.pdg6dof_mpc.WARMSTARTS
@@ -21,24 +23,60 @@ PDG_ERRORS = ("default", "none")
 
 
 def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
-    """Register ``simulate rendezvous`` and ``simulate pdg6dof`` on the top-level subparsers."""
+    """Register ``simulate rendezvous``, ``simulate pdg6dof`` and ``simulate
+    robust-rendezvous`` on the top-level subparsers."""
     simulate = commands.add_parser("simulate", help=command_help("", "simulate"))
     families = simulate.add_subparsers(dest="family", required=True, metavar="FAMILY")
-    parser = families.add_parser(
+    _add_rendezvous(
+        families,
         "rendezvous",
-        help="shrinking-horizon MPC of the ISS rendezvous through the two-body + J2 truth",
+        "shrinking-horizon MPC of the ISS rendezvous through the two-body + J2 truth",
+        "Fly the rendezvous in closed loop: re-plan Problem 3 every K impulses from a "
+        "navigation estimate and apply the plan through the truth model with navigation, "
+        "actuation and process errors (robust ART paper, Table 2).",
+        WARMSTARTS,
+        "warm start of each re-plan: cold (the convex Problem 2) or previous (the last "
+        "accepted plan shifted in time); the learned ART start cannot start mid-horizon",
+    )
+    _add_pdg6dof(families)
+    _add_rendezvous(
+        families,
+        "robust-rendezvous",
+        "shrinking-horizon MPC of the chance-constrained, passively safe rendezvous",
+        "Fly the chance-constrained, passively safe rendezvous (robust ART paper) in closed "
+        "loop: re-solve the remaining problem every K impulses from a navigation estimate and "
+        "apply the plan through the two-body + J2 truth with the Table 2 navigation, "
+        "actuation and process errors; success needs the pre-docking state reached and no "
+        "keep-out or passive-safety violation (dense Monte Carlo) along the flown trajectory.",
+        ROBUST_WARMSTARTS,
+        "warm start of each re-plan: cold (the three-stage solve) or previous (passive "
+        "safety from the last accepted plan shifted in time); the learned ART start cannot "
+        "start mid-horizon",
+    )
+
+
+def _add_rendezvous(
+    families: argparse._SubParsersAction,
+    name: str,
+    summary: str,
+    description: str,
+    warmstarts: tuple[str, ...],
+    warmstart_help: str,
+) -> None:
+    """A rendezvous family's parser (``rendezvous``, ``robust-rendezvous``): the same flags,
+    their own warm starts and texts."""
+    parser = families.add_parser(
+        name,
+        help=summary,
         description=(
-            "Fly the rendezvous in closed loop: re-plan Problem 3 every K impulses from a "
-            "navigation estimate and apply the plan through the truth model with navigation, "
-            "actuation and process errors (robust ART paper, Table 2). Writes DIR/runs.csv "
-            "(one row per run; a rerun resumes), DIR/run-NNNN.npz and DIR/simulate.png."
+            f"{description} Writes DIR/runs.csv (one row per run; a rerun resumes), "
+            "DIR/run-NNNN.npz and DIR/simulate.png."
         ),
     )
     _add_loop_arguments(
         parser,
-        WARMSTARTS,
-        "warm start of each re-plan: cold (the convex Problem 2) or previous (the last "
-        "accepted plan shifted in time); the learned ART start cannot start mid-horizon",
+        warmstarts,
+        warmstart_help,
         replan_every=(10, "impulses flown between re-plans"),
         seed="seed of the errors (and sampled instances)",
     )
@@ -59,7 +97,6 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
         help=with_default("navigation, actuation and process errors: table2 or none", "table2"),
     )
     _add_run_arguments(parser)
-    _add_pdg6dof(families)
 
 
 def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
