@@ -1,4 +1,5 @@
-"""``scpformer experiment run mpc-rendezvous``: closed-loop Monte Carlo, cold vs previous."""
+"""``scpformer experiment run mpc-rendezvous``: closed-loop Monte Carlo of the re-plan warm
+starts cold, previous, art and best."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ def test_the_experiment_is_registered_without_models_or_data():
     assert "src/scpformer/guidance" in entry.depends_on
 
 
-def test_both_warm_starts_fly_the_same_run_and_the_report_cites_celestini(one_run):
+def test_every_warm_start_flies_the_same_run_and_the_report_cites_celestini(one_run):
     with (one_run / "results.csv").open(newline="") as fh:
         (row,) = list(csv.DictReader(fh))
     assert row["index"] == "0"
@@ -41,6 +42,9 @@ def test_both_warm_starts_fly_the_same_run_and_the_report_cites_celestini(one_ru
     with np.load(one_run / "previous" / "run-0000.npz") as data:
         assert data["replan_node"].tolist() == [45, 90]
         assert data["compare_warmstart"].tolist() == ["cold", "cold"]
+    with np.load(one_run / "art" / "run-0000.npz") as data:
+        assert data["compare_warmstart"].tolist() == ["cold", "previous"] * 2
+        assert data["replan_used"].tolist() == ["art", "art"]
     results = json.loads((one_run / "results.json").read_text())
     assert results["experiment"] == "mpc-rendezvous"
     rows = {r["metric"]: r for r in results["rows"]}
@@ -48,8 +52,10 @@ def test_both_warm_starts_fly_the_same_run_and_the_report_cites_celestini(one_ru
     assert any("45%" in r["paper"] for r in rows.values())
     assert any("7x" in r["paper"] for r in rows.values())
     report = (one_run / "report.md").read_text()
-    for section in ("## Summary", "## Previous vs cold on the same re-plans", "## Failures"):
+    for section in ("## Summary", "## Who wins", "## Previous vs cold on the same re-plans",
+                    "## ART vs cold and previous on the same re-plans", "## Failures"):  # fmt: skip
         assert section in report
+    assert "(ART vs cold, 2 re-plans)" in report and "start the SCP began from" in report
     assert "win / tie / loss" in report and "p99 re-plan time / period" in report
 
 

@@ -49,5 +49,6 @@ def test_a_table_holds_one_array_per_field_in_record_order():
         "cost",
         "iterations",
         "wall_s",
+        "used",
     ]
     assert table["iterations"].tolist() == [3, 7] and table["accepted"].tolist() == [True, False]

@@ -37,8 +37,10 @@ replaced by ``N_wp - 2``.
 Warm starts of a re-plan (:data:`WARMSTARTS`): ``cold`` is the family's default start (the
 convex Problem 2 solved from the estimate); ``previous`` the last accepted plan shifted in
 time to node ``k`` (the classical MPC warm start), given to ``solve`` as a
-:class:`~scpformer.scp.warmstart.GivenWarmStart`. The learned ART start is not offered:
-see :data:`UNSUPPORTED`.
+:class:`~scpformer.scp.warmstart.GivenWarmStart`; ``art`` the ART model started mid-horizon,
+its context the flown prefix (Celestini et al., RA-L 2024; :mod:`.rendezvous_art`); ``best``
+ART's guess or the shifted previous plan, the one the post hoc check (robust ART paper, Eq. 8)
+prefers. Each re-plan records the start the SCP began from (:attr:`ReplanRecord.used`).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
+from os import PathLike
 from typing import Any
 
 import numpy as np
@@ -63,6 +66,13 @@ from scpformer.dynamics.roe import oe_to_roe, psi_matrix, qns_offset_to_roe
 from scpformer.dynamics.truth import propagate_relative
 from scpformer.dynamics.uncertainty import GatesModel, NavigationModel, ProcessNoise, burn_frame
 from scpformer.guidance.records import replan_statistics, replan_tables
+from scpformer.guidance.rendezvous_art import (
+    LEARNED,
+    FlownLog,
+    art_provider,
+    solve_learned,
+    uses_art,
+)
 from scpformer.problems.rendezvous.constraints import cone_slack, keep_out_slack
 from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.problems.rendezvous.scenario import MIN_PASSED_NODES, TargetOrbit
@@ -76,20 +86,12 @@ from scpformer.rendezvous import (
 from scpformer.scp.solution import Solution, Status, Trajectory
 from scpformer.scp.warmstart import GivenWarmStart
 from scpformer.validation import check_bool, check_int, check_positive
+from scpformer.warmstart.art import FlownHistory
 
 #: Warm starts of a re-plan that the loop implements.
-WARMSTARTS = ("cold", "previous")
-#: Warm starts a user may ask for that the loop does not implement, and why.
-UNSUPPORTED = {
-    "art": (
-        "the shipped ART model cannot start mid-horizon: generation "
-        "(scpformer.warmstart.art.generate) always begins at time step 0 with a fresh context, "
-        "its tokens are normalized per time step and it has a learned time-step embedding, and "
-        "it was trained on N = 100 impulses from t_0 over 1-3 orbits; a remaining problem of "
-        "N - k impulses from node k would be fed as if it started at t_0 (out of distribution)"
-    ),
-    "best": "needs the learned ART start (see 'art'), which cannot start mid-horizon",
-}
+WARMSTARTS = ("cold", "previous", "art", "best")
+#: Warm starts a user may ask for that the loop does not implement, and why (none today).
+UNSUPPORTED: dict[str, str] = {}
 #: Accuracy of the mean elements of a navigation fix: samples per orbit of the averaging and
 #: RK4 steps per sample (those of :func:`osculating_to_mean_qns`, ~2 mm in the ROE).
 MEAN_SAMPLES, MEAN_SUBSTEPS = 48, 12
@@ -307,6 +309,9 @@ class MPCConfig:
         Accept a re-plan that reached the iteration limit when its verification passes
         (default True): every SCP iterate of this family satisfies Problem 3 in the model
         (the keep-out cut is conservative, Eqs. 15-16) and the best one is returned.
+    model
+        The ART model of ``art`` and ``best``: a training run folder or checkpoint, or None
+        (``default``) for the shipped ``art-rendezvous``; only with one of those starts.
     """
 
     replan_every: int = 10
@@ -318,6 +323,7 @@ class MPCConfig:
     samples_per_interval: int = 10
     accept_max_iterations: bool = True
     burn_threshold_m_s: float = 1e-6
+    model: str | None = None
 
     def __post_init__(self) -> None:
         check_int("replan_every", self.replan_every, least=1)
@@ -337,6 +343,12 @@ class MPCConfig:
         check_int("samples_per_interval", self.samples_per_interval, least=1)
         check_bool("accept_max_iterations", self.accept_max_iterations)
         check_positive("burn_threshold_m_s", self.burn_threshold_m_s)
+        if self.model is not None:
+            if not isinstance(self.model, str | PathLike):
+                raise ValueError(f"model must be a path or None, got {type(self.model).__name__}")
+            if not uses_art(self):
+                raise ValueError("model: used with the warm starts art and best only")
+            object.__setattr__(self, "model", str(self.model))
 
 
 # ======================================================================================
@@ -354,6 +366,7 @@ class ReplanRecord:
     iterations: int
     wall_s: float  # wall time of the solve, warm start and verification included [s]
     message: str
+    used: str = ""  # the start the SCP began from, as its solve records it (cold: convex)
 
 
 @dataclass(frozen=True)
@@ -587,8 +600,9 @@ def replan_once(
     start = time.perf_counter()
     sol = solve_with(name)
     wall = time.perf_counter() - start
+    used = str((sol.extras.get("warmstart") or {}).get("used", ""))
     record = ReplanRecord(k, name, accepted(sol), sol.status.value, float(sol.cost),
-                          sol.iterations, wall, sol.message)  # fmt: skip
+                          sol.iterations, wall, sol.message, used)  # fmt: skip
     return record, sol
 
 
@@ -604,11 +618,16 @@ def replan_compared(
 
 
 def _solver(
-    sub: RendezvousInstance | None, previous: Solution, shift: int, cfg: MPCConfig
-) -> Callable[[str], Solution]:
-    """``solve_with(name)`` of a re-plan: the family's solve from the warm start ``name``."""
+    sub: RendezvousInstance | None, previous: Solution, shift: int, cfg: MPCConfig,
+    history: FlownHistory | None = None,
+) -> Callable[[str], Solution]:  # fmt: skip
+    """``solve_with(name)`` of a re-plan: the family's solve from the warm start ``name``
+    (``art``, ``best``: with the flown ``history``, :func:`.rendezvous_art.solve_learned`)."""
 
     def solve_with(name: str) -> Solution:
+        if name in LEARNED:
+            return solve_learned(name, sub, history, shifted_plan(previous, shift), cfg.solver,
+                                 cfg.model)  # fmt: skip
         warm = shifted_plan(previous, shift) if name == "previous" else None
         return solve(sub, cfg.solver, warmstart=warm)
 
@@ -659,6 +678,9 @@ def fly(
         raise ValueError(f"instance must be a RendezvousInstance, got {type(instance).__name__}")
     open_loop = open_loop or open_loop_plan(instance, cfg)
     sc = instance.scenario
+    log = FlownLog(instance, open_loop) if uses_art(cfg) else None
+    if log:  # the model is loaded before the re-plans are timed
+        art_provider(cfg.model, cfg.solver)
 
     def replan(
         k: int, estimate: np.ndarray, target_oe: np.ndarray, plan: Solution, shift: int
@@ -667,8 +689,9 @@ def fly(
             sub, error = remaining_instance(instance, k, estimate, target_oe), ""
         except ValueError as err:
             sub, error = None, str(err)
+        history = log.history(k, estimate, plan, shift) if log else None
         return replan_compared(sub, error, k, cfg.warmstart, cfg.compare,
-                               _solver(sub, plan, shift, cfg),
+                               _solver(sub, plan, shift, cfg, history),
                                lambda sol: _accepted(sol, cfg.accept_max_iterations))  # fmt: skip
 
     schedule = replan_nodes(sc.n_nodes, sc.waypoint_offset, cfg.replan_every)
