@@ -63,16 +63,19 @@ the first replaced by the estimate, and its impulses), given to ``method="passiv
 offered: see :data:`UNSUPPORTED`.
 
 Success of a flown run (:class:`RobustClosedLoopResult`): the pre-docking state ``x_f`` is
-reached within :func:`derive_tolerance`, the dense flown trajectory never enters the active
-ellipsoid (the keep-out check; this problem has no approach cone: it ends at the pre-docking
-hold, where the deterministic family's cone begins) and every flown node passes the family's
-dense Monte Carlo test of passive safety (:func:`flown_passive_safety`).
+reached within :func:`derive_tolerance`, and no constraint is violated along the true flown
+trajectory: the dense flown states never enter the active ellipsoid (the keep-out check; this
+problem has no approach cone: it ends at the pre-docking hold, where the deterministic
+family's cone begins), the free drift after every executed burn stays out of it
+(:func:`flown_drift_distance`: the realized loss of control, in two-body + J2 on the dense grid
+of the family's Monte Carlo) and every flown plan passes the family's dense Monte Carlo
+verification of passive safety at the nodes it was flown (:func:`plans_passive_safety`:
+the chance constraint of what was flown, checked in the truth model).
 """
 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -96,7 +99,7 @@ from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.robust_rendezvous.montecarlo import (
     MonteCarloConfig,
-    MonteCarloResult,
+    monte_carlo,
     propagate_drift_truth,
 )
 from scpformer.problems.robust_rendezvous.plan_dynamics import (
@@ -162,10 +165,10 @@ class MPCConfig:
         Impulses of at least this norm are burns, executed with a Gates error (the
         deterministic loop's convention; default 1e-6 m/s).
     safety_samples
-        Draws per node of the Monte Carlo check of the flown trajectory's passive safety
-        (:func:`flown_passive_safety`; default 50, whose binomial threshold at
-        ``Delta = 1e-3`` and confidence 1e-4 is 2 draws: a node fails when 3 or more of its
-        50 drifts enter the ellipsoid; ~10 s a run of 100 nodes on one core).
+        Draws per node of the family's Monte Carlo verification of the flown plans at the
+        nodes they were flown (:func:`plans_passive_safety`; default 200, whose binomial
+        threshold at ``Delta = 1e-3`` and confidence 1e-4 is 3 draws: a node fails when 4 or
+        more of its 200 drifts enter the ellipsoid; ~8 s a run of 100 nodes on one core).
     safety_confidence
         One-sided confidence of that binomial test (``MonteCarloResult.passes``).
     """
@@ -178,7 +181,7 @@ class MPCConfig:
     tolerance: DockingTolerance | None = None
     samples_per_interval: int = 10
     burn_threshold_m_s: float = 1e-6
-    safety_samples: int = 50
+    safety_samples: int = 200
     safety_confidence: float = 1e-4
 
     def __post_init__(self) -> None:
@@ -321,64 +324,67 @@ def derive_tolerance(
     return DockingTolerance(position_m=position, velocity_m_s=velocity)
 
 
-def flown_passive_safety(
+def flown_drift_distance(
     instance: RobustInstance,
     chief_oe: np.ndarray,
     rtn: np.ndarray,
-    dv_planned: np.ndarray,
     dv_applied: np.ndarray,
-    n_samples: int = 50,
-    seed: int = 0,
-    monte_carlo: MonteCarloConfig | None = None,
-) -> MonteCarloResult:
-    """The family's dense Monte Carlo check of passive safety, about the FLOWN trajectory.
-
-    The family's check (:func:`scpformer.problems.robust_rendezvous.monte_carlo`) draws, at
-    every node, the navigation and process errors about the plan's nominal state and a Gates
-    error about its impulse, loses control and counts entries into the node's active
-    ellipsoid during ``T_safety`` on a dense grid (``dense_step_s``, two-body + J2). Here the
-    nominal is the truth actually flown: ``chief_oe`` (N + 1, 6) the osculating target
-    elements and ``rtn`` (N, 6) the true pre-impulse relative states at the nodes, with the
-    commanded impulses ``dv_planned`` (N, 3). Draw 0 of every node is the flight itself (its
-    executed impulse ``dv_applied``, no added error); draws ``1 .. n_samples - 1`` add
-    ``N(0, X_nav + Q)`` (mapped to RTN by ``Psi(t_i)``) and ``dv_planned + N(0, U)``. Drift:
-    :func:`~scpformer.problems.robust_rendezvous.montecarlo.propagate_drift_truth` (RK4 of
-    at most ``rk4_step_s``) at every point of the dense grid. The result's ``passes(
-    confidence, dense=True)`` is the family's binomial test at ``Delta``.
-    """
-    cfg = monte_carlo or MonteCarloConfig()
-    start = time.perf_counter()
-    unc, sc, n = instance.uncertainty, instance.scenario, instance.n_nodes
-    model = linear_model(instance)
-    rng = np.random.default_rng(seed)
-    rho = np.linalg.norm(rtn[:, :3], axis=1)
-    sigma = rho[:, None] * unc.navigation.scale(rho)
-    e = rng.standard_normal((n, n_samples, 6)) * sigma[:, None, :]
-    e += rng.standard_normal((n, n_samples, 6)) @ np.linalg.cholesky(unc.process_noise.matrix).T
-    du = unc.actuation.sample(dv_planned, rng, n_samples)  # (M, N, 3)
-    u_exec = dv_planned[:, None, :] + np.swapaxes(du, 0, 1)
-    e[:, 0], u_exec[:, 0] = 0.0, dv_applied
-    states = rtn[:, None, :] + np.einsum("kij,kmj->kmi", model.Psi[:n], e)
+    monte_carlo_config: MonteCarloConfig | None = None,
+) -> np.ndarray:
+    """Smallest normalized distance ``|E_i dr|`` (N,) of the free drift that would follow a
+    loss of control right after each flown burn: from the true pre-impulse state ``rtn``
+    (N, 6) and target ``chief_oe`` (N + 1, 6) at node ``i``, the executed impulse
+    ``dv_applied`` (N, 3), over ``T_safety`` in two-body + J2 on the dense grid of the
+    family's Monte Carlo (``dense_step_s``, RK4 of at most ``rk4_step_s``,
+    :func:`~scpformer.problems.robust_rendezvous.montecarlo.propagate_drift_truth`), against
+    the node's ellipsoid (AE before ``N_ae-to-koz``, KOZ after). Below 1: the flown state was
+    not passively safe."""
+    cfg = monte_carlo_config or MonteCarloConfig()
+    sc, n = instance.scenario, instance.n_nodes
     r_c, v_c = oe_to_eci(chief_oe[:n])
-    r_d, v_d = rtn_to_eci(r_c[:, None], v_c[:, None], states)
-    v_d = v_d + np.einsum("kmji,kmj->kmi", rtn_dcm(r_d, v_d), u_exec)
+    r_d, v_d = rtn_to_eci(r_c, v_c, rtn)
+    v_d = v_d + np.einsum("kji,kj->ki", rtn_dcm(r_d, v_d), dv_applied)
     chief, deputy = np.concatenate([r_c, v_c], -1), np.concatenate([r_d, v_d], -1)
     design = drift_offsets(instance.t_safety_s, sc.n_safety)
-    m = max(1, math.ceil((design[1] - design[0]) / cfg.dense_step_s)) if design.size > 1 else 1
-    tau = np.linspace(0.0, design[-1], (design.size - 1) * m + 1)
+    steps = max(1, math.ceil((design[1] - design[0]) / cfg.dense_step_s)) if design.size > 1 else 1
+    tau = np.linspace(0.0, design[-1], (design.size - 1) * steps + 1)
+    drift = propagate_drift_truth(chief, deputy[:, None], tau, cfg.rk4_step_s, sc.j2)[:, 0]
     E = sc.ellipsoid_E()[:n]
-    d_design, d_dense = np.empty((n, n_samples)), np.empty((n, n_samples))
-    chunk = max(1, 2_000_000 // (n_samples * tau.size))
-    for lo in range(0, n, chunk):
-        sel = slice(lo, lo + chunk)
-        drift = propagate_drift_truth(chief[sel], deputy[sel], tau, cfg.rk4_step_s, sc.j2)
-        d = np.linalg.norm(np.einsum("krs,kmts->kmtr", E[sel], drift[..., :3]), axis=-1)
-        d_design[sel], d_dense[sel] = d[:, :, ::m].min(axis=2), d.min(axis=2)
-    return MonteCarloResult(
-        nodes=np.arange(n), p_design=(d_design < 1.0).mean(axis=1),
-        p_dense=(d_dense < 1.0).mean(axis=1), min_distance=d_dense, n_samples=n_samples,
-        delta=unc.delta, propagator="truth", wall_s=time.perf_counter() - start,
-    )  # fmt: skip
+    return np.linalg.norm(np.einsum("krs,kts->ktr", E, drift[..., :3]), axis=-1).min(axis=1)
+
+
+@dataclass(frozen=True)
+class FlownPlan:
+    """A plan the loop flew: from node ``start`` (of the flight) it was the flown plan for
+    ``nodes`` impulses; ``instance`` is the problem it solves (the remaining problem from its
+    estimate; the nominal instance for the open-loop plan)."""
+
+    start: int
+    nodes: int
+    instance: RobustInstance
+    plan: Solution
+
+
+def plans_passive_safety(
+    flown: list[FlownPlan], n_samples: int, confidence: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The family's dense Monte Carlo verification of passive safety
+    (:func:`scpformer.problems.robust_rendezvous.monte_carlo`, two-body + J2 drift on the dense
+    grid) of every flown plan at the nodes it was flown: navigation and process errors about
+    the plan's nominal state (its truth replay from its own initial state, the estimate),
+    Gates errors about its impulses, loss of control, entries into the node's ellipsoid
+    during ``T_safety``. Returns per node of the flight the empirical violation probability
+    (N,) and whether the node fails the family's binomial test at ``Delta`` (N,) bool
+    (``MonteCarloResult.counts`` above ``threshold(confidence)``). Seed 0 for every plan."""
+    p, failing = [], []
+    for seg in flown:
+        x, u = seg.plan.trajectory.x, seg.plan.trajectory.u
+        mc = monte_carlo(seg.instance, x, u, MonteCarloConfig(n_samples=n_samples),
+                         nodes=np.arange(seg.nodes),
+                         dynamics=seg.plan.extras.get("dynamics", "nonlinear"))  # fmt: skip
+        p.append(mc.p_dense)
+        failing.append(mc.counts(dense=True) > mc.threshold(confidence))
+    return np.concatenate(p), np.concatenate(failing)
 
 
 # ======================================================================================
@@ -387,11 +393,13 @@ def flown_passive_safety(
 @dataclass(frozen=True)
 class RobustClosedLoopResult(ClosedLoopResult):
     """A flown robust rendezvous: :class:`~scpformer.guidance.rendezvous_mpc.ClosedLoopResult`
-    with the target's osculating elements ``chief_oe`` (N + 1, 6) at the nodes, the terminal
-    errors taken against the pre-docking state ``x_f`` and the path checks of this problem
-    (keep-out of the active ellipsoid, passive safety of every flown node)."""
+    with the target's osculating elements ``chief_oe`` (N + 1, 6) at the nodes and the plans
+    flown (``flown``, in order), the terminal errors taken against the pre-docking state
+    ``x_f`` and the path checks of this problem (keep-out of the active ellipsoid, passive
+    safety of the flown states and of the flown plans)."""
 
     chief_oe: np.ndarray
+    flown: list[FlownPlan]
 
     @property
     def terminal_position_error(self) -> float:
@@ -404,54 +412,61 @@ class RobustClosedLoopResult(ClosedLoopResult):
         return float(np.linalg.norm(self.rtn[-1, 3:] - self.instance.xf_rtn[3:]))
 
     @cached_property
-    def passive_safety(self) -> MonteCarloResult:
-        """:func:`flown_passive_safety` of the flight (seed 0: the same standard normal
-        draws for every run and warm start)."""
+    def drift_distance(self) -> np.ndarray:
+        """:func:`flown_drift_distance` of the flight, (N,)."""
         m = self.samples_per_interval
-        return flown_passive_safety(
-            self.instance, self.chief_oe, self.rtn[: self.n_nodes * m : m], self.dv_planned,
-            self.dv_applied, self.config.safety_samples,
-        )  # fmt: skip
+        rtn = self.rtn[: self.n_nodes * m : m]
+        return flown_drift_distance(self.instance, self.chief_oe, rtn, self.dv_applied)
+
+    @cached_property
+    def plan_safety(self) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`plans_passive_safety` of the flown plans: (N,) probabilities, (N,) fails."""
+        return plans_passive_safety(self.flown, self.config.safety_samples,
+                                    self.config.safety_confidence)  # fmt: skip
 
     def path_violations(self) -> dict[str, Any]:
-        """Dense keep-out check of the flown states (the ellipsoid guarding each interval's
-        node: approach ellipsoid before ``N_ae-to-koz``, keep-out zone after) and the passive
-        safety test of every node.
+        """The path checks of the flight.
 
-        Returns ``keep_out`` (worst ``1 - |E dr|``, clipped at 0), ``cone_m`` (0: no cone in
-        this problem), ``passive_safety_nodes`` (nodes whose draws entering the ellipsoid
-        exceed the binomial threshold at ``Delta``), ``passive_safety_p_max`` (the largest
-        empirical probability) and ``count``: keep-out samples beyond the tolerance plus the
-        failing nodes.
+        * ``keep_out``: worst ``1 - |E dr|`` (clipped at 0) of the dense flown states against
+          the ellipsoid guarding each interval's node (AE before ``N_ae-to-koz``, KOZ after);
+          samples beyond ``tolerance.keep_out`` count;
+        * ``drift_entries``: flown nodes whose free drift after the executed burn enters the
+          node's ellipsoid (:func:`flown_drift_distance` below 1; the realized loss of control);
+        * ``passive_safety_nodes``: flown nodes failing the family's Monte Carlo test of the
+          plan flown there (:func:`plans_passive_safety`), ``passive_safety_p_max`` the largest
+          empirical probability;
+        * ``cone_m``: 0 (this problem has no approach cone); ``count``: the sum of the three
+          counts.
         """
         sc, m = self.instance.scenario, self.samples_per_interval
         node = np.minimum(np.arange(self.rtn.shape[0]) // m, self.n_nodes - 1)
         E = sc.ellipsoid_E()[node]
         koz = 1.0 - np.linalg.norm(np.einsum("krs,ks->kr", E, self.rtn[:, :3]), axis=1)
-        mc = self.passive_safety
-        failing = int((mc.counts(dense=True) > mc.threshold(self.config.safety_confidence)).sum())
+        p, failing = self.plan_safety
+        entries = int((self.drift_distance < 1.0).sum())
+        count = int((koz > self.tolerance.keep_out).sum()) + entries + int(failing.sum())
         return {
             "keep_out": float(max(0.0, koz.max())),
             "cone_m": 0.0,
-            "passive_safety_nodes": failing,
-            "passive_safety_p_max": float(mc.p_dense.max()),
-            "count": int((koz > self.tolerance.keep_out).sum()) + failing,
+            "drift_entries": entries,
+            "passive_safety_nodes": int(failing.sum()),
+            "passive_safety_p_max": float(p.max()),
+            "count": count,
         }
 
     def summary(self) -> dict[str, Any]:
         """The row of ``runs.csv`` (without the run number)."""
         violations = self.path_violations()
-        return super().summary() | {
-            key: violations[key] for key in ("passive_safety_nodes", "passive_safety_p_max")
-        }
+        keys = ("drift_entries", "passive_safety_nodes", "passive_safety_p_max")
+        return super().summary() | {key: violations[key] for key in keys}
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The deterministic loop's arrays, the chief's elements and the per-node passive
-        safety (empirical probability on the dense grid, smallest distance of draw 0)."""
-        mc = self.passive_safety
+        """The deterministic loop's arrays, the chief's elements, the flown drift distances and
+        the flown plans' violation probabilities per node."""
         return super().arrays() | {
-            "chief_oe": self.chief_oe, "passive_safety_p": mc.p_dense,
-            "passive_safety_flown_distance": mc.min_distance[:, 0],
+            "chief_oe": self.chief_oe, "drift_distance": self.drift_distance,
+            "passive_safety_p": self.plan_safety[0],
+            "flown_plan_start": np.array([seg.start for seg in self.flown]),
         }  # fmt: skip
 
 
@@ -514,6 +529,8 @@ def fly(
         raise ValueError(f"instance must be a RobustInstance, got {type(instance).__name__}")
     open_loop = open_loop or open_loop_plan(instance, cfg)
 
+    starts: list[tuple[int, RobustInstance, Solution]] = [(0, instance, open_loop)]
+
     def replan(
         k: int, estimate: np.ndarray, target_oe: np.ndarray, plan: Solution, shift: int
     ) -> tuple[ReplanRecord, list[ReplanRecord], Solution | None]:
@@ -522,8 +539,11 @@ def fly(
             prepare(sub)
         except ValueError as err:
             sub, error = None, str(err)
-        return replan_compared(sub, error, k, cfg.warmstart, cfg.compare,
-                               _solver(sub, plan, shift, cfg), accepted)  # fmt: skip
+        record, others, sol = replan_compared(sub, error, k, cfg.warmstart, cfg.compare,
+                                              _solver(sub, plan, shift, cfg), accepted)  # fmt: skip
+        if record.accepted and sol is not None and sub is not None:  # flown from k on
+            starts.append((k, sub, sol))
+        return record, others, sol
 
     schedule = replan_nodes(instance.n_nodes, cfg.replan_every)
     flight = fly_truth(instance, open_loop, schedule, replan, cfg.errors, seed=seed,
@@ -532,6 +552,9 @@ def fly(
     tolerance = cfg.tolerance or derive_tolerance(
         instance, open_loop, cfg.errors, cfg.replan_every, cfg.solver
     )
+    ends = [k for k, _, _ in starts[1:]] + [instance.n_nodes]
+    flown = [FlownPlan(start=k, nodes=end - k, instance=sub, plan=sol)
+             for (k, sub, sol), end in zip(starts, ends, strict=True)]  # fmt: skip
     return RobustClosedLoopResult(instance=instance, config=cfg, tolerance=tolerance,
-                                  open_loop=open_loop, chief_oe=flight.chief_oe,
+                                  open_loop=open_loop, chief_oe=flight.chief_oe, flown=flown,
                                   **flight.result_fields())  # fmt: skip

@@ -1,0 +1,212 @@
+"""``mpc-robust-rendezvous``: Monte Carlo of the closed-loop, chance-constrained, passively
+safe rendezvous (shrinking-horizon MPC of the robust ART paper's problem).
+
+Each of the ``--n`` runs flies one instance of the robust Table 1 sampler through the
+two-body + J2 truth with the Table 2 navigation, actuation and process errors
+(:mod:`scpformer.guidance.robust_rendezvous_mpc`), re-planning every ``K = 10`` impulses
+(nodes 10, 20, ..., 90). Every warm start of :data:`WARMSTARTS` flies the same runs: the same
+instance and the same error draws run by run (common random numbers,
+:mod:`scpformer.guidance.campaign` seeds run ``r`` of seed ``S`` with ``SeedSequence([S,
+r])``). The flights of ``previous`` also solve every re-plan from ``cold`` (compared, not
+flown): the per-re-plan win/tie/loss, iterations and wall times of the two starts on
+identical problems.
+
+Instances never used in training: the sampler's stream of run ``r`` is ``SeedSequence([S,
+r])``, while the dataset engine draws instance ``i`` of a dataset of seed ``S'`` from
+``SeedSequence(S', spawn_key=(i,))`` (:mod:`scpformer.data.executors`); the two never
+coincide, whatever the seeds.
+
+Output (``OUT``): ``cold/`` and ``previous/`` (each a resumable campaign folder: ``runs.csv``,
+``run-NNNN.npz``, ``settings.json``, ``simulate.png``), ``results.csv`` (one row per run,
+both warm starts side by side), ``report.md`` and ``results.json``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scpformer.experiments import report as rep
+from scpformer.experiments.mpc_rendezvous import relative, replan_arrays, results_csv, speedup
+from scpformer.experiments.runner import RunOptions, check_settings, require_n
+from scpformer.files import write_text_atomic
+from scpformer.guidance.campaign import Campaign, plot_campaign, run_campaign, summarize
+from scpformer.guidance.robust_rendezvous_mpc import MPCConfig
+
+NAME = "mpc-robust-rendezvous"
+REPRODUCES = "closed-loop MPC of the chance-constrained, passively safe rendezvous"
+#: Warm starts flown, in order; the last is flown with the others compared on its re-plans.
+WARMSTARTS = ("cold", "previous")
+REPLAN_EVERY = 10  # K: 9 re-plans over N = 100 impulses, every 710 s
+#: Columns of ``OUT/results.csv`` (per warm start ``W``: ``W_<column>``).
+RUN_COLUMNS = (
+    "success", "terminal_position_error", "terminal_velocity_error", "fuel",
+    "open_loop_fuel", "replans", "replans_failed", "replan_time_median_s",
+    "replan_time_p99_s", "replan_iterations_median", "violations", "drift_entries",
+    "passive_safety_nodes",
+)  # fmt: skip
+
+
+def campaign(n: int, seed: int, warmstart: str) -> Campaign:
+    """The campaign of ``warmstart``: ``n`` sampled instances, Table 2 errors, ``K = 10``;
+    ``previous`` also solves each re-plan cold (compared, not flown)."""
+    compare = tuple(w for w in WARMSTARTS if w != warmstart) if warmstart == "previous" else ()
+    config = MPCConfig(replan_every=REPLAN_EVERY, warmstart=warmstart, compare=compare)
+    return Campaign(runs=n, seed=seed, instances="sampled", config=config)
+
+
+def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
+    """Run ``mpc-robust-rendezvous`` into ``options.out``; returns the report's path."""
+    n, out = require_n(options), Path(options.out)
+    settings = {
+        "experiment": NAME, "n": n, "seed": options.seed, "out": str(out),
+        "instances": "sampled (robust Table 1 sampler, SeedSequence([seed, run]))",
+        "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
+        "warmstarts": list(WARMSTARTS), "safety_samples": MPCConfig().safety_samples,
+    }  # fmt: skip
+    check_settings(out, settings)
+    rows: dict[str, list[dict[str, str]]] = {}
+    summaries: dict[str, dict[str, Any]] = {}
+    for warmstart in WARMSTARTS:
+        folder = out / warmstart
+
+        def progress(row: dict[str, Any], ws: str = warmstart) -> None:
+            print(f"{NAME}: {ws} run {row['run'] + 1}/{n}: success {row['success']}",
+                  file=sys.stderr, flush=True)  # fmt: skip
+
+        rows[warmstart] = run_campaign(  # one worker unless asked: re-plan times are timed
+            campaign(n, options.seed, warmstart), folder, on_run=progress,
+            workers=options.workers or 1,
+        )  # fmt: skip
+        summaries[warmstart] = summarize(rows[warmstart], folder, "robust-rendezvous")
+        if rows[warmstart]:
+            plot_campaign(rows[warmstart], folder, folder / "simulate.png", "robust-rendezvous")
+    write_text_atomic(out / "results.csv", results_csv(rows, WARMSTARTS, RUN_COLUMNS))
+    report = rep.Report(name=name, reproduces=REPRODUCES, command=command, settings=settings,
+                        differences=DIFFERENCES)  # fmt: skip
+    analyse(rows, summaries, out, report)
+    return report.write(out)
+
+
+def _values(table: list[dict[str, str]], name: str) -> np.ndarray:
+    return np.array([float(r[name]) for r in table], dtype=float)
+
+
+def _med_p99(values: np.ndarray, digits: int = 3) -> str:
+    if not values.size:
+        return "n/a"
+    return f"{rep.fmt(float(np.median(values)), digits)} / {rep.fmt(float(np.percentile(values, 99)), digits)}"  # noqa: E501
+
+
+def analyse(
+    rows: dict[str, list[dict[str, str]]],
+    summaries: dict[str, dict[str, Any]],
+    out: Path,
+    report: rep.Report,
+) -> None:
+    """The summary table per warm start and the paired comparison of previous vs cold."""
+    n_runs = min((len(t) for t in rows.values()), default=0)
+    report.sections.append(("Runs", (
+        f"{n_runs} runs per warm start on sampled robust Table 1 instances (fresh seed, never "
+        f"in a training set), Table 2 errors, re-planning every K = {REPLAN_EVERY} impulses "
+        "(nodes 10, 20, ..., 90) on a shrinking horizon to the pre-docking state. Success: "
+        "the pre-docking state reached within the tolerance derived per run "
+        "(`robust_rendezvous_mpc.derive_tolerance`: ~12 m and ~15 mm/s, the 3-sigma "
+        "navigation error at the last fix dominating), no keep-out sample (normalized "
+        "intrusion > 0.02 into the ellipsoid guarding the node) along the dense flown "
+        "trajectory, no flown node whose free drift after the executed burn enters its "
+        "ellipsoid within T_safety (two-body + J2, 5 s grid), and every flown plan passing "
+        "the family's dense Monte Carlo verification of passive safety at the nodes it was "
+        "flown (200 draws per node, failing when more than 3 enter: the binomial threshold at "
+        "Delta = 1e-3, confidence 1e-4)."
+    )))  # fmt: skip
+    if not n_runs:
+        return
+    arrays = {w: replan_arrays(out / w, rows[w]) for w in WARMSTARTS}
+    table_rows = []
+
+    def line(quantity: str, value) -> None:
+        table_rows.append((quantity, *(value(w) for w in WARMSTARTS)))
+
+    def success(w: str) -> str:
+        ok = np.array([r["success"].strip().lower() in ("true", "1") for r in rows[w]])
+        return f"{int(ok.sum())}/{ok.size}"
+
+    line("success", success)
+    line("delta-v / open loop, median (max)", lambda w: (
+        f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
+        f"({rep.fmt(float(np.max(_values(rows[w], 'fuel') / _values(rows[w], 'open_loop_fuel'))), 4)})"  # noqa: E501
+    ))  # fmt: skip
+    line("terminal miss median / max [m]", lambda w: (
+        f"{rep.fmt(float(np.median(_values(rows[w], 'terminal_position_error'))))} / "
+        f"{rep.fmt(float(np.max(_values(rows[w], 'terminal_position_error'))))}"
+    ))  # fmt: skip
+    line("terminal velocity median / max [mm/s]", lambda w: (
+        f"{rep.fmt(1e3 * float(np.median(_values(rows[w], 'terminal_velocity_error'))))} / "
+        f"{rep.fmt(1e3 * float(np.max(_values(rows[w], 'terminal_velocity_error'))))}"
+    ))  # fmt: skip
+    line("re-plan wall time median / p99 [s]",
+         lambda w: _med_p99(arrays[w]["replan_wall_s"]))  # fmt: skip
+    line("re-planning period [s]", lambda w: f"{summaries[w]['replan_period_s']:.0f}")
+    line("convex solves per re-plan median / p99",
+         lambda w: _med_p99(arrays[w]["replan_iterations"]))  # fmt: skip
+    line("re-plans (failed)",
+         lambda w: f"{summaries[w]['replans']} ({summaries[w]['replans_failed']})")  # fmt: skip
+    line("keep-out samples + failing nodes", lambda w: str(summaries[w]["violations"]))
+    report.sections.append(("Summary", rep.markdown_table(("quantity", *WARMSTARTS),
+                                                          table_rows)))  # fmt: skip
+    report.sections.append(("Previous vs cold on the same re-plans",
+                            paired_text(summaries["previous"], arrays["previous"])))  # fmt: skip
+    for w in WARMSTARTS:
+        if (out / w / "simulate.png").exists():
+            report.figures.append((f"{w}/simulate.png", f"{w}: flown trajectories and re-plan "
+                                   "wall times against the re-planning period"))  # fmt: skip
+
+
+def paired_text(summary: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
+    """Per re-plan win/tie/loss of ``previous`` against ``cold`` (cost, tie within 1e-6 m/s)
+    and their convex solves and wall times on identical re-plan problems."""
+    vs = summary.get("vs_cold")
+    it_p, it_c = arrays["replan_iterations"], arrays["compare_iterations"]
+    t_p, t_c = arrays["replan_wall_s"], arrays["compare_wall_s"]
+    if not vs or it_p.size != it_c.size or not it_p.size:
+        return "No comparison solves recorded."
+    fewer = 100.0 * (1.0 - it_p.sum() / it_c.sum())
+    rows = [
+        ("per re-plan cost: win / tie / loss", f"{vs['win']} / {vs['tie']} / {vs['loss']}", ""),
+        ("convex solves median / mean", f"{np.median(it_p):g} / {it_p.mean():.2f}",
+         f"{np.median(it_c):g} / {it_c.mean():.2f}"),
+        ("convex solves, total", f"{int(it_p.sum())} ({relative(fewer, 'fewer', 'more')})",
+         f"{int(it_c.sum())}"),
+        ("solves per re-plan: fewer / same / more",
+         f"{int((it_p < it_c).sum())} / {int((it_p == it_c).sum())} / "
+         f"{int((it_p > it_c).sum())}", ""),
+        ("wall time median / p99 [s]", _med_p99(t_p), _med_p99(t_c)),
+        ("wall time, total [s]", f"{t_p.sum():.1f} ({speedup(t_c.sum() / t_p.sum())})",
+         f"{t_c.sum():.1f}"),
+    ]  # fmt: skip
+    text = rep.markdown_table(("quantity", "previous (flown)", "cold (same problems)"), rows)
+    return text + (
+        "\n\nThe cold solves are made on the re-plan problems of the flights of `previous` "
+        "(same estimate, same remaining horizon). Convex solves count every stage: cold runs "
+        "the three-stage procedure (TPBVP, collision avoidance, passive safety), previous "
+        "SCvx* on passive safety alone. Wall times include the warm start and the "
+        "verification (truth replay); the remaining problem's target maps are built before "
+        "either solve."
+    )
+
+
+DIFFERENCES: tuple[str, ...] = (
+    "Closed loop: the robust ART paper solves the chance-constrained problem open loop; "
+    "here it is re-solved every 10 impulses on a shrinking horizon from a navigation "
+    "estimate (mean ROE of the two-body + J2 truth plus the Table 2 navigation error), "
+    "each remaining problem with the chance constraint of Eq. 14-16 on its nodes.",
+    "Warm starts: the shipped robust ART model cannot start mid-horizon (it generates from "
+    "time step 0 of a 100-impulse problem), so the learned start is not flown.",
+    "Passive safety of the flown plans is checked by the family's Monte Carlo with 200 draws "
+    "per node instead of the 1000 of its verification (time); the flown states' own free "
+    "drift is checked too.",
+)
