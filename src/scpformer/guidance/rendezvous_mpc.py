@@ -100,13 +100,17 @@ MEAN_SAMPLES, MEAN_SUBSTEPS = 48, 12
 TAIL_BURNS = 2
 
 
-def check_warmstart(name: Any) -> str:
-    """``name`` when it is a warm start of :data:`WARMSTARTS`; ``ValueError`` otherwise
-    (naming why an unimplemented one is missing)."""
-    if name in UNSUPPORTED:
-        raise ValueError(f"warmstart {name!r} is not available: {UNSUPPORTED[name]}")
-    if name not in WARMSTARTS:
-        raise ValueError(f"warmstart must be one of {', '.join(WARMSTARTS)}, got {name!r}")
+def check_warmstart(
+    name: Any,
+    warmstarts: tuple[str, ...] = WARMSTARTS,
+    unsupported: dict[str, str] = UNSUPPORTED,
+) -> str:
+    """``name`` when it is a warm start of ``warmstarts`` (default :data:`WARMSTARTS`);
+    ``ValueError`` otherwise (naming why one of ``unsupported`` is missing)."""
+    if name in unsupported:
+        raise ValueError(f"warmstart {name!r} is not available: {unsupported[name]}")
+    if name not in warmstarts:
+        raise ValueError(f"warmstart must be one of {', '.join(warmstarts)}, got {name!r}")
     return str(name)
 
 
@@ -326,29 +330,37 @@ class MPCConfig:
     model: str | None = None
 
     def __post_init__(self) -> None:
-        check_int("replan_every", self.replan_every, least=1)
-        check_warmstart(self.warmstart)
-        compare = tuple(self.compare)
-        for name in compare:
-            check_warmstart(name)
-        object.__setattr__(self, "compare", tuple(n for n in compare if n != self.warmstart))
-        if not isinstance(self.solver, RendezvousSolverConfig):
-            raise ValueError(f"solver must be a RendezvousSolverConfig, got "
-                             f"{type(self.solver).__name__}")  # fmt: skip
-        if not isinstance(self.errors, ErrorModels):
-            raise ValueError(f"errors must be an ErrorModels, got {type(self.errors).__name__}")
-        if self.tolerance is not None and not isinstance(self.tolerance, DockingTolerance):
-            raise ValueError(f"tolerance must be a DockingTolerance or None, got "
-                             f"{type(self.tolerance).__name__}")  # fmt: skip
-        check_int("samples_per_interval", self.samples_per_interval, least=1)
+        check_loop_config(self, RendezvousSolverConfig, check_warmstart)
         check_bool("accept_max_iterations", self.accept_max_iterations)
-        check_positive("burn_threshold_m_s", self.burn_threshold_m_s)
         if self.model is not None:
             if not isinstance(self.model, str | PathLike):
                 raise ValueError(f"model must be a path or None, got {type(self.model).__name__}")
             if not uses_art(self):
                 raise ValueError("model: used with the warm starts art and best only")
             object.__setattr__(self, "model", str(self.model))
+
+
+def check_loop_config(cfg: Any, solver_type: type, check: Callable[[Any], str]) -> None:
+    """Check the fields a rendezvous loop's ``MPCConfig`` shares (this family's and the robust
+    family's): ``replan_every``, ``warmstart`` and ``compare`` (by ``check``; ``compare``
+    loses the flown start), ``solver`` (a ``solver_type``), ``errors``, ``tolerance``,
+    ``samples_per_interval`` and ``burn_threshold_m_s``; ``ValueError`` naming the field."""
+    check_int("replan_every", cfg.replan_every, least=1)
+    check(cfg.warmstart)
+    compare = tuple(cfg.compare)
+    for name in compare:
+        check(name)
+    object.__setattr__(cfg, "compare", tuple(n for n in compare if n != cfg.warmstart))
+    if not isinstance(cfg.solver, solver_type):
+        raise ValueError(f"solver must be a {solver_type.__name__}, got "
+                         f"{type(cfg.solver).__name__}")  # fmt: skip
+    if not isinstance(cfg.errors, ErrorModels):
+        raise ValueError(f"errors must be an ErrorModels, got {type(cfg.errors).__name__}")
+    if cfg.tolerance is not None and not isinstance(cfg.tolerance, DockingTolerance):
+        raise ValueError(f"tolerance must be a DockingTolerance or None, got "
+                         f"{type(cfg.tolerance).__name__}")  # fmt: skip
+    check_int("samples_per_interval", cfg.samples_per_interval, least=1)
+    check_positive("burn_threshold_m_s", cfg.burn_threshold_m_s)
 
 
 # ======================================================================================

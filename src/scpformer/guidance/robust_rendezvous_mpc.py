@@ -90,11 +90,13 @@ from scpformer.guidance.rendezvous_mpc import (
     DockingTolerance,
     ErrorModels,
     ReplanRecord,
+    check_loop_config,
     fly_truth,
     replan_compared,
     shifted_plan,
     terminal_tolerance,
 )
+from scpformer.guidance.rendezvous_mpc import check_warmstart as rendezvous_check_warmstart
 from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.robust_rendezvous.montecarlo import (
@@ -130,11 +132,7 @@ MIN_REMAINING = 2
 def check_warmstart(name: Any) -> str:
     """``name`` when it is a warm start of :data:`WARMSTARTS`; ``ValueError`` otherwise
     (naming why an unimplemented one is missing)."""
-    if name in UNSUPPORTED:
-        raise ValueError(f"warmstart {name!r} is not available: {UNSUPPORTED[name]}")
-    if name not in WARMSTARTS:
-        raise ValueError(f"warmstart must be one of {', '.join(WARMSTARTS)}, got {name!r}")
-    return str(name)
+    return rendezvous_check_warmstart(name, WARMSTARTS, UNSUPPORTED)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -185,25 +183,10 @@ class MPCConfig:
     safety_confidence: float = 1e-4
 
     def __post_init__(self) -> None:
-        check_int("replan_every", self.replan_every, least=1)
-        check_warmstart(self.warmstart)
-        compare = tuple(self.compare)
-        for name in compare:
-            check_warmstart(name)
-        object.__setattr__(self, "compare", tuple(n for n in compare if n != self.warmstart))
-        if not isinstance(self.solver, RobustSolverConfig):
-            raise ValueError(f"solver must be a RobustSolverConfig, got "
-                             f"{type(self.solver).__name__}")  # fmt: skip
+        check_loop_config(self, RobustSolverConfig, check_warmstart)
         if self.solver.safety_mode != "chance":
             raise ValueError(f"solver.safety_mode must be 'chance' (the chance-constrained "
                              f"rendezvous), got {self.solver.safety_mode!r}")  # fmt: skip
-        if not isinstance(self.errors, ErrorModels):
-            raise ValueError(f"errors must be an ErrorModels, got {type(self.errors).__name__}")
-        if self.tolerance is not None and not isinstance(self.tolerance, DockingTolerance):
-            raise ValueError(f"tolerance must be a DockingTolerance or None, got "
-                             f"{type(self.tolerance).__name__}")  # fmt: skip
-        check_int("samples_per_interval", self.samples_per_interval, least=1)
-        check_positive("burn_threshold_m_s", self.burn_threshold_m_s)
         check_int("safety_samples", self.safety_samples, least=1)
         confidence = check_positive("safety_confidence", self.safety_confidence)
         if confidence >= 1.0:
