@@ -31,6 +31,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             warmstart=args.warmstart,
             compare=(args.compare,) if args.compare else (),
             errors=pdg.ErrorModels() if args.errors == "default" else pdg.ErrorModels.none(),
+            tracking=pdg.TrackingWeights() if args.tracking == "lqr" else None,
         )
     else:
         from scpformer.guidance import robust_rendezvous_mpc as robust

@@ -190,6 +190,20 @@ EXPERIMENTS: dict[str, Experiment] = {
             ),
         ),
         Experiment(
+            name="mpc-pdg6dof",
+            reproduces="closed-loop 6-DoF landing: T-SCvx against the classical re-plan starts",
+            summary="closed-loop landing Monte Carlo: cold, previous-plan and T-SCvx re-plans",
+            module="scpformer.experiments.mpc_pdg6dof",
+            default_n=100,
+            models="the shipped T-SCvx networks",
+            depends_on=(
+                "src/scpformer/experiments/mpc_pdg6dof.py",
+                "src/scpformer/guidance",
+                "src/scpformer/problems/pdg6dof",
+                "src/scpformer/scp",
+            ),
+        ),
+        Experiment(
             name="tscvx-training",
             reproduces=f"{_TSCVX} Table 3",
             summary="T-SCvx networks: losses, test accuracy vs all-zeros/ones, precision/recall",

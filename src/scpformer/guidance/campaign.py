@@ -27,7 +27,7 @@ import math
 import multiprocessing as mp
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -139,6 +139,8 @@ class Campaign:
                 "family": "pdg6dof", "seed": self.seed, "instances": self.instances,
                 "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,
                 "min_remaining_time": cfg.min_remaining_time, "compare": list(cfg.compare),
+                "tracking": asdict(cfg.tracking) if cfg.tracking is not None else None,
+                "thrust_margin": cfg.thrust_margin, "gimbal_margin_deg": cfg.gimbal_margin_deg,
                 "errors": {
                     name: getattr(errors, name) for name in (
                         "thrust_magnitude", "pointing_deg", "mass_fraction",

@@ -48,6 +48,11 @@ import numpy as np
 
 from scpformer.dynamics import powered_descent_truth as truth
 from scpformer.dynamics import quaternion as quat
+from scpformer.guidance.pdg6dof_tracking import (
+    TrackingWeights,
+    project_thrust,
+    tracking_gains,
+)
 from scpformer.guidance.records import replan_statistics, replan_tables
 from scpformer.pdg6dof import PDGInstance, PDGSolverConfig, sample_instances, solve
 from scpformer.problems.pdg6dof import constraints as con
@@ -353,6 +358,20 @@ class MPCConfig:
         nonlinear replay meets the terminal conditions and the constraints at the nodes to
         the verification's tolerances), only not certified optimal; the alternative is the
         older plan, flown open loop from a state that has drifted further.
+    tracking
+        Weights of the feedback that keeps the vehicle on the plan between re-plans
+        (:mod:`scpformer.guidance.pdg6dof_tracking`: a time-varying LQR on the plan's
+        first-order-hold linearization, fed by a navigation fix every interval); ``None``
+        flies the plan's thrust open loop between re-plans.
+    thrust_margin, gimbal_margin_deg
+        Control authority the plans leave to the tracking law (:func:`planning_instance`):
+        every plan flown, the first one included, is solved with the thrust bounds 6a moved
+        inwards by ``thrust_margin T_max`` (default 0.06: 0.3 U, five 1-sigma thrust errors
+        plus the mass and drag corrections) and the gimbal bound 6b by ``gimbal_margin_deg``
+        (default 2 deg, a tenth of the range). The fuel-optimal descent flies its last
+        40% at ``T_max`` and ends at the gimbal stop, where no correction is possible. The
+        open-loop reference (``open_loop_fuel``) keeps the full bounds, and so do the plans
+        when ``tracking`` is None.
     """
 
     replan_every: int = 5
@@ -363,9 +382,24 @@ class MPCConfig:
     errors: ErrorModels = field(default_factory=ErrorModels)
     tolerance: LandingTolerance | None = None
     accept_unconverged: bool = True
+    tracking: TrackingWeights | None = field(default_factory=TrackingWeights)
+    thrust_margin: float = 0.06
+    gimbal_margin_deg: float = 2.0
 
     def __post_init__(self) -> None:
+        check_finite("thrust_margin", self.thrust_margin, shape=(), nonnegative=True)
+        check_finite("gimbal_margin_deg", self.gimbal_margin_deg, shape=(), nonnegative=True)
+        c = PDGInstance().constants
+        if c.T_min + 2 * self.thrust_margin * c.T_max >= c.T_max:
+            raise ValueError(f"thrust_margin {self.thrust_margin} leaves no thrust range "
+                             f"(T_min {c.T_min}, T_max {c.T_max})")  # fmt: skip
+        if self.gimbal_margin_deg >= c.delta_max_deg:
+            raise ValueError(f"gimbal_margin_deg must be below delta_max = {c.delta_max_deg} "
+                             f"deg, got {self.gimbal_margin_deg}")  # fmt: skip
         check_bool("accept_unconverged", self.accept_unconverged)
+        if self.tracking is not None and not isinstance(self.tracking, TrackingWeights):
+            raise ValueError(f"tracking must be a TrackingWeights or None, got "
+                             f"{type(self.tracking).__name__}")  # fmt: skip
         if not isinstance(self.solver, PDGSolverConfig):
             raise ValueError(f"solver must be a PDGSolverConfig, got "
                              f"{type(self.solver).__name__}")  # fmt: skip
@@ -583,6 +617,21 @@ def remaining_instance(instance: PDGInstance, estimate: np.ndarray) -> PDGInstan
                    m0=float(x[13]))  # fmt: skip
 
 
+def planning_instance(instance: PDGInstance, cfg: MPCConfig) -> PDGInstance:
+    """``instance`` with the thrust and gimbal bounds the plans use: ``T_min + m T_max <= |T|
+    <= (1 - m) T_max`` and ``delta_max - d`` for the margins ``m, d`` of ``cfg``
+    (:attr:`MPCConfig.thrust_margin`); the truth and the constraint check keep the
+    instance's own bounds. The margins are the tracking law's: without tracking
+    (``cfg.tracking`` None) the plans use the whole thrust set."""
+    if cfg.tracking is None or not (cfg.thrust_margin or cfg.gimbal_margin_deg):
+        return instance
+    c = instance.constants
+    margin = cfg.thrust_margin * c.T_max
+    return replace(instance, constants=replace(
+        c, T_min=c.T_min + margin, T_max=c.T_max - margin,
+        delta_max_deg=c.delta_max_deg - cfg.gimbal_margin_deg))  # fmt: skip
+
+
 def shifted_plan(plan: Solution, node: int, estimate: np.ndarray | None = None) -> GivenWarmStart:
     """The warm start ``previous``: the plan from its node ``node`` on, re-interpolated onto
     the plan's ``N`` nodes over its remaining time ``t_f - t_node`` (linear in time, as the
@@ -662,6 +711,39 @@ def open_loop_plan(instance: PDGInstance, config: MPCConfig | None = None) -> So
     return sol
 
 
+def navigation_fix(
+    x: np.ndarray, mass_factor: float, nav: NavigationErrors | None, rng: np.random.Generator
+) -> np.ndarray:
+    """The navigation estimate (14,) of the true state ``x``: the mass the guidance believes
+    (``m / mass_factor``) and, unless ``nav`` is None, position, velocity, attitude (a small
+    body-axis rotation) and rate errors drawn from ``rng`` (12 normal draws)."""
+    estimate = np.array(x, dtype=float)
+    estimate[13] = x[13] / mass_factor
+    if nav is not None:
+        zn = rng.standard_normal(12)
+        estimate[0:3] += nav.position * zn[0:3]
+        estimate[3:6] += nav.velocity * zn[3:6]
+        estimate[6:10] = _rotated(x[6:10], nav.attitude_deg * DEG * zn[6:9])
+        estimate[10:13] += nav.rate_deg * DEG * zn[9:12]
+    return estimate
+
+
+def _deviation(estimate: np.ndarray, planned: np.ndarray) -> np.ndarray:
+    """``estimate - planned`` with the estimate's quaternion taken in the plan's hemisphere
+    (``q`` and ``-q`` are one attitude)."""
+    dx = np.asarray(estimate, dtype=float) - planned
+    if float(np.dot(estimate[6:10], planned[6:10])) < 0.0:
+        dx[6:10] = -np.asarray(estimate[6:10]) - planned[6:10]
+    return dx
+
+
+def _gains(instance: PDGInstance, plan: Solution, cfg: MPCConfig) -> np.ndarray | None:
+    """The tracking gains of ``plan`` (None without tracking)."""
+    if cfg.tracking is None:
+        return None
+    return tracking_gains(instance, plan.trajectory, cfg.tracking, cfg.solver.n_sub)
+
+
 def _rotated(q: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """``q (x) dq``: ``q`` rotated by the small body-axis rotation vector ``angles`` [rad]."""
     angle = float(np.linalg.norm(angles))
@@ -716,7 +798,8 @@ def fly(
         raise ValueError(f"instance must be a PDGInstance, got {type(instance).__name__}")
     open_loop = open_loop or open_loop_plan(instance, cfg)
     errors, c = cfg.errors, instance.constants
-    rng_vehicle, rng_nav, rng_act = (np.random.default_rng([seed, i]) for i in range(3))
+    rng_vehicle, rng_nav, rng_act, rng_track = (np.random.default_rng([seed, i])
+                                                for i in range(4))  # fmt: skip
     z_vehicle = rng_vehicle.standard_normal(5)
     mass_factor = 1.0 + errors.mass_fraction * z_vehicle[0]
     truth_c = replace(
@@ -730,15 +813,18 @@ def fly(
     m = SAMPLES_PER_INTERVAL
     nav = errors.navigation
 
+    planner = planning_instance(instance, cfg)
+    first = open_loop if planner is instance else open_loop_plan(planner, cfg)
     x = np.array(instance.x0)
     x[13] *= mass_factor
-    plan, node, k_flown, t_now, since = open_loop, 0, 0, 0.0, 0
+    plan, node, k_flown, t_now, since = first, 0, 0, 0.0, 0
     t_out, x_out, ucmd_out, uexec_out = [0.0], [x.copy()], [], []
     replans: list[ReplanRecord] = []
     comparisons: list[ReplanRecord] = []
     estimates, truths = [], []
     step = 0.0
-    u1 = np.zeros(3)
+    u1 = c1 = np.zeros(3)
+    gains = _gains(instance, plan, cfg)
     while True:
         z = plan.trajectory
         n = z.x.shape[0]
@@ -747,18 +833,11 @@ def fly(
         if (since >= cfg.replan_every and remaining >= cfg.min_remaining_time
                 and n - node >= cfg.replan_every + 2):  # fmt: skip
             since = 0
-            estimate = x.copy()
-            estimate[13] = x[13] / mass_factor
-            if nav is not None:
-                zn = rng_nav.standard_normal(12)
-                estimate[0:3] += nav.position * zn[0:3]
-                estimate[3:6] += nav.velocity * zn[3:6]
-                estimate[6:10] = _rotated(x[6:10], nav.attitude_deg * DEG * zn[6:9])
-                estimate[10:13] += nav.rate_deg * DEG * zn[9:12]
+            estimate = navigation_fix(x, mass_factor, nav, rng_nav)
             truths.append(x.copy())
             estimates.append(estimate)
             try:
-                sub, error = remaining_instance(instance, estimate), ""
+                sub, error = remaining_instance(planner, estimate), ""
             except ValueError as err:
                 sub, error = None, str(err)
             period = cfg.replan_every * dt
@@ -770,15 +849,21 @@ def fly(
                 comparisons.append(_replan(*args, other, *rest)[0])
             if record.accepted and sol is not None:
                 plan, node = sol, 0
+                gains = _gains(instance, plan, cfg)
                 continue
         if node >= n - 1:
             break
         # one interval of the plan through the truth
+        c0, c1 = np.asarray(z.u[node], dtype=float), np.asarray(z.u[node + 1], dtype=float)
+        if gains is not None:
+            du = -gains[node] @ _deviation(navigation_fix(x, mass_factor, nav, rng_track),
+                                           z.x[node])  # fmt: skip
+            c0, c1 = project_thrust(c0 + du, instance), project_thrust(c1 + du, instance)
         za = rng_act.standard_normal(3)
         scale = 1.0 + errors.thrust_magnitude * za[0]
         angles = errors.pointing_deg * DEG * za[1:3]
-        u0 = _thrust_error(np.asarray(z.u[node], dtype=float), scale, angles)
-        u1 = _thrust_error(np.asarray(z.u[node + 1], dtype=float), scale, angles)
+        u0 = _thrust_error(c0, scale, angles)
+        u1 = _thrust_error(c1, scale, angles)
         params = np.concatenate([scalars, u0, (u1 - u0) / dt])
         sample = np.linspace(0.0, 1.0, m + 1)[1:]
         rows = np.empty((m, x.size))
@@ -786,7 +871,7 @@ def fly(
         if step == truth.TOO_SMALL_STEP:
             raise RuntimeError(f"truth propagation failed at t = {t_now:.3f} U_T")
         frac = np.r_[0.0, sample][:-1]
-        ucmd_out.append(z.u[node] + frac[:, None] * (z.u[node + 1] - z.u[node]))
+        ucmd_out.append(c0 + frac[:, None] * (c1 - c0))
         uexec_out.append(u0 + frac[:, None] * (u1 - u0))
         t_out.extend(t_now + sample * dt)
         x_out.extend(rows)
@@ -795,7 +880,7 @@ def fly(
         node += 1
         k_flown += 1
         since += 1
-    ucmd_out.append(np.asarray(plan.trajectory.u[-1], dtype=float)[None])
+    ucmd_out.append((c1 if uexec_out else np.asarray(plan.trajectory.u[-1], dtype=float))[None])
     uexec_out.append((u1 if uexec_out else ucmd_out[-1][0])[None])
     tolerance = cfg.tolerance or LandingTolerance.derive(errors, cfg, instance, open_loop)
     return ClosedLoopResult(

@@ -20,6 +20,7 @@ INSTANCES = ("default", "sampled")  # scpformer.guidance.campaign.INSTANCES
 ERRORS = ("table2", "none")
 PDG_WARMSTARTS = ("cold", "previous", "tscvx")  # scpformer.guidance.pdg6dof_mpc.WARMSTARTS
 PDG_ERRORS = ("default", "none")
+PDG_TRACKING = ("lqr", "none")
 
 
 def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
@@ -139,6 +140,17 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
             "default: thrust 1%% and 0.1 deg, mass 1%%, inertia 5%%, aerodynamic coefficient "
             "20%%, navigation and initial dispersion (1 sigma); none: no error",
             "default",
+        ),
+    )
+    parser.add_argument(
+        "--tracking",
+        choices=PDG_TRACKING,
+        default="lqr",
+        help=with_default(
+            "lqr: a time-varying LQR on the plan's linearization corrects the thrust every "
+            "interval from a navigation fix; none: the plan's thrust is flown open loop "
+            "between re-plans",
+            "lqr",
         ),
     )
     _add_run_arguments(parser)

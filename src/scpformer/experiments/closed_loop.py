@@ -1,0 +1,71 @@
+"""What the closed-loop experiments (``mpc-*``) share: flying every warm start's campaign into
+its own folder of the experiment's output, with progress, summary and figure."""
+
+from __future__ import annotations
+
+import csv
+import io
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from scpformer.guidance.campaign import Campaign, plot_campaign, run_campaign, summarize
+
+
+def fly_warmstarts(
+    name: str,
+    out: Path,
+    warmstarts: tuple[str, ...],
+    campaign_of: Callable[[str], Campaign],
+    *,
+    family: str,
+    workers: int = 1,
+) -> tuple[dict[str, list[dict[str, str]]], dict[str, dict[str, Any]]]:
+    """Fly ``campaign_of(w)`` into ``out / w`` for every warm start ``w`` in order (each a
+    resumable campaign folder with its ``simulate.png``); returns the rows of ``runs.csv``
+    and the summary of each. One worker unless asked: re-plan wall times are measured."""
+    rows: dict[str, list[dict[str, str]]] = {}
+    summaries: dict[str, dict[str, Any]] = {}
+    for warmstart in warmstarts:
+        folder = out / warmstart
+        campaign = campaign_of(warmstart)
+
+        def progress(row: dict[str, Any], ws: str = warmstart, n: int = campaign.runs) -> None:
+            print(f"{name}: {ws} run {row['run'] + 1}/{n}: success {row['success']}",
+                  file=sys.stderr, flush=True)  # fmt: skip
+
+        rows[warmstart] = run_campaign(campaign, folder, on_run=progress, workers=workers)
+        summaries[warmstart] = summarize(rows[warmstart], folder, family)
+        if rows[warmstart]:
+            plot_campaign(rows[warmstart], folder, folder / "simulate.png", family)
+    return rows, summaries
+
+
+def results_csv(
+    rows: dict[str, list[dict[str, str]]], warmstarts: tuple[str, ...], columns: tuple[str, ...]
+) -> str:
+    """``OUT/results.csv``: one line per run, its index and error seed, then each warm
+    start ``w``'s ``columns`` as ``w_<column>``."""
+    header = ["index", "seed"] + [f"{w}_{c}" for w in warmstarts for c in columns]
+    by_run: dict[int, dict[str, str]] = {}
+    for warmstart, table in rows.items():
+        for row in table:
+            line = by_run.setdefault(int(row["run"]), {"index": row["run"], "seed": row["seed"]})
+            line.update({f"{warmstart}_{c}": row.get(c, "") for c in columns})
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=header, lineterminator="\n")
+    writer.writeheader()
+    for run_index in sorted(by_run):
+        writer.writerow(by_run[run_index])
+    return buf.getvalue()
+
+
+def relative(percent: float, less: str, more: str) -> str:
+    """``"12.3% fewer"`` for a positive saving, ``"4.5% more"`` for a negative one."""
+    return f"{abs(percent):.1f}% {less if percent >= 0 else more}"
+
+
+def speedup(ratio: float) -> str:
+    """``"2.10x shorter"`` for a ratio above 1 (cold over warm), ``"1.09x longer"`` below."""
+    return f"{ratio:.2f}x shorter" if ratio >= 1 else f"{1 / ratio:.2f}x longer"

@@ -1,0 +1,61 @@
+"""``scpformer experiment run mpc-pdg6dof``: closed-loop landing Monte Carlo, three starts."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from scpformer.cli.main import main
+from scpformer.experiments import EXPERIMENTS, mpc_pdg6dof
+
+
+@pytest.fixture(scope="module")
+def one_run(tmp_path_factory):
+    """One run per warm start, re-planning every 24 intervals (one or two re-plans)."""
+    out = tmp_path_factory.mktemp("mpc") / "out"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(mpc_pdg6dof, "REPLAN_EVERY", 24)
+        argv = ["experiment", "run", "mpc-pdg6dof", "--n", "1", "--seed", "5", "--out", str(out)]
+        assert main(argv) == 0
+    return out
+
+
+def test_the_experiment_is_registered_with_the_shipped_networks():
+    entry = EXPERIMENTS["mpc-pdg6dof"]
+    assert entry.module == "scpformer.experiments.mpc_pdg6dof"
+    assert "src/scpformer/guidance" in entry.depends_on
+
+
+def test_every_start_flies_the_same_run_and_tscvx_is_compared_on_its_re_plans(one_run):
+    with (one_run / "results.csv").open(newline="") as fh:
+        (row,) = list(csv.DictReader(fh))
+    assert row["index"] == "0"
+    for warmstart in mpc_pdg6dof.WARMSTARTS:
+        assert int(row[f"{warmstart}_replans"]) >= 1
+        # the same dispersed instance: one open-loop optimum for all three
+        assert row[f"{warmstart}_open_loop_fuel"] == row["cold_open_loop_fuel"]
+    with np.load(one_run / "tscvx" / "run-0000.npz") as data:
+        flown = data["replan_node"].tolist()
+        compared = data["compare_warmstart"].tolist()
+        assert compared == ["cold", "previous"] * len(flown)
+        assert data["compare_node"].tolist() == [n for n in flown for _ in range(2)]
+    results = json.loads((one_run / "results.json").read_text())
+    assert results["experiment"] == "mpc-pdg6dof"
+    report = (one_run / "report.md").read_text()
+    for section in ("## Summary", "## T-SCvx vs cold on the same re-plans",
+                    "## T-SCvx vs previous on the same re-plans", "## Failures"):  # fmt: skip
+        assert section in report
+    assert "win / tie / loss" in report
+
+
+def test_a_rerun_resumes_and_other_settings_are_refused(one_run, capsys):
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(mpc_pdg6dof, "REPLAN_EVERY", 24)
+        argv = ["experiment", "run", "mpc-pdg6dof", "--n", "1", "--seed", "5"]
+        assert main([*argv, "--out", str(one_run)]) == 0  # nothing left to fly
+        assert "run 1/1" not in capsys.readouterr().err
+        assert main([*argv[:-1], "6", "--out", str(one_run)]) == 2
+    assert "other settings (seed)" in capsys.readouterr().err
