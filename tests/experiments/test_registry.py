@@ -13,6 +13,7 @@ PAPER_ITEMS = {
     "robust-trajectory": "Figs. 7-8",
     "robust-posthoc": "Figs. 9-10",
     "mpc-rendezvous": "closed-loop MPC: warm-start gains",
+    "mpc-robust-rendezvous": "passively safe rendezvous",
     "mpc-pdg6dof": "T-SCvx against the classical re-plan starts",
     "tscvx-training": "Table 3",
     "tscvx-solve-time": "Fig. 2",

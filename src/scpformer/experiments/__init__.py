@@ -190,6 +190,20 @@ EXPERIMENTS: dict[str, Experiment] = {
             ),
         ),
         Experiment(
+            name="mpc-robust-rendezvous",
+            reproduces="closed-loop MPC of the chance-constrained, passively safe rendezvous",
+            summary="closed-loop robust rendezvous Monte Carlo: cold vs previous-plan re-plans",
+            module="scpformer.experiments.mpc_robust_rendezvous",
+            default_n=100,
+            models="none (the learned start cannot start mid-horizon)",
+            depends_on=(
+                "src/scpformer/experiments/mpc_robust_rendezvous.py",
+                "src/scpformer/guidance",
+                *_ROBUST_FAMILY,
+                "src/scpformer/scp",
+            ),
+        ),
+        Experiment(
             name="mpc-pdg6dof",
             reproduces="closed-loop 6-DoF landing: T-SCvx against the classical re-plan starts",
             summary="closed-loop landing Monte Carlo: cold, previous-plan and T-SCvx re-plans",

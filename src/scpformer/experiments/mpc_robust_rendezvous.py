@@ -23,17 +23,17 @@ both warm starts side by side), ``report.md`` and ``results.json``.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from scpformer.experiments import report as rep
-from scpformer.experiments.mpc_rendezvous import relative, replan_arrays, results_csv, speedup
+from scpformer.experiments.closed_loop import fly_warmstarts, relative, results_csv, speedup
+from scpformer.experiments.mpc_rendezvous import replan_arrays
 from scpformer.experiments.runner import RunOptions, check_settings, require_n
 from scpformer.files import write_text_atomic
-from scpformer.guidance.campaign import Campaign, plot_campaign, run_campaign, summarize
+from scpformer.guidance.campaign import Campaign
 from scpformer.guidance.robust_rendezvous_mpc import MPCConfig
 
 NAME = "mpc-robust-rendezvous"
@@ -68,22 +68,10 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
         "warmstarts": list(WARMSTARTS), "safety_samples": MPCConfig().safety_samples,
     }  # fmt: skip
     check_settings(out, settings)
-    rows: dict[str, list[dict[str, str]]] = {}
-    summaries: dict[str, dict[str, Any]] = {}
-    for warmstart in WARMSTARTS:
-        folder = out / warmstart
-
-        def progress(row: dict[str, Any], ws: str = warmstart) -> None:
-            print(f"{NAME}: {ws} run {row['run'] + 1}/{n}: success {row['success']}",
-                  file=sys.stderr, flush=True)  # fmt: skip
-
-        rows[warmstart] = run_campaign(  # one worker unless asked: re-plan times are timed
-            campaign(n, options.seed, warmstart), folder, on_run=progress,
-            workers=options.workers or 1,
-        )  # fmt: skip
-        summaries[warmstart] = summarize(rows[warmstart], folder, "robust-rendezvous")
-        if rows[warmstart]:
-            plot_campaign(rows[warmstart], folder, folder / "simulate.png", "robust-rendezvous")
+    rows, summaries = fly_warmstarts(
+        NAME, out, WARMSTARTS, lambda w: campaign(n, options.seed, w),
+        family="robust-rendezvous", workers=options.workers or 1,
+    )  # fmt: skip
     write_text_atomic(out / "results.csv", results_csv(rows, WARMSTARTS, RUN_COLUMNS))
     report = rep.Report(name=name, reproduces=REPRODUCES, command=command, settings=settings,
                         differences=DIFFERENCES)  # fmt: skip

@@ -61,9 +61,10 @@ PDG_COLUMNS = (
     "violations", "flight_time",
 )  # fmt: skip
 #: Columns of ``runs.csv`` of the robust rendezvous: :data:`COLUMNS` (``cone_violation_m`` is
-#: 0, the problem has no cone) and the flown nodes failing the passive-safety Monte Carlo test
-#: and the largest violation probability of a node.
-ROBUST_COLUMNS = (*COLUMNS, "passive_safety_nodes", "passive_safety_p_max")
+#: 0, the problem has no cone), the flown nodes whose free drift entered the ellipsoid, the
+#: flown nodes whose plan fails the passive-safety Monte Carlo test and the largest violation
+#: probability of a node (``robust_rendezvous_mpc.RobustClosedLoopResult.path_violations``).
+ROBUST_COLUMNS = (*COLUMNS, "drift_entries", "passive_safety_nodes", "passive_safety_p_max")
 INSTANCES = ("default", "sampled")
 #: Cost difference below which two re-plans tie [m/s]: the SCP's cost tolerance J_tol of
 #: Eq. 19 (Table 1, 1e-6 m/s).
