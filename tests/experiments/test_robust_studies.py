@@ -35,7 +35,10 @@ def test_robust_warmstart_runs_scvx_star_from_cvx_and_art_in_both_modes(tmp_path
         assert row[f"{mode}_cvx_status"] in ("converged", "max_iterations", "solver_failed")
         assert row[f"{mode}_art_rtn_accepted"] in ("True", "False")  # the Eq. 8 check ran
     assert (out / "fig5_deterministic.png").is_file() and (out / "fig6_chance.png").is_file()
-    assert "PS-ART-C (RTN)" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "PS-ART-C (RTN)" in report
+    assert "instance by instance against PS-CVX-C (chance)" in report
+    assert "**PS-ART-C (RTN) with the check against PS-CVX-C**" in report
 
 
 def test_a_rendezvous_dataset_is_refused_by_robust_warmstart(

@@ -66,6 +66,7 @@ def test_solve_time_compares_cold_and_tscvx_on_the_same_instances(tscvx_study, t
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert len(rows) == 2 and (out / "fig2_solve_times.png").is_file()
     assert "T-SCvx mean solve-time reduction" in report
+    assert "## Instance by instance" in report and "solved by both" in report
     # T-SCvx converges (fallbacks included) near cold SCvx's verified optimum. The networks of
     # this fixture trained one epoch on four instances, so their guess can lead SCvx to another
     # local optimum: measured 0.55% of the propellant above cold SCvx's on one of these two

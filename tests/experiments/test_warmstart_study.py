@@ -50,6 +50,9 @@ def test_run_writes_the_csv_the_figures_and_the_report(warmstart_run):
     assert "scpformer generate rendezvous --n 6 --seed 11" in text
     assert "| ART improvement of the gap vs CVX, every C_CVX(t_1) > x, x >= 0 [%] | > 20 |" in text
     assert "5 m behind the docking port" in text
+    section = text.split("## Instance by instance against CVX")[1]
+    assert "| draws (all, failures included) | 2 | 2 |" in section
+    assert "**ART against CVX**" in section and "**CVX-TPBVP against CVX**" in section
 
 
 def test_a_rerun_skips_done_instances_and_redoes_missing_ones(warmstart_run):

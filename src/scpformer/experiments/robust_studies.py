@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.experiments import report as rep
+from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import (
     KEY,
     RESULTS_NAME,
@@ -413,12 +414,43 @@ def analyse(
                 _outcome_table(checked, mode, frames),
             ),
             (f"{figure}: ART's guesses and the check ({mode})", _check_table(rows, mode, frames)),
-        ]
+            (f"{figure}: instance by instance against PS-CVX-{letter} ({mode})",
+             paired_text(rows, checked, mode, frames)),
+        ]  # fmt: skip
         report.comparisons += _comparisons(rows, mode, frames, stats)
         report.comparisons += _checked_comparisons(mode, frames, stats, stats_checked, checked)
         report.figures.append(_figure(rows, mode, frames, stats, out))
     if len(frames) > 1:
         report.comparisons += _frame_comparisons(rows, frames)
+
+
+def outcomes(rows: list[dict[str, str]], mode: str, source: str) -> Outcomes:
+    """``source``'s whole path per instance in ``mode``: the warm start's time plus SCvx*'s
+    (none without a guess), its iterations, converged or not, and its cost."""
+    def col(name: str) -> np.ndarray:
+        return column(rows, f"{mode}_{source}_{name}")
+
+    return Outcomes(time=col("ws_time") + np.nan_to_num(col("scp_time")),
+                    iterations=np.nan_to_num(col("iterations")), solved=col("converged") == 1.0,
+                    cost=col("cost"))  # fmt: skip
+
+
+def paired_text(
+    rows: list[dict[str, str]], checked: list[dict[str, str]], mode: str,
+    frames: tuple[str, ...],
+) -> str:  # fmt: skip
+    """Each ART start, without and with the post hoc check, against CVX draw by draw
+    (:mod:`.paired`); a cost difference within SCvx*'s stopping tolerance (1e-6 m/s) ties."""
+    base = outcomes(rows, mode, "cvx")
+    cvx = label(mode, "cvx")
+    tables = [
+        f"**{name} against {cvx}**\n\n"
+        + paired_table(name, outcomes(table, mode, source), cvx, base, cost_tie=1e-6)
+        for source in sources(frames)[1:]
+        for name, table in ((label(mode, source), rows),
+                            (f"{label(mode, source)} with the check", checked))
+    ]  # fmt: skip
+    return "\n\n".join(tables) or "No ART start to compare."
 
 
 def room_for_improvement(rows: list[dict[str, str]]) -> str:

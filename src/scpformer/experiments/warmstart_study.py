@@ -36,6 +36,7 @@ import numpy as np
 
 from scpformer.data.rendezvous_family import RendezvousDataConfig
 from scpformer.experiments import report as rep
+from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import (
     KEY,
     RESULTS_NAME,
@@ -66,6 +67,7 @@ RANGES = ((0, 0), (1, 9), (10, 19), (20, 29), (30, 40), (41, 10**6))  # disjoint
 MM = 1e3  # m/s -> mm/s
 INTERVAL_LEVEL = 0.9  # two-sided level of the bootstrap intervals of the improvement rows
 BOOTSTRAP_DRAWS = 2000  # resamples per interval (seeded: the report is reproducible)
+J_TOL = 1e-6  # the SCP's cost tolerance (Eq. 19, Table 1) [m/s]: two costs within it tie
 PER_WS = (
     "ws_time",
     "ws_cost",
@@ -386,9 +388,33 @@ def analyse(rows: list[dict[str, str]], out: Path, zeta_1: float = math.inf) -> 
     report.figures += _figures(cols, cum, out)
     report.sections.append(("Results by C_CVX(t_1) > x (the paper's curves)", _table(cum, "x")))
     report.sections.append(("Results in disjoint C_CVX(t_1) ranges", _table(bins, "range")))
+    report.sections.append(("Instance by instance against CVX", paired_text(rows)))
     report.comparisons += _comparisons(cols, cum)
     report.sections.insert(0, ("Reading these numbers", _caveats(cols, zeta_1)))
     return report
+
+
+def outcomes(rows: list[dict[str, str]], ws: str) -> Outcomes:
+    """Warm start ``ws``'s whole path per instance: the guess's time plus the SCP's, its
+    iterations, converged or not, and its cost (NaN without a trajectory)."""
+    def col(name: str) -> np.ndarray:
+        return np.array([float(r.get(f"{ws}_{name}") or "nan") for r in rows])
+
+    solved = np.array([r.get(f"{ws}_status") == "converged" for r in rows], dtype=bool)
+    return Outcomes(time=col("ws_time") + np.nan_to_num(col("scp_time")),
+                    iterations=col("iterations"), solved=solved, cost=col("cost"))  # fmt: skip
+
+
+def paired_text(rows: list[dict[str, str]]) -> str:
+    """ART and CVX-TPBVP against CVX, the strongest classical start, draw by draw
+    (:mod:`.paired`); a cost difference within the SCP's J_tol (1e-6 m/s) ties."""
+    base = outcomes(rows, "convex")
+    return "\n\n".join(
+        f"**{LABELS[ws]} against CVX**\n\n"
+        + paired_table(LABELS[ws], outcomes(rows, ws), "CVX", base, cost_tie=J_TOL)
+        for ws in ("art", "tpbvp")
+    ) + ("\n\nWall time of the whole path: the guess (ART: its convex solve for "
+         "R(t_1) = -J_CVX and the rollout) and every SCP iteration.")  # fmt: skip
 
 
 def _caveats(cols: Columns, zeta_1: float) -> str:

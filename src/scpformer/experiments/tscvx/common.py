@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.experiments import report as rep
+from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import (
     KEY,
     RESULTS_NAME,
@@ -281,6 +282,11 @@ class _ExtraCells:
 # ======================================================================================
 # analysis of a solve study
 # ======================================================================================
+#: Propellant difference below which two solves tie [U_M]: SCvx's stationarity test,
+#: ``eps_opt max(1, |J|)`` (eps_opt = 1e-4, |J| = m_f <= m0 = 3 U_M).
+TIE_PROPELLANT = 3e-4
+
+
 def method_stats(rows: Sequence[dict[str, str]], method: str) -> dict[str, float]:
     """Converged rate, solve-time statistics, iterations, gaps and fallbacks of ``method``."""
     times = column(rows, f"{method}_time_s")
@@ -338,6 +344,29 @@ def stats_table(rows: Sequence[dict[str, str]], methods: Sequence[str]) -> str:
         "fallbacks",
     )
     return rep.markdown_table(header, lines)
+
+
+def outcomes(rows: Sequence[dict[str, str]], method: str) -> Outcomes:
+    """``method``'s whole-path wall time, conic solves, solved flag (converged and verified)
+    and cost per row."""
+    return Outcomes(
+        time=column(rows, f"{method}_time_s"),
+        iterations=column(rows, f"{method}_iterations"),
+        solved=np.array([r.get(f"{method}_status") == "converged"
+                         and r.get(f"{method}_verified", "True") == "True" for r in rows],
+                        dtype=bool),  # fmt: skip
+        cost=column(rows, f"{method}_cost"),
+    )
+
+
+def paired_section(rows: Sequence[dict[str, str]], methods: Sequence[str]) -> str:
+    """Each method against cold SCvx instance by instance (:mod:`..paired`); a propellant
+    difference within SCvx's stationarity tolerance (3e-4 U_M) ties."""
+    base = outcomes(rows, COLD)
+    tables = [f"**{m} against cold SCvx**\n\n" + paired_table(m, outcomes(rows, m), COLD, base,
+                                                            cost_tie=TIE_PROPELLANT)
+              for m in methods if m != COLD]  # fmt: skip
+    return "\n\n".join(tables) or "No method to compare with cold SCvx."
 
 
 def pct(value: float) -> str:

@@ -23,6 +23,7 @@ from scpformer.experiments.tscvx.common import (
     method_stats,
     new_report,
     open_tscvx_study,
+    paired_section,
     solve_rows,
     stats_table,
     study_settings,
@@ -52,6 +53,8 @@ def run_lookup(options: RunOptions, *, command: str = "", name: str) -> Path:
             stats_table(_ood(rows, True), methods),
         ),
         ("Where each one wins", lookup_findings(metrics, rows, methods)),
+        ("Instance by instance: in distribution", paired_section(_ood(rows, False), methods)),
+        ("Instance by instance: out of distribution", paired_section(_ood(rows, True), methods)),
     ]
     report.differences = (*TSCVX_DIFFERENCES, *lookup_differences(study))
     report.figures.append(

@@ -18,6 +18,7 @@ from scpformer.experiments.tscvx.common import (
     TscvxStudy,
     new_report,
     open_tscvx_study,
+    paired_section,
     plot_solve_times,
     solve_rows,
     solve_time_comparisons,
@@ -39,6 +40,7 @@ def run_solve_time(options: RunOptions, *, command: str = "", name: str) -> Path
     report.sections.append(
         ("Solve times", _finished(rows, positions) + "\n\n" + stats_table(rows, methods))
     )
+    report.sections.append(("Instance by instance", paired_section(rows, methods)))
     figure = plot_solve_times(rows, methods, options.out / "fig2_solve_times.png")
     report.figures.append((figure, "Fig. 2: solve times of cold SCvx and T-SCvx"))
     return report.write(options.out)
