@@ -19,6 +19,7 @@ from scpformer.guidance import (
     remaining_instance,
 )
 from scpformer.guidance.campaign import COLUMNS, INSTANCES, Campaign, run_campaign
+from scpformer.guidance.rendezvous_art import FlownLog
 from scpformer.guidance.rendezvous_mpc import replan_nodes
 from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.rendezvous import RendezvousInstance, RendezvousSolverConfig
@@ -126,9 +127,9 @@ def test_the_derived_tolerance_is_written_down():
     [
         ({"replan_every": 0}, "replan_every"),
         ({"replan_every": 1.5}, "replan_every"),
-        ({"warmstart": "art"}, "cannot start mid-horizon"),
-        ({"warmstart": "best"}, "not available"),
-        ({"warmstart": "nope"}, "must be one of cold, previous"),
+        ({"warmstart": "nope"}, "must be one of cold, previous, art, best"),
+        ({"model": "run"}, "used with the warm starts art and best only"),
+        ({"warmstart": "art", "model": 3}, "model must be a path or None"),
         ({"compare": ("nope",)}, "must be one of"),
         ({"samples_per_interval": 0}, "samples_per_interval"),
     ],
@@ -187,7 +188,7 @@ def test_the_simulate_command_writes_runs_npz_and_figure(tmp_path, capsys):
     [
         (["--replan-every", "0"], "--replan-every: must be at least 1"),
         (["--runs", "0"], "--runs: must be at least 1"),
-        (["--warmstart", "art"], "invalid choice: 'art'"),
+        (["--warmstart", "tscvx"], "invalid choice: 'tscvx'"),
     ],
 )
 def test_the_simulate_command_refuses_bad_input_in_one_line(argv, match, tmp_path, capsys):
@@ -199,3 +200,49 @@ def test_the_simulate_command_refuses_bad_input_in_one_line(argv, match, tmp_pat
 def test_the_parser_choices_are_the_library_ones():
     assert simulate_parser.WARMSTARTS == WARMSTARTS
     assert simulate_parser.INSTANCES == INSTANCES
+
+
+def test_art_and_best_replan_from_the_flown_prefix_and_record_the_start_used(plan):
+    """K = 45: ART started mid-horizon at nodes 45 and 90 (the final approach), its plans
+    flown; ``best`` starts from ART's guess or the previous plan, whichever Eq. 8 prefers."""
+    cfg = MPCConfig(replan_every=45, warmstart="art", compare=("cold", "best"))
+    result = fly(INSTANCE, cfg, seed=3, open_loop=plan)
+    assert [r.node for r in result.replans] == [45, 90]
+    assert all(r.accepted for r in result.replans), [r.message for r in result.replans]
+    assert [r.used for r in result.replans] == ["art", "art"]
+    assert [r.used for r in result.comparisons[::2]] == ["convex", "convex"]
+    assert {r.used for r in result.comparisons[1::2]} <= {"art", "previous"}
+    for flown, cold in zip(result.replans, result.comparisons[::2], strict=True):
+        assert abs(flown.cost - cold.cost) <= 1e-3 * cold.cost  # one optimum, two starts
+    assert result.success, result.summary()
+    with np.testing.assert_raises(AssertionError):  # the re-plans changed the impulses
+        np.testing.assert_array_equal(result.dv_planned[45:], plan.trajectory.u[45:])
+
+
+def test_the_flown_log_rebuilds_the_commanded_impulses_and_the_known_states(plan):
+    log = FlownLog(INSTANCE, plan)
+    fix = INSTANCE.roe0 + 1.0
+    first = log.history(45, fix, plan, 45)
+    np.testing.assert_array_equal(first.u, plan.trajectory.u[:45])
+    np.testing.assert_array_equal(first.x[0], INSTANCE.roe0)
+    m = linear_model(INSTANCE)  # between fixes: x_{j+1} = Phi_j (x_j + B_j u_j) (Eq. 10)
+    pred = np.einsum("kij,kj->ki", m.Phi[:44], first.x[:44] + np.einsum("kij,kj->ki", m.B[:44],
+                                                                        first.u[:44]))  # fmt: skip
+    np.testing.assert_allclose(first.x[1:], pred, rtol=0.0, atol=1e-9)
+    np.testing.assert_allclose(first.x, plan.trajectory.x[:45], rtol=0.0, atol=1e-6)  # metres
+    # the re-plan at 45 failed: the open-loop plan flies on; node 45 is known by its fix
+    second = log.history(90, fix, plan, 90)
+    np.testing.assert_array_equal(second.u, plan.trajectory.u[:90])
+    np.testing.assert_array_equal(second.x[45], fix)
+    np.testing.assert_array_equal(second.x[:45], first.x)
+
+
+def test_the_simulate_command_flies_the_art_start(tmp_path, capsys):
+    out = tmp_path / "art"
+    argv = ["simulate", "rendezvous", "--runs", "1", "--replan-every", "45", "--warmstart",
+            "art", "--model", "default", "--out", str(out), "--quiet", "--no-figure"]  # fmt: skip
+    assert main(argv) == 0
+    assert "1 runs, warm start art: success 100%" in capsys.readouterr().out
+    with np.load(out / "run-0000.npz") as data:
+        assert data["replan_used"].tolist() == ["art", "art"]
+        assert data["replan_warmstart"].tolist() == ["art", "art"]

@@ -37,12 +37,18 @@ def run_simulate(args: argparse.Namespace) -> int:
         from scpformer.guidance import robust_rendezvous_mpc as robust
 
         make = robust.MPCConfig if family == "robust-rendezvous" else MPCConfig
+        model = getattr(args, "model", None)  # the ART model of art and best (rendezvous)
         config = make(
             replan_every=args.replan_every,
             warmstart=args.warmstart,
             compare=(args.compare,) if args.compare else (),
             errors=ErrorModels() if args.errors == "table2" else ErrorModels.none(),
+            **({"model": str(model)} if model is not None else {}),
         )
+        if {args.warmstart, args.compare} & {"art", "best"}:
+            from scpformer.cli.warmstart import single_thread_inference
+
+            single_thread_inference()
     campaign = Campaign(runs=args.runs, seed=args.seed, instances=args.instances, config=config)
     bar = _Bar(args.quiet)
     try:

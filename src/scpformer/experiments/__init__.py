@@ -178,10 +178,10 @@ EXPERIMENTS: dict[str, Experiment] = {
         Experiment(
             name="mpc-rendezvous",
             reproduces="Celestini et al. (RA-L 2024), closed-loop MPC: warm-start gains",
-            summary="closed-loop rendezvous Monte Carlo: cold vs previous-plan re-plans",
+            summary="closed-loop rendezvous Monte Carlo: cold, previous, ART and best re-plans",
             module="scpformer.experiments.mpc_rendezvous",
             default_n=100,  # about 9 min on two busy cores (9:02 measured at load 3-5)
-            models="none (the learned start cannot start mid-horizon)",
+            models="the shipped art-rendezvous model, started mid-horizon",
             depends_on=(
                 "src/scpformer/experiments/mpc_rendezvous.py",
                 "src/scpformer/guidance",

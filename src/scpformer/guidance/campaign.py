@@ -36,6 +36,7 @@ import numpy as np
 from scpformer.files import atomic_path, save_npz_atomic, write_text_atomic
 from scpformer.guidance import pdg6dof_mpc as pdg
 from scpformer.guidance import robust_rendezvous_mpc as robust
+from scpformer.guidance.rendezvous_art import uses_art
 from scpformer.guidance.rendezvous_mpc import MPCConfig, fly, open_loop_plan
 from scpformer.pdg6dof import PDGInstance
 from scpformer.rendezvous import RendezvousInstance, sample_instances
@@ -150,6 +151,8 @@ class Campaign:
                      "dispersion": errors.dispersion is not None},
             }  # fmt: skip
         robust_only = {"safety_samples": cfg.safety_samples} if self.family != "rendezvous" else {}
+        if self.family == "rendezvous" and uses_art(cfg):  # the ART model of art and best
+            robust_only = {"model": cfg.model or "default"}
         return {
             "family": self.family, "seed": self.seed, "instances": self.instances,
             "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,

@@ -14,7 +14,7 @@ from scpformer.cli.argtypes import count, positive
 from scpformer.cli.commands import command_help, lazy_handler
 from scpformer.cli.dataclass_args import with_default
 
-WARMSTARTS = ("cold", "previous")  # scpformer.guidance.WARMSTARTS
+WARMSTARTS = ("cold", "previous", "art", "best")  # scpformer.guidance.WARMSTARTS
 ROBUST_WARMSTARTS = ("cold", "previous")  # scpformer.guidance.robust_rendezvous_mpc.WARMSTARTS
 INSTANCES = ("default", "sampled")  # scpformer.guidance.campaign.INSTANCES
 ERRORS = ("table2", "none")
@@ -36,8 +36,10 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
         "navigation estimate and apply the plan through the truth model with navigation, "
         "actuation and process errors (robust ART paper, Table 2).",
         WARMSTARTS,
-        "warm start of each re-plan: cold (the convex Problem 2) or previous (the last "
-        "accepted plan shifted in time); the learned ART start cannot start mid-horizon",
+        "warm start of each re-plan: cold (the convex Problem 2), previous (the last "
+        "accepted plan shifted in time), art (the ART model of --model started from node k, "
+        "its context the flown prefix) or best (art or previous, the one the post hoc check "
+        "of Eq. 8 prefers)",
     )
     _add_pdg6dof(families)
     _add_rendezvous(
@@ -97,6 +99,17 @@ def _add_rendezvous(
         default="table2",
         help=with_default("navigation, actuation and process errors: table2 or none", "table2"),
     )
+    if "art" in warmstarts:
+        parser.add_argument(
+            "--model",
+            type=Path,
+            metavar="RUN",
+            help=with_default(
+                "ART model of --warmstart/--compare art or best: a training run folder or "
+                "checkpoint file, or 'default': the pretrained model shipped with scpformer",
+                "default",
+            ),
+        )
     _add_run_arguments(parser)
 
 
