@@ -41,6 +41,7 @@ REPRODUCES = "closed-loop MPC of the chance-constrained, passively safe rendezvo
 #: Warm starts flown, in order; the last is flown with the others compared on its re-plans.
 WARMSTARTS = ("cold", "previous")
 REPLAN_EVERY = 10  # K: 9 re-plans over N = 100 impulses, every 710 s
+SAFETY_SAMPLES = 200  # Monte Carlo draws per flown node (MPCConfig.safety_samples)
 #: Columns of ``OUT/results.csv`` (per warm start ``W``: ``W_<column>``).
 RUN_COLUMNS = (
     "success", "terminal_position_error", "terminal_velocity_error", "fuel",
@@ -54,7 +55,8 @@ def campaign(n: int, seed: int, warmstart: str) -> Campaign:
     """The campaign of ``warmstart``: ``n`` sampled instances, Table 2 errors, ``K = 10``;
     ``previous`` also solves each re-plan cold (compared, not flown)."""
     compare = tuple(w for w in WARMSTARTS if w != warmstart) if warmstart == "previous" else ()
-    config = MPCConfig(replan_every=REPLAN_EVERY, warmstart=warmstart, compare=compare)
+    config = MPCConfig(replan_every=REPLAN_EVERY, warmstart=warmstart, compare=compare,
+                       safety_samples=SAFETY_SAMPLES)  # fmt: skip
     return Campaign(runs=n, seed=seed, instances="sampled", config=config)
 
 
@@ -65,7 +67,7 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
         "experiment": NAME, "n": n, "seed": options.seed, "out": str(out),
         "instances": "sampled (robust Table 1 sampler, SeedSequence([seed, run]))",
         "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
-        "warmstarts": list(WARMSTARTS), "safety_samples": MPCConfig().safety_samples,
+        "warmstarts": list(WARMSTARTS), "safety_samples": SAFETY_SAMPLES,
     }  # fmt: skip
     check_settings(out, settings)
     rows, summaries = fly_warmstarts(
