@@ -180,7 +180,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             reproduces="Celestini et al. (RA-L 2024), closed-loop MPC: warm-start gains",
             summary="closed-loop rendezvous Monte Carlo: cold, previous, ART and best re-plans",
             module="scpformer.experiments.mpc_rendezvous",
-            default_n=100,  # about 9 min on two busy cores (9:02 measured at load 3-5)
+            default_n=100,  # about 22 min on two busy cores (22:16 measured at load 5-6)
             models="the shipped art-rendezvous model, started mid-horizon",
             depends_on=(
                 "src/scpformer/experiments/mpc_rendezvous.py",
