@@ -6,8 +6,11 @@ ISS rendezvous (ART paper, Problem 3) under the navigation, actuation and proces
 the robust ART paper (Table 2). :mod:`.pdg6dof_mpc`: re-planned free-final-time SCvx of the
 6-DoF Mars landing (T-SCvx paper) under thrust, vehicle, navigation and initial-state errors
 (its names are used through the module: ``from scpformer.guidance import pdg6dof_mpc``).
-:mod:`.campaign`: seeded runs of either family into a folder (``runs.csv`` resumed, one
-``run-NNNN.npz`` per run), the engine of ``scpformer simulate``.
+:mod:`.robust_rendezvous_mpc`: shrinking-horizon MPC of the chance-constrained, passively
+safe rendezvous (robust ART paper), flown through the rendezvous loop's truth flight (used
+through the module, like the landing's). :mod:`.campaign`: seeded runs of any of the three
+into a folder (``runs.csv`` resumed, one ``run-NNNN.npz`` per run), the engine of
+``scpformer simulate``.
 """
 
 from scpformer.guidance.rendezvous_mpc import (
