@@ -42,6 +42,9 @@ def test_every_start_flies_the_same_run_and_tscvx_is_compared_on_its_re_plans(on
         compared = data["compare_warmstart"].tolist()
         assert compared == ["cold", "previous"] * len(flown)
         assert data["compare_node"].tolist() == [n for n in flown for _ in range(2)]
+    with np.load(one_run / "best" / "run-0000.npz") as data:
+        assert set(data["replan_used"].tolist()) <= {"previous", "tscvx"}
+        assert set(data["replan_warmstart"].tolist()) == {"best"}
     results = json.loads((one_run / "results.json").read_text())
     assert results["experiment"] == "mpc-pdg6dof"
     report = (one_run / "report.md").read_text()

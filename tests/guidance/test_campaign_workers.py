@@ -1,4 +1,4 @@
-"""Runs flown by a pool of processes are the runs flown one after the other.
+"""Runs flown by a pool of processes or by Ray tasks are the runs flown one after the other.
 
 Each run draws its errors from its own seed (``SeedSequence([seed, run])``), so the numbers of
 ``runs.csv`` and of ``run-NNNN.npz`` cannot depend on the number of workers; only the wall
@@ -16,18 +16,27 @@ from scpformer.guidance.rendezvous_mpc import MPCConfig
 TIMED = ("replan_time_median_s", "replan_time_p99_s")
 
 
-def test_two_workers_fly_the_same_runs_as_one(tmp_path):
-    campaign = Campaign(runs=3, seed=5, config=MPCConfig(replan_every=30))
-    run_campaign(campaign, tmp_path / "one")
-    run_campaign(campaign, tmp_path / "two", workers=2)
-    one, two = read_rows(tmp_path / "one" / "runs.csv"), read_rows(tmp_path / "two" / "runs.csv")
+CAMPAIGN = Campaign(runs=3, seed=5, config=MPCConfig(replan_every=30))
+
+
+@pytest.fixture(scope="module")
+def one_by_one(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("campaign") / "one"
+    run_campaign(CAMPAIGN, folder)
+    return folder
+
+
+@pytest.mark.parametrize("pool", ["workers", "ray"])
+def test_two_workers_fly_the_same_runs_as_one(one_by_one, tmp_path, pool):
+    run_campaign(CAMPAIGN, tmp_path / "two", workers=2, ray="local" if pool == "ray" else None)
+    one, two = read_rows(one_by_one / "runs.csv"), read_rows(tmp_path / "two" / "runs.csv")
     assert [r["run"] for r in two] == ["0", "1", "2"]
     for a, b in zip(one, two, strict=True):
         assert {k: v for k, v in a.items() if k not in TIMED} == {
             k: v for k, v in b.items() if k not in TIMED
         }
     for run in range(3):
-        a = np.load(tmp_path / "one" / f"run-{run:04d}.npz")
+        a = np.load(one_by_one / f"run-{run:04d}.npz")
         b = np.load(tmp_path / "two" / f"run-{run:04d}.npz")
         np.testing.assert_array_equal(a["rtn"], b["rtn"])
         np.testing.assert_array_equal(a["dv_applied"], b["dv_applied"])

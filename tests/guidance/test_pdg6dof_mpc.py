@@ -103,6 +103,29 @@ def test_seeded_runs_with_errors_land(plan, seed):
     assert result.truth_constants == again.truth_constants
 
 
+def test_best_keeps_the_shifted_optimum_over_the_networks_guess(plan):
+    """Without errors the shifted plan is the optimum's own tail (Bellman), dynamically
+    consistent to the replay's defects: its penalized cost J (Eq. 16) is the cost of a
+    feasible landing, and ``best`` keeps it over the networks' prediction, whose J is higher
+    (measured: the shipped networks' guess at node 10 of the default descent)."""
+    from scpformer.warmstart.tscvx import penalized_cost
+
+    config = PDGSolverConfig()
+    x = plan.trajectory.x[10]
+    sub = mpc.remaining_instance(INSTANCE, x)
+    used, warm = mpc.best_start(sub, plan, 10, x, config)
+    shifted = mpc.shifted_plan(plan, 10, x).guess(sub).trajectory
+    j_shifted = penalized_cost(sub, config, shifted)
+    guess = mpc._tscvx_provider(config).guess_for(sub, config)
+    assert used == "previous" and warm.guess(sub).trajectory.p[0] == shifted.p[0]
+    assert j_shifted < guess.record.details["J_prediction"]
+    flown = mpc.fly(INSTANCE, mpc.MPCConfig(warmstart="best", replan_every=20,
+                                            errors=mpc.ErrorModels.none(), **UNTRACKED),
+                    seed=0, open_loop=plan)  # fmt: skip
+    assert flown.replans and all(r.used in ("previous", "tscvx") for r in flown.replans)
+    assert all(r.warmstart == "best" and r.accepted for r in flown.replans)
+
+
 def test_the_shifted_plan_is_the_rest_of_the_plan_retimed(plan):
     z = plan.trajectory
     n = z.x.shape[0]
@@ -130,7 +153,7 @@ def test_the_derived_tolerance_is_written_down(plan):
     [
         ({"replan_every": 0}, "replan_every"),
         ({"replan_every": 2.5}, "replan_every"),
-        ({"warmstart": "art"}, "must be one of cold, previous, tscvx"),
+        ({"warmstart": "art"}, "must be one of cold, previous, tscvx, best"),
         ({"compare": ("nope",)}, "must be one of"),
         ({"min_remaining_time": 0.1}, "tf_min"),
         ({"errors": "none"}, "errors must be an ErrorModels"),

@@ -19,7 +19,7 @@ from scpformer.problems.pdg6dof.tscvx import (
 )
 from scpformer.scp.scvx import SCvxParameters
 from scpformer.scp.solution import Status
-from scpformer.warmstart.tscvx import TscvxWarmStart, _penalized_cost
+from scpformer.warmstart.tscvx import TscvxWarmStart, penalized_cost
 
 N = 50
 
@@ -204,7 +204,7 @@ def test_a_noisy_prediction_is_kept_although_its_j_exceeds_the_straight_lines(co
     guess = (z.x + 0.02 * rng.normal(size=z.x.shape), z.u, float(z.p[0]))
     record = TscvxWarmStart(OraclePredictor(cold, guess=guess)).guess(PDGInstance()).record
     assert record.accepted, record.reason
-    straight = _penalized_cost(PDGInstance(), PDGSolverConfig(), straight_line_trajectory(
+    straight = penalized_cost(PDGInstance(), PDGSolverConfig(), straight_line_trajectory(
         PDGInstance(), N))  # fmt: skip
     assert record.details["J_prediction"] > straight
 

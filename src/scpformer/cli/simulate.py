@@ -53,7 +53,12 @@ def run_simulate(args: argparse.Namespace) -> int:
     bar = _Bar(args.quiet)
     try:
         rows = run_campaign(
-            campaign, folder, on_start=bar.start, on_run=bar.update, workers=args.workers
+            campaign,
+            folder,
+            on_start=bar.start,
+            on_run=bar.update,
+            workers=args.workers,
+            ray=args.ray,
         )
     finally:
         bar.close()

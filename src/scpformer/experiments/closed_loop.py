@@ -21,10 +21,12 @@ def fly_warmstarts(
     *,
     family: str,
     workers: int = 1,
+    ray: str | None = None,
 ) -> tuple[dict[str, list[dict[str, str]]], dict[str, dict[str, Any]]]:
     """Fly ``campaign_of(w)`` into ``out / w`` for every warm start ``w`` in order (each a
     resumable campaign folder with its ``simulate.png``); returns the rows of ``runs.csv``
-    and the summary of each. One worker unless asked: re-plan wall times are measured."""
+    and the summary of each. One worker unless asked: re-plan wall times are measured.
+    ``ray``: fly the runs as tasks on that Ray cluster (:func:`run_campaign`)."""
     rows: dict[str, list[dict[str, str]]] = {}
     summaries: dict[str, dict[str, Any]] = {}
     for warmstart in warmstarts:
@@ -35,7 +37,8 @@ def fly_warmstarts(
             print(f"{name}: {ws} run {row['run'] + 1}/{n}: success {row['success']}",
                   file=sys.stderr, flush=True)  # fmt: skip
 
-        rows[warmstart] = run_campaign(campaign, folder, on_run=progress, workers=workers)
+        rows[warmstart] = run_campaign(campaign, folder, on_run=progress, workers=workers,
+                                       ray=ray)  # fmt: skip
         summaries[warmstart] = summarize(rows[warmstart], folder, family)
         if rows[warmstart]:
             plot_campaign(rows[warmstart], folder, folder / "simulate.png", family)

@@ -9,14 +9,15 @@ run by run (common random numbers: :mod:`scpformer.guidance.campaign` seeds run 
 ``S`` with ``SeedSequence([S, r])``). The flights of ``tscvx`` also solve every one of their
 re-plans from ``cold`` and from ``previous`` (compared, not flown), which gives the learned
 start's per-re-plan win / tie / loss, iterations and wall times against both classical
-starts on identical problems.
+starts on identical problems. ``best`` starts each re-plan from T-SCvx or from the shifted
+plan, whichever guess has the lower penalized cost ``J`` (Eq. 16).
 
 Instances never used in training: the dispersion of run ``r`` is drawn from
 ``SeedSequence([S, r])``; the T-SCvx networks were trained on the dataset engine's instances
 ``SeedSequence(S', spawn_key=(i,))`` (:mod:`scpformer.data.executors`) of the nominal
 sampler, and no training instance is a dispersed Table 1 state.
 
-Output (``OUT``): ``cold/``, ``previous/``, ``tscvx/`` (each a resumable campaign folder:
+Output (``OUT``): ``cold/``, ``previous/``, ``tscvx/``, ``best/`` (each a resumable campaign folder:
 ``runs.csv``, ``run-NNNN.npz``, ``settings.json``, ``simulate.png``), ``results.csv`` (one
 row per run, the warm starts side by side), ``report.md`` and ``results.json``.
 """
@@ -38,8 +39,11 @@ from scpformer.guidance.pdg6dof_mpc import TIE_U_M, LandingTolerance, MPCConfig
 
 NAME = "mpc-pdg6dof"
 REPRODUCES = "closed-loop 6-DoF landing: T-SCvx against the classical re-plan starts"
-#: Warm starts flown, in order; the last is flown with the others compared on its re-plans.
-WARMSTARTS = ("cold", "previous", "tscvx")
+#: Warm starts flown, in order; ``tscvx`` is flown with the classical ones compared on its
+#: re-plans (:data:`COMPARED`).
+WARMSTARTS = ("cold", "previous", "tscvx", "best")
+#: The classical starts solved on the re-plans of the ``tscvx`` flights.
+COMPARED = ("cold", "previous")
 REPLAN_EVERY = 5  # K: a re-plan every tenth of the remaining descent (N = 50)
 #: Columns of ``OUT/results.csv`` (per warm start ``W``: ``W_<column>``).
 RUN_COLUMNS = (
@@ -53,7 +57,7 @@ RUN_COLUMNS = (
 def campaign(n: int, seed: int, warmstart: str) -> Campaign:
     """The campaign of ``warmstart``: ``n`` dispersed Table 1 descents with every error on,
     ``K = 5``; ``tscvx`` also solves each re-plan cold and from the previous plan."""
-    compare = tuple(w for w in WARMSTARTS if w != warmstart) if warmstart == "tscvx" else ()
+    compare = COMPARED if warmstart == "tscvx" else ()
     config = MPCConfig(replan_every=REPLAN_EVERY, warmstart=warmstart, compare=compare)
     return Campaign(runs=n, seed=seed, instances="default", config=config)
 
@@ -70,7 +74,7 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     check_settings(out, settings)
     rows, summaries = fly_warmstarts(
         NAME, out, WARMSTARTS, lambda w: campaign(n, options.seed, w), family="pdg6dof",
-        workers=options.workers or 1,
+        workers=options.workers or 1, ray=options.ray,
     )  # fmt: skip
     write_text_atomic(out / "results.csv", results_csv(rows, WARMSTARTS, RUN_COLUMNS))
     report = rep.Report(name=name, reproduces=REPRODUCES, command=command, settings=settings,
@@ -84,7 +88,7 @@ def replan_arrays(folder: Path, table: list[dict[str, str]]) -> dict[str, np.nda
     the comparison solves (with the warm start each compared)."""
     keys = ("replan_iterations", "replan_wall_s", "replan_cost", "replan_accepted",
             "compare_iterations", "compare_wall_s", "compare_cost", "compare_accepted",
-            "compare_warmstart")  # fmt: skip
+            "compare_warmstart", "replan_used")  # fmt: skip
     parts: dict[str, list[np.ndarray]] = {k: [] for k in keys}
     for row in table:
         path = folder / f"run-{int(row['run']):04d}.npz"
@@ -128,7 +132,7 @@ def analyse(
     arrays = {w: replan_arrays(out / w, rows[w]) for w in WARMSTARTS}
     report.sections.append(("Summary", summary_table(rows, summaries, arrays)))
     flown = arrays["tscvx"]
-    for other in WARMSTARTS[:-1]:
+    for other in COMPARED:
         report.sections.append((f"T-SCvx vs {other} on the same re-plans",
                                 paired_text(flown, other, summaries["tscvx"])))  # fmt: skip
     report.sections.append(("Failures", failures_text(rows)))
@@ -176,6 +180,10 @@ def summary_table(
     line("re-plans (failed)",
          lambda w: f"{summaries[w]['replans']} ({summaries[w]['replans_failed']})")  # fmt: skip
     line("T-SCvx cold fallbacks", lambda w: str(summaries[w]["tscvx_fallbacks"]))
+    line("re-plans started from previous / tscvx", lambda w: (
+        f"{int((arrays[w]['replan_used'].astype(str) == 'previous').sum())} / "
+        f"{int((arrays[w]['replan_used'].astype(str) == 'tscvx').sum())}"
+    ))  # fmt: skip
     line("path-constraint violations (samples)", lambda w: str(summaries[w]["violations"]))
     return rep.markdown_table(("quantity", *WARMSTARTS), table_rows) + (
         "\n\nThe re-planning period is in Table 1's nondimensional time: set against wall "

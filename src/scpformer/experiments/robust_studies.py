@@ -427,6 +427,7 @@ def analyse(
 def outcomes(rows: list[dict[str, str]], mode: str, source: str) -> Outcomes:
     """``source``'s whole path per instance in ``mode``: the warm start's time plus SCvx*'s
     (none without a guess), its iterations, converged or not, and its cost."""
+
     def col(name: str) -> np.ndarray:
         return column(rows, f"{mode}_{source}_{name}")
 

@@ -397,6 +397,7 @@ def analyse(rows: list[dict[str, str]], out: Path, zeta_1: float = math.inf) -> 
 def outcomes(rows: list[dict[str, str]], ws: str) -> Outcomes:
     """Warm start ``ws``'s whole path per instance: the guess's time plus the SCP's, its
     iterations, converged or not, and its cost (NaN without a trajectory)."""
+
     def col(name: str) -> np.ndarray:
         return np.array([float(r.get(f"{ws}_{name}") or "nan") for r in rows])
 

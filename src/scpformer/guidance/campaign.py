@@ -240,6 +240,7 @@ def run_campaign(
     on_run: Callable[[dict[str, Any]], None] | None = None,
     on_start: Callable[[int, int], None] | None = None,
     workers: int = 1,
+    ray: str | None = None,
 ) -> list[dict[str, str]]:
     """Fly the runs not yet in ``folder/runs.csv``; return every row (old and new).
 
@@ -247,7 +248,9 @@ def run_campaign(
     each (a progress bar). Open-loop plans are solved once per instance and process.
     ``workers > 1`` flies runs in that many local processes (``forkserver``, as the dataset
     engine's pool); a run's numbers do not depend on it (each run has its own seed), but the
-    re-plan wall times then share the cores: time with one worker.
+    re-plan wall times then share the cores: time with one worker. ``ray`` (an address, or
+    ``"local"`` to start a private instance of ``workers`` CPUs) flies them as Ray tasks of
+    one CPU each instead; their arrays come back to this process, which writes every file.
 
     Raises
     ------
@@ -263,7 +266,9 @@ def run_campaign(
     todo = [r for r in range(campaign.runs) if r not in done]
     if on_start is not None:
         on_start(campaign.runs - len(todo), campaign.runs)
-    for row in _flown(campaign, folder, todo, workers):
+    flown = _flown_ray(campaign, folder, todo, ray, workers) if ray else _flown(
+        campaign, folder, todo, workers)  # fmt: skip
+    for row in flown:
         rows.append({k: str(_cell(v)) for k, v in row.items()})
         rows.sort(key=lambda r: int(r["run"]))
         write_text_atomic(csv_path, _csv_text(rows, columns(campaign.family)))
@@ -275,17 +280,47 @@ def run_campaign(
 _PLANS: dict[Any, Any] = {}  # this process's open-loop plan of the last instance flown
 
 
-def fly_run(campaign: Campaign, folder: Path, run: int) -> dict[str, Any]:
-    """Fly run ``run`` of ``campaign``, write its ``run-NNNN.npz`` into ``folder`` and return
-    its ``runs.csv`` row (in any process)."""
+def flight(campaign: Campaign, run: int) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Fly run ``run`` of ``campaign`` (in any process): its ``runs.csv`` row and the arrays
+    of its ``run-NNNN.npz``."""
     instance = campaign.instance(run)
     if instance not in _PLANS:
         _PLANS.clear()
         _PLANS[instance] = campaign.open_loop_plan(instance)
     seed = campaign.run_seed(run)
     result = campaign.fly(instance, seed, _PLANS[instance])
-    save_npz_atomic(folder / f"run-{run:04d}.npz", result.arrays())
-    return {"run": run, "seed": seed, **result.summary()}
+    return {"run": run, "seed": seed, **result.summary()}, result.arrays()
+
+
+def fly_run(campaign: Campaign, folder: Path, run: int) -> dict[str, Any]:
+    """Fly run ``run`` of ``campaign``, write its ``run-NNNN.npz`` into ``folder`` and return
+    its ``runs.csv`` row (in any process)."""
+    row, arrays = flight(campaign, run)
+    save_npz_atomic(folder / f"run-{run:04d}.npz", arrays)
+    return row
+
+
+def _flown_ray(
+    campaign: Campaign, folder: Path, runs: list[int], address: str, workers: int
+) -> Iterator[dict[str, Any]]:
+    """The rows of ``runs`` as their Ray tasks finish; this process writes the npz files."""
+    import ray
+
+    from scpformer.data.executors import connect_ray
+
+    owns = connect_ray(address, workers)
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(flight)
+        pending = {remote.remote(campaign, run): run for run in runs}
+        while pending:
+            (ref,), _ = ray.wait(list(pending), num_returns=1)
+            run = pending.pop(ref)
+            row, arrays = ray.get(ref)
+            save_npz_atomic(folder / f"run-{run:04d}.npz", arrays)
+            yield row
+    finally:
+        if owns:
+            ray.shutdown()
 
 
 def _flown(

@@ -33,7 +33,11 @@ Warm starts of a re-plan (:data:`WARMSTARTS`): ``cold`` is SCvx from the family'
 start (the cubic profile); ``previous`` is SCvx from the last accepted plan shifted in time:
 its nodes from the current one on, re-interpolated onto ``N`` nodes over its remaining time
 (:func:`shifted_plan`, the free final time makes the node spacing change); ``tscvx`` is
-T-SCvx (Algorithm 2) with the shipped networks evaluated at the current estimate as theta.
+T-SCvx (Algorithm 2) with the shipped networks evaluated at the current estimate as theta;
+``best`` is whichever of the last two has the lower penalized cost ``J = C + lambda P``
+(Eq. 16, the T-SCvx paper's acceptance measure of a guess) on the re-plan problem: T-SCvx
+when its predicted solution's ``J`` is lower, SCvx from the shifted plan otherwise
+(:func:`best_start`; the record's ``used`` says which).
 """
 
 from __future__ import annotations
@@ -61,8 +65,8 @@ from scpformer.scp.warmstart import GivenWarmStart
 from scpformer.validation import check_bool, check_finite, check_int, check_positive
 
 #: Warm starts of a re-plan that the loop implements.
-WARMSTARTS = ("cold", "previous", "tscvx")
-#: Methods of ``solve`` per warm start.
+WARMSTARTS = ("cold", "previous", "tscvx", "best")
+#: Methods of ``solve`` per warm start (``best``: the method of the start it picks).
 METHOD = {"cold": "scvx", "previous": "scvx", "tscvx": "tscvx"}
 #: Cost difference below which two re-plans tie [U_M]: SCvx's stationarity test, ``Delta L <=
 #: eps_opt max(1, |J|)`` (eps_opt = 1e-4, |J| = m_f <= m0 = 3 U_M).
@@ -439,6 +443,7 @@ class ReplanRecord:
     period: float  # K times the node spacing of the plan being flown [U_T]
     fallback: str  # T-SCvx's fallback ("" when none or not T-SCvx)
     message: str
+    used: str = ""  # the start the solve ran from (best: previous or tscvx; else the name)
 
 
 @dataclass(frozen=True)
@@ -652,6 +657,24 @@ def shifted_plan(plan: Solution, node: int, estimate: np.ndarray | None = None) 
     return GivenWarmStart(Trajectory(x=x, u=u, p=np.array([remaining])), "previous")
 
 
+def best_start(
+    sub: PDGInstance, plan: Solution, node: int, estimate: np.ndarray, config: PDGSolverConfig
+) -> tuple[str, Any]:
+    """The start of a ``best`` re-plan: ``("tscvx", provider)`` when the networks' predicted
+    solution has a lower penalized cost ``J = C + lambda P`` (Eq. 16) on ``sub`` than the
+    shifted previous plan, else ``("previous", shifted plan)``. A prediction the provider
+    rejects (unusable, or ``J`` above its bound) loses."""
+    from scpformer.warmstart.tscvx import penalized_cost
+
+    provider = _tscvx_provider(config)
+    shifted = shifted_plan(plan, node, estimate)
+    guess = provider.guess_for(sub, config)
+    j_tscvx = guess.record.details.get("J_prediction", math.inf) if guess.record.accepted else (
+        math.inf)  # fmt: skip
+    j_shifted = penalized_cost(sub, config, shifted.guess(sub).trajectory)
+    return ("tscvx", provider) if j_tscvx < j_shifted else ("previous", shifted)
+
+
 @lru_cache(maxsize=2)
 def _tscvx_provider(config: PDGSolverConfig) -> Any:
     """The shipped T-SCvx networks, loaded once per configuration."""
@@ -681,21 +704,24 @@ def _replan(
                               period, "", error)  # fmt: skip
         return record, None
     start = time.perf_counter()
-    if name == "previous":
+    used = name
+    if name == "best":
+        used, warm = best_start(sub, plan, node, estimate, cfg.solver)
+    elif name == "previous":
         warm: Any = shifted_plan(plan, node, estimate)
     elif name == "tscvx":
         warm = _tscvx_provider(cfg.solver)
     else:
         warm = None
-    sol = solve(sub, cfg.solver, method=METHOD[name], warmstart=warm)
+    sol = solve(sub, cfg.solver, method=METHOD[used], warmstart=warm)
     wall = time.perf_counter() - start
     fallback = ""
-    if name == "tscvx":
+    if used == "tscvx":
         fallback = str((sol.extras.get("tscvx") or {}).get("fallback") or "")
     cost = float(sol.cost) if sol.trajectory is not None else math.nan
     ok = _accepted(sol, cfg.accept_unconverged)
     record = ReplanRecord(k_flown, t_now, name, ok, sol.status.value, cost,
-                          sol.iterations, wall, period, fallback, sol.message)  # fmt: skip
+                          sol.iterations, wall, period, fallback, sol.message, used)  # fmt: skip
     return record, sol
 
 

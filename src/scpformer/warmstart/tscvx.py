@@ -104,10 +104,10 @@ class TscvxWarmStart:
             )
         except ValueError as err:
             return self._result(fallback(), False, f"prediction unusable: {err}", {}, start)
-        details = {"J_prediction": _penalized_cost(instance, config, predicted)}
+        details = {"J_prediction": penalized_cost(instance, config, predicted)}
         if not details["J_prediction"] <= self.params.guess_factor:  # the bound is at least this
             yardstick = straight_line_trajectory(instance, config.n_nodes)
-            details["J_straight_line"] = _penalized_cost(instance, config, yardstick)
+            details["J_straight_line"] = penalized_cost(instance, config, yardstick)
             bound = self.params.guess_factor * max(abs(details["J_straight_line"]), 1.0)
             if not details["J_prediction"] <= bound:
                 reason = f"J of the prediction above {self.params.guess_factor:g} straight lines'"
@@ -178,7 +178,7 @@ class TscvxWarmStart:
         return WarmStartResult(trajectory, timed(record, start))
 
 
-def _penalized_cost(instance: PDGInstance, config: PDGSolverConfig, z: Trajectory) -> float:
+def penalized_cost(instance: PDGInstance, config: PDGSolverConfig, z: Trajectory) -> float:
     """``J = C + lambda P`` (Eq. 16) of the guess ``z`` on the full nonlinear problem (its
     flow alone: the linearization is the solver's to compute)."""
     defects = PDGProblem(instance, config).flow_defects(z)

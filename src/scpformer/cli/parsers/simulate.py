@@ -18,7 +18,7 @@ WARMSTARTS = ("cold", "previous", "art", "best")  # scpformer.guidance.WARMSTART
 ROBUST_WARMSTARTS = ("cold", "previous")  # scpformer.guidance.robust_rendezvous_mpc.WARMSTARTS
 INSTANCES = ("default", "sampled")  # scpformer.guidance.campaign.INSTANCES
 ERRORS = ("table2", "none")
-PDG_WARMSTARTS = ("cold", "previous", "tscvx")  # scpformer.guidance.pdg6dof_mpc.WARMSTARTS
+PDG_WARMSTARTS = ("cold", "previous", "tscvx", "best")  # scpformer.guidance.pdg6dof_mpc.WARMSTARTS
 PDG_ERRORS = ("default", "none")
 PDG_TRACKING = ("lqr", "none")
 
@@ -130,8 +130,9 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
         parser,
         PDG_WARMSTARTS,
         "warm start of each re-plan: cold (SCvx from the cubic profile), previous (SCvx "
-        "from the last accepted plan shifted in time and re-timed) or tscvx (T-SCvx with "
-        "the shipped networks at the current state)",
+        "from the last accepted plan shifted in time and re-timed), tscvx (T-SCvx with "
+        "the shipped networks at the current state) or best (tscvx or previous, the one "
+        "whose guess has the lower penalized cost J of Eq. 16)",
         replan_every=(5, "intervals of the current plan flown between re-plans"),
         seed="seed of the errors, dispersions (and sampled instances)",
     )
@@ -208,6 +209,12 @@ def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
             "wall times share the cores, so time with 1)",
             1,
         ),
+    )
+    parser.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="fly the runs as tasks on a Ray cluster ('local' starts one of W CPUs) instead of "
+        "local processes; the files are written here",
     )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     parser.add_argument("--no-figure", action="store_true", help="do not draw DIR/simulate.png")

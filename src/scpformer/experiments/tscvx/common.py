@@ -349,12 +349,14 @@ def stats_table(rows: Sequence[dict[str, str]], methods: Sequence[str]) -> str:
 def outcomes(rows: Sequence[dict[str, str]], method: str) -> Outcomes:
     """``method``'s whole-path wall time, conic solves, solved flag (converged and verified)
     and cost per row."""
+    solved = [
+        r.get(f"{method}_status") == "converged" and r.get(f"{method}_verified", "True") == "True"
+        for r in rows
+    ]
     return Outcomes(
         time=column(rows, f"{method}_time_s"),
         iterations=column(rows, f"{method}_iterations"),
-        solved=np.array([r.get(f"{method}_status") == "converged"
-                         and r.get(f"{method}_verified", "True") == "True" for r in rows],
-                        dtype=bool),  # fmt: skip
+        solved=np.array(solved, dtype=bool),
         cost=column(rows, f"{method}_cost"),
     )
 
