@@ -51,7 +51,8 @@ def test_every_start_flies_the_same_run_and_tscvx_is_compared_on_its_re_plans(on
     for section in ("## Summary", "## T-SCvx vs cold on the same re-plans",
                     "## T-SCvx vs previous on the same re-plans", "## Failures"):  # fmt: skip
         assert section in report
-    assert "win / tie / loss" in report
+    assert "solved by both / only this / only the baseline / neither" in report
+    assert "cost where both solved: lower / tie" in report
 
 
 def test_a_rerun_resumes_and_other_settings_are_refused(one_run, capsys):

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 
 from scpformer.experiments import report as rep
-from scpformer.experiments.closed_loop import fly_warmstarts, relative, results_csv, speedup
+from scpformer.experiments.closed_loop import fly_warmstarts, results_csv
+from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import RunOptions, check_settings, require_n
 from scpformer.files import write_text_atomic
 from scpformer.guidance.campaign import Campaign
@@ -134,7 +135,7 @@ def analyse(
     flown = arrays["tscvx"]
     for other in COMPARED:
         report.sections.append((f"T-SCvx vs {other} on the same re-plans",
-                                paired_text(flown, other, summaries["tscvx"])))  # fmt: skip
+                                paired_text(flown, other)))  # fmt: skip
     report.sections.append(("Failures", failures_text(rows)))
     for w in WARMSTARTS:
         if (out / w / "simulate.png").exists():
@@ -191,47 +192,33 @@ def summary_table(
     )
 
 
-def paired_text(arrays: dict[str, np.ndarray], other: str, summary: dict[str, Any]) -> str:
-    """Per re-plan win / tie / loss of the flown ``tscvx`` against ``other`` (propellant; a
-    failed re-plan counts apart), and their iterations and wall times on identical problems."""
-    names = arrays["compare_warmstart"].astype(str)
-    sel = names == other
-    it_f, t_f = arrays["replan_iterations"], arrays["replan_wall_s"]
-    it_o, t_o = arrays["compare_iterations"][sel], arrays["compare_wall_s"][sel]
-    vs = summary.get(f"vs_{other}")
-    if not vs or it_o.size != it_f.size or not it_f.size:
+def paired_text(arrays: dict[str, np.ndarray], other: str) -> str:
+    """The flown ``tscvx`` re-plans against ``other`` solved on the same re-plan problems,
+    re-plan by re-plan (:mod:`..paired`: accepted by both / one / neither, wall time,
+    iterations, propellant where both were accepted)."""
+    sel = arrays["compare_warmstart"].astype(str) == other
+    if not arrays["replan_wall_s"].size or int(sel.sum()) != arrays["replan_wall_s"].size:
         return "No comparison solves recorded."
-    both = arrays["replan_accepted"].astype(bool) & arrays["compare_accepted"][sel].astype(bool)
-    fewer = 100.0 * (1.0 - it_f.sum() / it_o.sum())
-    rows = [
-        ("per re-plan propellant: win / tie / loss (both accepted)",
-         f"{vs['win']} / {vs['tie']} / {vs['loss']}", ""),
-        ("re-plans not accepted", f"{vs['failed_flown']}", f"{vs['failed_other']}"),
-        ("SCP iterations, median / mean (all re-plans)",
-         f"{np.median(it_f):.0f} / {it_f.mean():.2f}",
-         f"{np.median(it_o):.0f} / {it_o.mean():.2f}"),
-        ("SCP iterations, median (both accepted)",
-         f"{np.median(it_f[both]):.0f}" if both.any() else "-",
-         f"{np.median(it_o[both]):.0f}" if both.any() else "-"),
-        ("SCP iterations, total", f"{int(it_f.sum())} ({relative(fewer, 'fewer', 'more')})",
-         f"{int(it_o.sum())}"),
-        ("iterations per re-plan: fewer / same / more",
-         f"{int((it_f < it_o).sum())} / {int((it_f == it_o).sum())} / "
-         f"{int((it_f > it_o).sum())}", ""),
-        ("wall time per re-plan: faster / slower", f"{int((t_f < t_o).sum())} / "
-         f"{int((t_f >= t_o).sum())}", ""),
-        ("wall time, total [s]", f"{t_f.sum():.1f} ({speedup(t_o.sum() / t_f.sum())})",
-         f"{t_o.sum():.1f}"),
-        ("wall time median / p99 [s]", f"{np.median(t_f):.3f} / {np.percentile(t_f, 99):.3f}",
-         f"{np.median(t_o):.3f} / {np.percentile(t_o, 99):.3f}"),
-    ]  # fmt: skip
-    text = rep.markdown_table(("quantity", "tscvx (flown)", f"{other} (same problems)"), rows)
-    return text + (
-        f"\n\nThe {other} solves are made on the re-plan problems of the flights of `tscvx` "
-        "(same estimate, same plan to shift), so the starts are compared on identical "
-        f"problems; a tie is a propellant difference within {TIE_U_M:g} U_M. Wall times cover "
-        "the whole re-plan: the warm start (the networks' evaluation for T-SCvx), every SCP "
-        "iteration, T-SCvx's cold fallback when it takes one, and the verification."
+    ours = Outcomes(time=arrays["replan_wall_s"], iterations=arrays["replan_iterations"],
+                    solved=arrays["replan_accepted"], cost=arrays["replan_cost"])  # fmt: skip
+    base = Outcomes(
+        time=arrays["compare_wall_s"][sel],
+        iterations=arrays["compare_iterations"][sel],
+        solved=arrays["compare_accepted"][sel],
+        cost=arrays["compare_cost"][sel],
+    )
+    p99 = (f"Wall time p99: tscvx {np.percentile(ours.time, 99):.3f} s, {other} "
+           f"{np.percentile(base.time, 99):.3f} s.")  # fmt: skip
+    table = paired_table("tscvx (flown)", ours, f"{other} (same problems)", base,
+                         cost_tie=TIE_U_M)  # fmt: skip
+    return table + (
+        f"\n\n{p99} The {other} solves are made on the re-plan problems of the flights of "
+        "`tscvx` (same estimate, same plan to shift), so the starts are compared on identical "
+        f"problems; a draw is a re-plan, solved means accepted (converged or verified "
+        f"unconverged, `MPCConfig.accept_unconverged`), and a tie is a propellant difference "
+        f"within {TIE_U_M:g} U_M. Wall times cover the whole re-plan: the warm start (the "
+        "networks' evaluation for T-SCvx), every SCP iteration, T-SCvx's cold fallback when "
+        "it takes one, and the verification."
     )
 
 
