@@ -1,14 +1,18 @@
 """What the closed-loop experiments (``mpc-*``) share: flying every warm start's campaign into
-its own folder of the experiment's output, with progress, summary and figure."""
+its own folder of the experiment's output (with progress, summary and figure), the
+side-by-side ``results.csv``, and the per-re-plan tables read back from the runs' npz."""
 
 from __future__ import annotations
 
 import csv
 import io
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from scpformer.guidance.campaign import Campaign, plot_campaign, run_campaign, summarize
 
@@ -72,3 +76,43 @@ def relative(percent: float, less: str, more: str) -> str:
 def speedup(ratio: float) -> str:
     """``"2.10x shorter"`` for a ratio above 1 (cold over warm), ``"1.09x longer"`` below."""
     return f"{ratio:.2f}x shorter" if ratio >= 1 else f"{1 / ratio:.2f}x longer"
+
+
+def replan_arrays(folder: Path, table: list[dict[str, str]]) -> dict[str, np.ndarray]:
+    """Every ``replan_*`` and ``compare_*`` table of the runs of ``table`` (their
+    ``folder/run-NNNN.npz``), concatenated over the runs in order; a table a run lacks (an
+    older run) is filled with empty strings."""
+    runs = []
+    for row in table:
+        path = folder / f"run-{int(row['run']):04d}.npz"
+        if path.exists():
+            with np.load(path) as data:
+                runs.append({k: np.asarray(data[k]) for k in data.files
+                             if k.startswith(("replan_", "compare_"))})  # fmt: skip
+    keys = sorted({k for run in runs for k in run})
+    out = {}
+    for key in keys:
+        prefix = key.split("_", 1)[0]
+        parts = [run.get(key, np.full(run[f"{prefix}_node"].size, "")) for run in runs]
+        out[key] = np.concatenate(parts)
+    return out
+
+
+def column(table: list[dict[str, str]], name: str) -> np.ndarray:
+    """The float column ``name`` of ``runs.csv`` rows."""
+    return np.array([float(r[name]) for r in table], dtype=float)
+
+
+def succeeded(table: list[dict[str, str]]) -> np.ndarray:
+    """The ``success`` column of ``runs.csv`` rows as booleans."""
+    return np.array([r["success"].strip().lower() in ("true", "1") for r in table], dtype=bool)
+
+
+def percentile(values: np.ndarray, q: float) -> float:
+    """``np.percentile`` that is NaN for no values."""
+    return float(np.percentile(values, q)) if values.size else math.nan
+
+
+def fuel_ratio(table: list[dict[str, str]]) -> np.ndarray:
+    """Each run's closed-loop fuel over its open-loop optimum's (delta-v or propellant)."""
+    return column(table, "fuel") / column(table, "open_loop_fuel")

@@ -24,14 +24,21 @@ row per run, the warm starts side by side), ``report.md`` and ``results.json``.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from scpformer.experiments import report as rep
-from scpformer.experiments.closed_loop import fly_warmstarts, results_csv
+from scpformer.experiments.closed_loop import (
+    column,
+    fly_warmstarts,
+    fuel_ratio,
+    percentile,
+    replan_arrays,
+    results_csv,
+    succeeded,
+)
 from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import RunOptions, check_settings, require_n
 from scpformer.files import write_text_atomic
@@ -84,31 +91,6 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     return report.write(out)
 
 
-def replan_arrays(folder: Path, table: list[dict[str, str]]) -> dict[str, np.ndarray]:
-    """Per re-plan arrays of a campaign folder's ``run-NNNN.npz``: the flown re-plans and
-    the comparison solves (with the warm start each compared)."""
-    keys = ("replan_iterations", "replan_wall_s", "replan_cost", "replan_accepted",
-            "compare_iterations", "compare_wall_s", "compare_cost", "compare_accepted",
-            "compare_warmstart", "replan_used")  # fmt: skip
-    parts: dict[str, list[np.ndarray]] = {k: [] for k in keys}
-    for row in table:
-        path = folder / f"run-{int(row['run']):04d}.npz"
-        if path.exists():
-            with np.load(path) as data:
-                for k in keys:
-                    if k in data:
-                        parts[k].append(np.asarray(data[k]))
-    return {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
-
-
-def _column(table: list[dict[str, str]], name: str) -> np.ndarray:
-    return np.array([float(r[name]) for r in table], dtype=float)
-
-
-def _success(table: list[dict[str, str]]) -> np.ndarray:
-    return np.array([r["success"].strip().lower() in ("true", "1") for r in table], dtype=bool)
-
-
 def analyse(
     rows: dict[str, list[dict[str, str]]],
     summaries: dict[str, dict[str, Any]],
@@ -154,19 +136,16 @@ def summary_table(
     def line(quantity: str, value) -> None:
         table_rows.append((quantity, *(value(w) for w in WARMSTARTS)))
 
-    def pct(values: np.ndarray, q: float) -> float:
-        return float(np.percentile(values, q)) if values.size else math.nan
-
-    line("success", lambda w: f"{int(_success(rows[w]).sum())}/{len(rows[w])}")
+    line("success", lambda w: f"{int(succeeded(rows[w]).sum())}/{len(rows[w])}")
     line("propellant / open loop, median (p95)", lambda w: (
         f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
-        f"({rep.fmt(pct(_column(rows[w], 'fuel') / _column(rows[w], 'open_loop_fuel'), 95), 4)})"
+        f"({rep.fmt(percentile(fuel_ratio(rows[w]), 95), 4)})"
     ))  # fmt: skip
     for col, unit in (("terminal_position_error", "U_L"), ("terminal_velocity_error", "U_L/U_T"),
                       ("terminal_tilt_deg", "deg"), ("terminal_rate_deg", "deg/U_T")):  # fmt: skip
         line(f"{col.replace('_', ' ')} median / max [{unit}]", lambda w, c=col: (
-            f"{rep.fmt(float(np.median(_column(rows[w], c))))} / "
-            f"{rep.fmt(float(_column(rows[w], c).max()))}"
+            f"{rep.fmt(float(np.median(column(rows[w], c))))} / "
+            f"{rep.fmt(float(column(rows[w], c).max()))}"
         ))  # fmt: skip
     line("re-plan wall time median / p99 [s]", lambda w: (
         f"{rep.fmt(summaries[w]['replan_time_median_s'])} / "

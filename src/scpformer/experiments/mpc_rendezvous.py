@@ -30,23 +30,28 @@ the warm starts side by side), ``report.md`` and ``results.json``.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from scpformer.experiments import report as rep
+from scpformer.experiments.closed_loop import (
+    column,
+    fly_warmstarts,
+    fuel_ratio,
+    percentile,
+    relative,
+    replan_arrays,
+    results_csv,
+    speedup,
+    succeeded,
+)
 from scpformer.experiments.runner import RunOptions, check_settings, require_n
 from scpformer.files import write_text_atomic
 from scpformer.guidance.campaign import (
     Campaign,
-    plot_campaign,
-    run_campaign,
-    summarize,
 )
 from scpformer.guidance.rendezvous_mpc import DockingTolerance, MPCConfig
 from scpformer.rendezvous import RendezvousInstance
@@ -92,65 +97,15 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     import torch
 
     torch.set_num_threads(1)  # batch-1 ART rollouts: a second thread only synchronizes
-    rows: dict[str, list[dict[str, str]]] = {}
-    summaries: dict[str, dict[str, Any]] = {}
-    for warmstart in WARMSTARTS:
-        folder = out / warmstart
-
-        def progress(row: dict[str, Any], ws: str = warmstart) -> None:
-            print(f"{NAME}: {ws} run {row['run'] + 1}/{n}: success {row['success']}",
-                  file=sys.stderr, flush=True)  # fmt: skip
-
-        rows[warmstart] = run_campaign(  # one worker unless asked: re-plan times are timed
-            campaign(n, options.seed, warmstart), folder, on_run=progress,
-            workers=options.workers or 1,
-        )  # fmt: skip
-        summaries[warmstart] = summarize(rows[warmstart], folder)
-        if rows[warmstart]:
-            plot_campaign(rows[warmstart], folder, folder / "simulate.png")
-    write_text_atomic(out / "results.csv", results_csv(rows))
+    rows, summaries = fly_warmstarts(
+        NAME, out, WARMSTARTS, lambda w: campaign(n, options.seed, w), family="rendezvous",
+        workers=options.workers or 1, ray=options.ray,
+    )  # fmt: skip
+    write_text_atomic(out / "results.csv", results_csv(rows, WARMSTARTS, RUN_COLUMNS))
     report = rep.Report(name=name, reproduces=REPRODUCES, command=command, settings=settings,
                         differences=DIFFERENCES)  # fmt: skip
     analyse(rows, summaries, out, report)
     return report.write(out)
-
-
-def results_csv(
-    rows: dict[str, list[dict[str, str]]],
-    warmstarts: tuple[str, ...] = WARMSTARTS,
-    run_columns: tuple[str, ...] = RUN_COLUMNS,
-) -> str:
-    """One line per run: its index and error seed, then each warm start's columns."""
-    header = ["index", "seed"] + [f"{w}_{c}" for w in warmstarts for c in run_columns]
-    by_run: dict[int, dict[str, str]] = {}
-    for warmstart, table in rows.items():
-        for row in table:
-            line = by_run.setdefault(int(row["run"]), {"index": row["run"], "seed": row["seed"]})
-            line.update({f"{warmstart}_{c}": row.get(c, "") for c in run_columns})
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=header, lineterminator="\n")
-    writer.writeheader()
-    for run_index in sorted(by_run):
-        writer.writerow(by_run[run_index])
-    return buf.getvalue()
-
-
-def replan_arrays(folder: Path, table: list[dict[str, str]]) -> dict[str, np.ndarray]:
-    """Per re-plan arrays of a campaign folder's ``run-NNNN.npz`` (flown and compared)."""
-    keys = ("replan_iterations", "replan_wall_s", "replan_cost", "replan_node",
-            "compare_iterations", "compare_wall_s", "compare_cost")  # fmt: skip
-    names = ("replan_used", "compare_warmstart")
-    parts: dict[str, list[np.ndarray]] = {k: [] for k in (*keys, *names)}
-    for row in table:
-        path = folder / f"run-{int(row['run']):04d}.npz"
-        if path.exists():
-            with np.load(path) as data:
-                for k in keys:
-                    parts[k].append(np.asarray(data[k], dtype=float))
-                for k in names:
-                    parts[k].append(np.asarray(data[k], dtype=str) if k in data else
-                                    np.full(data["replan_node"].size, ""))  # fmt: skip
-    return {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
 
 
 def compared(arrays: dict[str, np.ndarray], other: str) -> dict[str, np.ndarray]:
@@ -158,18 +113,6 @@ def compared(arrays: dict[str, np.ndarray], other: str) -> dict[str, np.ndarray]
     in the flown re-plans' order): ``iterations``, ``wall_s`` and ``cost``."""
     sel = arrays["compare_warmstart"] == other
     return {k: arrays[f"compare_{k}"][sel] for k in ("iterations", "wall_s", "cost")}
-
-
-def _column(table: list[dict[str, str]], name: str) -> np.ndarray:
-    return np.array([float(r[name]) for r in table], dtype=float)
-
-
-def _pct(values: np.ndarray, q: float) -> float:
-    return float(np.percentile(values, q)) if values.size else math.nan
-
-
-def _success(table: list[dict[str, str]]) -> np.ndarray:
-    return np.array([r["success"].strip().lower() in ("true", "1") for r in table], dtype=bool)
 
 
 def analyse(
@@ -199,11 +142,11 @@ def analyse(
         table_rows.append((quantity, *(value(w) for w in WARMSTARTS)))
 
     arrays = {w: replan_arrays(out / w, rows[w]) for w in WARMSTARTS}
-    line("success", lambda w: f"{int(_success(rows[w]).sum())}/{len(rows[w])} "
-         f"({100 * _success(rows[w]).mean():.1f}%)")  # fmt: skip
+    line("success", lambda w: f"{int(succeeded(rows[w]).sum())}/{len(rows[w])} "
+         f"({100 * succeeded(rows[w]).mean():.1f}%)")  # fmt: skip
     line("delta-v / open loop, median (p95)", lambda w: (
         f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
-        f"({rep.fmt(_pct(_column(rows[w], 'fuel') / _column(rows[w], 'open_loop_fuel'), 95), 4)})"
+        f"({rep.fmt(percentile(fuel_ratio(rows[w]), 95), 4)})"
     ))  # fmt: skip
     line("delta-v median [mm/s] (open loop)", lambda w: (
         f"{1e3 * summaries[w]['fuel_median']:.2f} "
@@ -212,9 +155,9 @@ def analyse(
     for col, unit, scale in (("terminal_position_error", "m", 1.0),
                              ("terminal_velocity_error", "mm/s", 1e3)):  # fmt: skip
         line(f"{col.replace('_', ' ')} median / p95 / max [{unit}]", lambda w, c=col, s=scale: (
-            f"{rep.fmt(s * float(np.median(_column(rows[w], c))))} / "
-            f"{rep.fmt(s * _pct(_column(rows[w], c), 95))} / "
-            f"{rep.fmt(s * float(_column(rows[w], c).max()))}"
+            f"{rep.fmt(s * float(np.median(column(rows[w], c))))} / "
+            f"{rep.fmt(s * percentile(column(rows[w], c), 95))} / "
+            f"{rep.fmt(s * float(column(rows[w], c).max()))}"
         ))  # fmt: skip
     line("re-plan wall time median / p99 [s]", lambda w: (
         f"{rep.fmt(summaries[w]['replan_time_median_s'])} / "
@@ -326,7 +269,7 @@ def _med_mean(values: np.ndarray) -> str:
 
 
 def _med_p99(values: np.ndarray) -> str:
-    return f"{np.median(values):.3f} / {_pct(values, 99):.3f}"
+    return f"{np.median(values):.3f} / {percentile(values, 99):.3f}"
 
 
 def verdict_text(summaries: dict[str, dict[str, Any]], arrays: dict[str, dict[str, np.ndarray]]
@@ -382,16 +325,6 @@ def failures_text(rows: dict[str, list[dict[str, str]]], tol: DockingTolerance) 
     if not lines:
         return "No run failed."
     return rep.markdown_table(("warm start", "run", "what failed"), lines)
-
-
-def relative(percent: float, less: str, more: str) -> str:
-    """``"12.3% fewer"`` for a positive saving, ``"4.5% more"`` for a negative one."""
-    return f"{abs(percent):.1f}% {less if percent >= 0 else more}"
-
-
-def speedup(ratio: float) -> str:
-    """``"2.10x shorter"`` for a ratio above 1 (cold over warm), ``"1.09x longer"`` below."""
-    return f"{ratio:.2f}x shorter" if ratio >= 1 else f"{1 / ratio:.2f}x longer"
 
 
 def add_celestini(report: rep.Report, arrays: dict[str, np.ndarray]) -> None:
