@@ -23,14 +23,24 @@ both warm starts side by side), ``report.md`` and ``results.json``.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from scpformer.experiments import report as rep
-from scpformer.experiments.closed_loop import fly_warmstarts, relative, results_csv, speedup
-from scpformer.experiments.mpc_rendezvous import replan_arrays
+from scpformer.experiments.closed_loop import (
+    column,
+    fly_warmstarts,
+    fuel_ratio,
+    percentile,
+    relative,
+    replan_arrays,
+    results_csv,
+    speedup,
+    succeeded,
+)
 from scpformer.experiments.runner import RunOptions, check_settings, require_n
 from scpformer.files import write_text_atomic
 from scpformer.guidance.campaign import Campaign
@@ -81,14 +91,9 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     return report.write(out)
 
 
-def _values(table: list[dict[str, str]], name: str) -> np.ndarray:
-    return np.array([float(r[name]) for r in table], dtype=float)
-
-
-def _med_p99(values: np.ndarray, digits: int = 3) -> str:
-    if not values.size:
-        return "n/a"
-    return f"{rep.fmt(float(np.median(values)), digits)} / {rep.fmt(float(np.percentile(values, 99)), digits)}"  # noqa: E501
+def _med_p99(values: np.ndarray) -> str:
+    median = float(np.median(values)) if values.size else math.nan
+    return f"{rep.fmt(median)} / {rep.fmt(percentile(values, 99))}"
 
 
 def analyse(
@@ -121,22 +126,18 @@ def analyse(
     def line(quantity: str, value) -> None:
         table_rows.append((quantity, *(value(w) for w in WARMSTARTS)))
 
-    def success(w: str) -> str:
-        ok = np.array([r["success"].strip().lower() in ("true", "1") for r in rows[w]])
-        return f"{int(ok.sum())}/{ok.size}"
-
-    line("success", success)
+    line("success", lambda w: f"{int(succeeded(rows[w]).sum())}/{len(rows[w])}")
     line("delta-v / open loop, median (max)", lambda w: (
         f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
-        f"({rep.fmt(float(np.max(_values(rows[w], 'fuel') / _values(rows[w], 'open_loop_fuel'))), 4)})"  # noqa: E501
+        f"({rep.fmt(float(np.max(fuel_ratio(rows[w]))), 4)})"
     ))  # fmt: skip
     line("terminal miss median / max [m]", lambda w: (
-        f"{rep.fmt(float(np.median(_values(rows[w], 'terminal_position_error'))))} / "
-        f"{rep.fmt(float(np.max(_values(rows[w], 'terminal_position_error'))))}"
+        f"{rep.fmt(float(np.median(column(rows[w], 'terminal_position_error'))))} / "
+        f"{rep.fmt(float(np.max(column(rows[w], 'terminal_position_error'))))}"
     ))  # fmt: skip
     line("terminal velocity median / max [mm/s]", lambda w: (
-        f"{rep.fmt(1e3 * float(np.median(_values(rows[w], 'terminal_velocity_error'))))} / "
-        f"{rep.fmt(1e3 * float(np.max(_values(rows[w], 'terminal_velocity_error'))))}"
+        f"{rep.fmt(1e3 * float(np.median(column(rows[w], 'terminal_velocity_error'))))} / "
+        f"{rep.fmt(1e3 * float(np.max(column(rows[w], 'terminal_velocity_error'))))}"
     ))  # fmt: skip
     line("re-plan wall time median / p99 [s]",
          lambda w: _med_p99(arrays[w]["replan_wall_s"]))  # fmt: skip
@@ -145,7 +146,8 @@ def analyse(
          lambda w: _med_p99(arrays[w]["replan_iterations"]))  # fmt: skip
     line("re-plans (failed)",
          lambda w: f"{summaries[w]['replans']} ({summaries[w]['replans_failed']})")  # fmt: skip
-    line("keep-out samples + failing nodes", lambda w: str(summaries[w]["violations"]))
+    line("violations (keep-out samples, drift entries, failing nodes)",
+         lambda w: str(summaries[w]["violations"]))  # fmt: skip
     report.sections.append(("Summary", rep.markdown_table(("quantity", *WARMSTARTS),
                                                           table_rows)))  # fmt: skip
     report.sections.append(("Previous vs cold on the same re-plans",
