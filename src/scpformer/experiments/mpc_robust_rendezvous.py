@@ -109,7 +109,7 @@ def analyse(
         f"in a training set), Table 2 errors, re-planning every K = {REPLAN_EVERY} impulses "
         "(nodes 10, 20, ..., 90) on a shrinking horizon to the pre-docking state. Success: "
         "the pre-docking state reached within the tolerance derived per run "
-        "(`robust_rendezvous_mpc.derive_tolerance`: ~12 m and ~15 mm/s, the 3-sigma "
+        "(`robust_rendezvous_mpc.derive_tolerance`: ~12 m and ~14 mm/s, the 3-sigma "
         "navigation error at the last fix dominating), no keep-out sample (normalized "
         "intrusion > 0.02 into the ellipsoid guarding the node) along the dense flown "
         "trajectory, no flown node whose free drift after the executed burn enters its "
