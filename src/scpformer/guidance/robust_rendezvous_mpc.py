@@ -289,7 +289,9 @@ def derive_tolerance(
       Gates fixed-term error (Eq. 12) as a velocity error at ``t_N``.
 
     Default instance, ``K = 10``: the last fix at node 90, ~750 m from the target, below
-    ``rho_2`` (``s_2`` of Table 2: 4.1 m 1-sigma); 2 burns after it; 12.5 m and 14.3 mm/s.
+    ``rho_2`` (``s_2`` of Table 2: 4.1 m 1-sigma); the plan has no burn after it (its last
+    burns are at nodes 76-77), so one is counted (a re-plan's correction); 12.5 m and
+    14.3 mm/s.
     The keep-out threshold is the deterministic family's (0.02 of the normalized distance,
     4 m at the 200 m keep-out zone, 20 m at the 1 km approach ellipsoid).
     """
