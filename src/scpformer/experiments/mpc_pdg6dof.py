@@ -161,14 +161,19 @@ def summary_table(
          lambda w: f"{summaries[w]['replans']} ({summaries[w]['replans_failed']})")  # fmt: skip
     line("T-SCvx cold fallbacks", lambda w: str(summaries[w]["tscvx_fallbacks"]))
     line("re-plans started from previous / tscvx", lambda w: (
-        f"{int((arrays[w]['replan_used'].astype(str) == 'previous').sum())} / "
-        f"{int((arrays[w]['replan_used'].astype(str) == 'tscvx').sum())}"
+        f"{int((_used(arrays[w]) == 'previous').sum())} / "
+        f"{int((_used(arrays[w]) == 'tscvx').sum())}"
     ))  # fmt: skip
     line("path-constraint violations (samples)", lambda w: str(summaries[w]["violations"]))
     return rep.markdown_table(("quantity", *WARMSTARTS), table_rows) + (
         "\n\nThe re-planning period is in Table 1's nondimensional time: set against wall "
         "seconds it says what share of the flight a re-plan takes if U_T is one second."
     )
+
+
+def _used(arrays: dict[str, np.ndarray]) -> np.ndarray:
+    """The start each flown re-plan ran from (empty for runs recorded without it)."""
+    return arrays.get("replan_used", np.zeros(0)).astype(str)
 
 
 def paired_text(arrays: dict[str, np.ndarray], other: str) -> str:
