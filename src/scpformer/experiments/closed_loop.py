@@ -14,7 +14,54 @@ from typing import Any
 
 import numpy as np
 
+from scpformer.experiments import report as rep
+from scpformer.experiments.runner import RunOptions, check_settings, require_n
+from scpformer.files import write_text_atomic
 from scpformer.guidance.campaign import Campaign, plot_campaign, run_campaign, summarize
+
+#: ``analyse(rows, summaries, out, report)`` of an experiment: its sections of the report.
+Analysis = Callable[
+    [dict[str, list[dict[str, str]]], dict[str, dict[str, Any]], Path, rep.Report], None
+]
+
+
+def run_experiment(
+    options: RunOptions,
+    *,
+    experiment: str,
+    name: str,
+    reproduces: str,
+    command: str,
+    settings: dict[str, Any],
+    warmstarts: tuple[str, ...],
+    campaign_of: Callable[[int, int, str], Campaign],
+    family: str,
+    run_columns: tuple[str, ...],
+    analyse: Analysis,
+    differences: tuple[str, ...],
+) -> Path:
+    """Run the closed-loop experiment ``experiment`` into ``options.out`` (its report
+    named ``name``); returns the report's path.
+
+    Records ``settings`` (with the experiment's name, run count, seed, folder and warm
+    starts) in ``OUT/config.json`` and refuses a folder of other settings; flies
+    ``campaign_of(n, seed, w)`` for every warm start ``w`` (:func:`fly_warmstarts`, resumed
+    run by run); writes ``OUT/results.csv`` (:func:`results_csv`) and the report, whose
+    sections ``analyse`` adds.
+    """
+    n, out = require_n(options), Path(options.out)
+    record = {"experiment": experiment, "n": n, "seed": options.seed, "out": str(out),
+              **settings, "warmstarts": list(warmstarts)}  # fmt: skip
+    check_settings(out, record)
+    rows, summaries = fly_warmstarts(
+        experiment, out, warmstarts, lambda w: campaign_of(n, options.seed, w),
+        family=family, workers=options.workers or 1, ray=options.ray,
+    )  # fmt: skip
+    write_text_atomic(out / "results.csv", results_csv(rows, warmstarts, run_columns))
+    report = rep.Report(name=name, reproduces=reproduces, command=command, settings=record,
+                        differences=differences)  # fmt: skip
+    analyse(rows, summaries, out, report)
+    return report.write(out)
 
 
 def fly_warmstarts(

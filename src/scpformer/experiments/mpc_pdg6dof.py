@@ -32,16 +32,14 @@ import numpy as np
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
     column,
-    fly_warmstarts,
     fuel_ratio,
     percentile,
     replan_arrays,
-    results_csv,
+    run_experiment,
     succeeded,
 )
 from scpformer.experiments.paired import Outcomes, paired_table
-from scpformer.experiments.runner import RunOptions, check_settings, require_n
-from scpformer.files import write_text_atomic
+from scpformer.experiments.runner import RunOptions
 from scpformer.guidance.campaign import Campaign
 from scpformer.guidance.pdg6dof_mpc import TIE_U_M, LandingTolerance, MPCConfig
 
@@ -72,23 +70,16 @@ def campaign(n: int, seed: int, warmstart: str) -> Campaign:
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``mpc-pdg6dof`` into ``options.out``; returns the report's path."""
-    n, out = require_n(options), Path(options.out)
     settings = {
-        "experiment": NAME, "n": n, "seed": options.seed, "out": str(out),
         "instances": "Table 1 with a dispersed initial state (SeedSequence([seed, run]))",
         "errors": "thrust, mass, inertia, aerodynamic, navigation, initial dispersion",
-        "replan_every": REPLAN_EVERY, "warmstarts": list(WARMSTARTS), "tracking": "lqr",
+        "replan_every": REPLAN_EVERY, "tracking": "lqr",
     }  # fmt: skip
-    check_settings(out, settings)
-    rows, summaries = fly_warmstarts(
-        NAME, out, WARMSTARTS, lambda w: campaign(n, options.seed, w), family="pdg6dof",
-        workers=options.workers or 1, ray=options.ray,
+    return run_experiment(
+        options, experiment=NAME, name=name, reproduces=REPRODUCES, command=command,
+        settings=settings, warmstarts=WARMSTARTS, campaign_of=campaign, family="pdg6dof",
+        run_columns=RUN_COLUMNS, analyse=analyse, differences=DIFFERENCES,
     )  # fmt: skip
-    write_text_atomic(out / "results.csv", results_csv(rows, WARMSTARTS, RUN_COLUMNS))
-    report = rep.Report(name=name, reproduces=REPRODUCES, command=command, settings=settings,
-                        differences=DIFFERENCES)  # fmt: skip
-    analyse(rows, summaries, out, report)
-    return report.write(out)
 
 
 def analyse(

@@ -39,17 +39,15 @@ import numpy as np
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
     column,
-    fly_warmstarts,
     fuel_ratio,
     percentile,
     relative,
     replan_arrays,
-    results_csv,
+    run_experiment,
     speedup,
     succeeded,
 )
-from scpformer.experiments.runner import RunOptions, check_settings, require_n
-from scpformer.files import write_text_atomic
+from scpformer.experiments.runner import RunOptions
 from scpformer.guidance.campaign import (
     Campaign,
 )
@@ -86,26 +84,18 @@ def campaign(n: int, seed: int, warmstart: str) -> Campaign:
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``mpc-rendezvous`` into ``options.out``; returns the report's path."""
-    n, out = require_n(options), Path(options.out)
-    settings = {
-        "experiment": NAME, "n": n, "seed": options.seed, "out": str(out),
-        "instances": "sampled (Table 1 sampler, SeedSequence([seed, run]))",
-        "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
-        "warmstarts": list(WARMSTARTS),
-    }  # fmt: skip
-    check_settings(out, settings)
     import torch
 
     torch.set_num_threads(1)  # batch-1 ART rollouts: a second thread only synchronizes
-    rows, summaries = fly_warmstarts(
-        NAME, out, WARMSTARTS, lambda w: campaign(n, options.seed, w), family="rendezvous",
-        workers=options.workers or 1, ray=options.ray,
+    settings = {
+        "instances": "sampled (Table 1 sampler, SeedSequence([seed, run]))",
+        "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
+    }  # fmt: skip
+    return run_experiment(
+        options, experiment=NAME, name=name, reproduces=REPRODUCES, command=command,
+        settings=settings, warmstarts=WARMSTARTS, campaign_of=campaign, family="rendezvous",
+        run_columns=RUN_COLUMNS, analyse=analyse, differences=DIFFERENCES,
     )  # fmt: skip
-    write_text_atomic(out / "results.csv", results_csv(rows, WARMSTARTS, RUN_COLUMNS))
-    report = rep.Report(name=name, reproduces=REPRODUCES, command=command, settings=settings,
-                        differences=DIFFERENCES)  # fmt: skip
-    analyse(rows, summaries, out, report)
-    return report.write(out)
 
 
 def compared(arrays: dict[str, np.ndarray], other: str) -> dict[str, np.ndarray]:

@@ -32,17 +32,15 @@ import numpy as np
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
     column,
-    fly_warmstarts,
     fuel_ratio,
     percentile,
     relative,
     replan_arrays,
-    results_csv,
+    run_experiment,
     speedup,
     succeeded,
 )
-from scpformer.experiments.runner import RunOptions, check_settings, require_n
-from scpformer.files import write_text_atomic
+from scpformer.experiments.runner import RunOptions
 from scpformer.guidance.campaign import Campaign
 from scpformer.guidance.robust_rendezvous_mpc import MPCConfig
 
@@ -72,23 +70,17 @@ def campaign(n: int, seed: int, warmstart: str) -> Campaign:
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``mpc-robust-rendezvous`` into ``options.out``; returns the report's path."""
-    n, out = require_n(options), Path(options.out)
     settings = {
-        "experiment": NAME, "n": n, "seed": options.seed, "out": str(out),
         "instances": "sampled (robust Table 1 sampler, SeedSequence([seed, run]))",
         "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
-        "warmstarts": list(WARMSTARTS), "safety_samples": SAFETY_SAMPLES,
+        "safety_samples": SAFETY_SAMPLES,
     }  # fmt: skip
-    check_settings(out, settings)
-    rows, summaries = fly_warmstarts(
-        NAME, out, WARMSTARTS, lambda w: campaign(n, options.seed, w),
-        family="robust-rendezvous", workers=options.workers or 1,
+    return run_experiment(
+        options, experiment=NAME, name=name, reproduces=REPRODUCES, command=command,
+        settings=settings, warmstarts=WARMSTARTS, campaign_of=campaign,
+        family="robust-rendezvous", run_columns=RUN_COLUMNS, analyse=analyse,
+        differences=DIFFERENCES,
     )  # fmt: skip
-    write_text_atomic(out / "results.csv", results_csv(rows, WARMSTARTS, RUN_COLUMNS))
-    report = rep.Report(name=name, reproduces=REPRODUCES, command=command, settings=settings,
-                        differences=DIFFERENCES)  # fmt: skip
-    analyse(rows, summaries, out, report)
-    return report.write(out)
 
 
 def _med_p99(values: np.ndarray) -> str:
