@@ -870,12 +870,15 @@ def fly(
             args = (sub, error)
             rest = (plan, node, k_flown, t_now, period, estimate, cfg)
             record, sol = _replan(*args, cfg.warmstart, *rest)
+            if record.accepted and sol is not None:  # the new plan's gains: part of the re-plan
+                start = time.perf_counter()
+                new_gains = _gains(instance, sol, cfg)
+                record = replace(record, wall_s=record.wall_s + time.perf_counter() - start)
             replans.append(record)
             for other in cfg.compare:
                 comparisons.append(_replan(*args, other, *rest)[0])
             if record.accepted and sol is not None:
-                plan, node = sol, 0
-                gains = _gains(instance, plan, cfg)
+                plan, node, gains = sol, 0, new_gains
                 continue
         if node >= n - 1:
             break
