@@ -119,10 +119,9 @@ WARMSTARTS = ("cold", "previous")
 #: Warm starts a user may ask for that the loop does not implement, and why.
 UNSUPPORTED = {
     "art": (
-        "the shipped robust ART model cannot start mid-horizon: it generates from time step 0 "
-        "of a 100-impulse problem from t_0 with a fresh context and a learned time-step "
-        "embedding; a remaining problem of N - k impulses from node k would be out of "
-        "distribution"
+        "not built for the robust loop yet: the mid-horizon ART generation the rendezvous "
+        "loop uses (the flown prefix as context, scpformer.warmstart.art) is not wired to "
+        "the robust family's remaining problem, its covariance and its Eq. 8 check"
     ),
 }
 #: Smallest number of impulses of a remaining problem (the scenario's ``n_nodes >= 2``).
