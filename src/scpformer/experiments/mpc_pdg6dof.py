@@ -151,9 +151,9 @@ def summary_table(
     line("re-plans (failed)",
          lambda w: f"{summaries[w]['replans']} ({summaries[w]['replans_failed']})")  # fmt: skip
     line("T-SCvx cold fallbacks", lambda w: str(summaries[w]["tscvx_fallbacks"]))
-    line("re-plans started from previous / tscvx", lambda w: (
+    line("best: re-plans started from previous / tscvx", lambda w: (
         f"{int((_used(arrays[w]) == 'previous').sum())} / "
-        f"{int((_used(arrays[w]) == 'tscvx').sum())}"
+        f"{int((_used(arrays[w]) == 'tscvx').sum())}" if w == "best" else "-"
     ))  # fmt: skip
     line("path-constraint violations (samples)", lambda w: str(summaries[w]["violations"]))
     return rep.markdown_table(("quantity", *WARMSTARTS), table_rows) + (
