@@ -126,6 +126,20 @@ def test_best_keeps_the_shifted_optimum_over_the_networks_guess(plan):
     assert all(r.warmstart == "best" and r.accepted for r in flown.replans)
 
 
+def test_a_tscvx_run_folder_given_as_model_is_the_networks_of_the_re_plans(plan):
+    """``--model RUN`` loads that run's networks (here the shipped folder, by its path) and
+    they predict the same guess as the default ones."""
+    from scpformer.pretrained import default_model
+
+    cfg = mpc.MPCConfig(warmstart="tscvx", model=str(default_model("pdg6dof")))
+    sub = mpc.remaining_instance(INSTANCE, plan.trajectory.x[10])
+    by_path = mpc._tscvx_provider(cfg.solver, cfg.model).guess_for(sub, cfg.solver)
+    shipped = mpc._tscvx_provider(cfg.solver).guess_for(sub, cfg.solver)
+    np.testing.assert_array_equal(by_path.trajectory.x, shipped.trajectory.x)
+    assert Campaign(runs=1, config=cfg).settings()["model"] == cfg.model
+    assert "model" not in Campaign(runs=1, config=mpc.MPCConfig(warmstart="tscvx")).settings()
+
+
 def test_the_shifted_plan_is_the_rest_of_the_plan_retimed(plan):
     z = plan.trajectory
     n = z.x.shape[0]
@@ -162,6 +176,7 @@ def test_the_derived_tolerance_is_written_down(plan):
         ({"thrust_margin": -0.1}, "thrust_margin"),
         ({"thrust_margin": 0.5}, "leaves no thrust range"),
         ({"gimbal_margin_deg": 25.0}, "gimbal_margin_deg"),
+        ({"model": 3}, "model must be a path string"),
     ],
 )
 def test_bad_configuration_is_refused_naming_the_field(kwargs, match):
@@ -234,6 +249,7 @@ def test_the_simulate_command_writes_runs_npz_and_figure(tmp_path, capsys):
         (["--warmstart", "art"], "invalid choice: 'art'"),
         (["--errors", "table2"], "invalid choice: 'table2'"),
         (["--tracking", "pid"], "invalid choice: 'pid'"),
+        (["--warmstart", "tscvx", "--model", "no-such-run"], "no-such-run"),
     ],
 )
 def test_the_simulate_command_refuses_bad_input_in_one_line(argv, match, tmp_path, capsys):

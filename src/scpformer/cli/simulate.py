@@ -32,6 +32,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             compare=(args.compare,) if args.compare else (),
             errors=pdg.ErrorModels() if args.errors == "default" else pdg.ErrorModels.none(),
             tracking=pdg.TrackingWeights() if args.tracking == "lqr" else None,
+            model=None if args.model is None else str(args.model),
         )
     else:
         from scpformer.guidance import robust_rendezvous_mpc as robust

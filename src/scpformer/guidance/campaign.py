@@ -143,6 +143,7 @@ class Campaign:
                 "min_remaining_time": cfg.min_remaining_time, "compare": list(cfg.compare),
                 "tracking": asdict(cfg.tracking) if cfg.tracking is not None else None,
                 "thrust_margin": cfg.thrust_margin, "gimbal_margin_deg": cfg.gimbal_margin_deg,
+                **({"model": cfg.model} if cfg.model not in (None, "default") else {}),
                 "errors": {
                     name: getattr(errors, name) for name in (
                         "thrust_magnitude", "pointing_deg", "mass_fraction",

@@ -52,6 +52,7 @@ import numpy as np
 
 from scpformer.dynamics import powered_descent_truth as truth
 from scpformer.dynamics import quaternion as quat
+from scpformer.files import require_model_path
 from scpformer.guidance.pdg6dof_tracking import (
     TrackingWeights,
     project_thrust,
@@ -376,6 +377,9 @@ class MPCConfig:
         40% at ``T_max`` and ends at the gimbal stop, where no correction is possible. The
         open-loop reference (``open_loop_fuel``) keeps the full bounds, and so do the plans
         when ``tracking`` is None.
+    model
+        T-SCvx networks of the ``tscvx`` and ``best`` starts: a training run folder
+        (``scpformer train tscvx``), or None / ``"default"`` for the shipped ones.
     """
 
     replan_every: int = 5
@@ -389,6 +393,7 @@ class MPCConfig:
     tracking: TrackingWeights | None = field(default_factory=TrackingWeights)
     thrust_margin: float = 0.06
     gimbal_margin_deg: float = 2.0
+    model: str | None = None
 
     def __post_init__(self) -> None:
         check_finite("thrust_margin", self.thrust_margin, shape=(), nonnegative=True)
@@ -401,6 +406,11 @@ class MPCConfig:
             raise ValueError(f"gimbal_margin_deg must be below delta_max = {c.delta_max_deg} "
                              f"deg, got {self.gimbal_margin_deg}")  # fmt: skip
         check_bool("accept_unconverged", self.accept_unconverged)
+        if self.model is not None and not isinstance(self.model, str):
+            raise ValueError(f"model must be a path string or None, got "
+                             f"{type(self.model).__name__}")  # fmt: skip
+        if self.model not in (None, "default"):
+            require_model_path(self.model)  # a missing run fails here, not mid-flight
         if self.tracking is not None and not isinstance(self.tracking, TrackingWeights):
             raise ValueError(f"tracking must be a TrackingWeights or None, got "
                              f"{type(self.tracking).__name__}")  # fmt: skip
@@ -658,15 +668,16 @@ def shifted_plan(plan: Solution, node: int, estimate: np.ndarray | None = None) 
 
 
 def best_start(
-    sub: PDGInstance, plan: Solution, node: int, estimate: np.ndarray, config: PDGSolverConfig
-) -> tuple[str, Any]:
+    sub: PDGInstance, plan: Solution, node: int, estimate: np.ndarray, config: PDGSolverConfig,
+    model: str | None = None,
+) -> tuple[str, Any]:  # fmt: skip
     """The start of a ``best`` re-plan: ``("tscvx", provider)`` when the networks' predicted
     solution has a lower penalized cost ``J = C + lambda P`` (Eq. 16) on ``sub`` than the
     shifted previous plan, else ``("previous", shifted plan)``. A prediction the provider
     rejects (unusable, or ``J`` above its bound) loses."""
     from scpformer.warmstart.tscvx import penalized_cost
 
-    provider = _tscvx_provider(config)
+    provider = _tscvx_provider(config, model)
     shifted = shifted_plan(plan, node, estimate)
     guess = provider.guess_for(sub, config)
     j_tscvx = guess.record.details.get("J_prediction", math.inf) if guess.record.accepted else (
@@ -675,13 +686,14 @@ def best_start(
     return ("tscvx", provider) if j_tscvx < j_shifted else ("previous", shifted)
 
 
-@lru_cache(maxsize=2)
-def _tscvx_provider(config: PDGSolverConfig) -> Any:
-    """The shipped T-SCvx networks, loaded once per configuration."""
-    from scpformer.pretrained import default_model
+@lru_cache(maxsize=4)
+def _tscvx_provider(config: PDGSolverConfig, model: str | None = None) -> Any:
+    """The T-SCvx networks of ``model`` (a training run folder; None or ``default``: the
+    shipped ones, checksum verified), loaded once per model and configuration."""
+    from scpformer.pretrained import resolve_model
     from scpformer.warmstart.tscvx import TscvxWarmStart
 
-    return TscvxWarmStart.from_checkpoint(default_model("pdg6dof"), config=config)
+    return TscvxWarmStart.from_checkpoint(resolve_model(model, "pdg6dof"), config=config)
 
 
 def _accepted(sol: Solution, unconverged: bool = False) -> bool:
@@ -706,11 +718,11 @@ def _replan(
     start = time.perf_counter()
     used = name
     if name == "best":
-        used, warm = best_start(sub, plan, node, estimate, cfg.solver)
+        used, warm = best_start(sub, plan, node, estimate, cfg.solver, cfg.model)
     elif name == "previous":
         warm: Any = shifted_plan(plan, node, estimate)
     elif name == "tscvx":
-        warm = _tscvx_provider(cfg.solver)
+        warm = _tscvx_provider(cfg.solver, cfg.model)
     else:
         warm = None
     sol = solve(sub, cfg.solver, method=METHOD[used], warmstart=warm)

@@ -167,6 +167,16 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
             "lqr",
         ),
     )
+    parser.add_argument(
+        "--model",
+        type=Path,
+        metavar="RUN",
+        help=with_default(
+            "T-SCvx networks of --warmstart/--compare tscvx or best: a training run folder "
+            "(scpformer train tscvx), or 'default': the networks shipped with scpformer",
+            "default",
+        ),
+    )
     _add_run_arguments(parser)
 
 
