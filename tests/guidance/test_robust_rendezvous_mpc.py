@@ -79,12 +79,31 @@ def test_the_remaining_problem_starts_from_the_estimate_with_the_domains_of_its_
         robust.remaining_instance(INSTANCE, 99, estimate, model.oe[99])
 
 
+def test_art_replans_from_the_flown_prefix_and_records_the_start_it_used(plan):
+    """The learned start: the robust ART model started at node 50 with the flown prefix as
+    its context; its guess passes the Eq. 8 check or the TPBVP replaces it (the record's
+    ``used`` says which), and passive safety from it is a verified plan that docks. Without
+    errors the remaining problem is the plan's own tail, so the closed loop's delta-v stays
+    within the bound of the test above."""
+    cfg = _config(warmstart="art")
+    result = robust.fly(INSTANCE, cfg, seed=0, open_loop=plan)
+    (record,) = result.replans
+    assert record.warmstart == "art" and record.used in ("art", "tpbvp")
+    assert record.accepted and result.success
+    tol = cfg.solver.verification
+    remaining_s = (INSTANCE.n_nodes - K_ONE) * INSTANCE.horizon_s / INSTANCE.n_nodes
+    bound = tol.terminal_velocity_m_s + 2.0 * tol.terminal_position_m / remaining_s
+    assert abs(result.fuel - result.open_loop_fuel) <= bound
+    assert Campaign(runs=1, config=cfg).settings()["model"] == "default"
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
         ({"replan_every": 0}, "replan_every"),
-        ({"warmstart": "art"}, "'art' is not available"),
+        ({"warmstart": "best"}, "warmstart must be one of cold, previous, art"),
         ({"warmstart": "hot"}, "warmstart must be one of cold, previous"),
+        ({"model": 3}, "model must be a path string"),
         ({"compare": ("hot",)}, "warmstart must be one of"),
         ({"solver": RobustSolverConfig(safety_mode="deterministic")}, "safety_mode must be"),
         ({"safety_samples": 0}, "safety_samples"),
@@ -122,7 +141,7 @@ def test_runs_csv_has_the_columns_and_resumes(tmp_path, plan):
     [
         (["--replan-every", "0"], "--replan-every: must be at least 1"),
         (["--runs", "0"], "--runs: must be at least 1"),
-        (["--warmstart", "art"], "invalid choice: 'art'"),
+        (["--warmstart", "best"], "invalid choice: 'best'"),
         (["--warmstart", "tscvx"], "invalid choice: 'tscvx'"),
     ],
 )

@@ -195,7 +195,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             summary="closed-loop robust rendezvous Monte Carlo: cold vs previous-plan re-plans",
             module="scpformer.experiments.mpc_robust_rendezvous",
             default_n=100,
-            models="none (the learned start is not wired to the robust loop yet)",
+            models="none (the classical starts; the learned one flies in simulate)",
             depends_on=(
                 "src/scpformer/experiments/mpc_robust_rendezvous.py",
                 "src/scpformer/guidance",

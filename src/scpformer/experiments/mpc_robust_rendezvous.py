@@ -188,8 +188,8 @@ DIFFERENCES: tuple[str, ...] = (
     "here it is re-solved every 10 impulses on a shrinking horizon from a navigation "
     "estimate (mean ROE of the two-body + J2 truth plus the Table 2 navigation error), "
     "each remaining problem with the chance constraint of Eq. 14-16 on its nodes.",
-    "Warm starts: the learned robust ART start is not flown: the mid-horizon generation of "
-    "the rendezvous loop is not wired to the robust family's remaining problem yet.",
+    "Warm starts: this experiment flies the classical starts; the learned robust ART start "
+    "(`simulate robust-rendezvous --warmstart art`) is measured in the closed-loop guide.",
     "Passive safety of the flown plans is checked by the family's Monte Carlo with 200 draws "
     "per node instead of the 1000 of its verification (time); the flown states' own free "
     "drift is checked too.",

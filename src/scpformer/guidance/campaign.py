@@ -152,8 +152,8 @@ class Campaign:
                      "dispersion": errors.dispersion is not None},
             }  # fmt: skip
         robust_only = {"safety_samples": cfg.safety_samples} if self.family != "rendezvous" else {}
-        if self.family == "rendezvous" and uses_art(cfg):  # the ART model of art and best
-            robust_only = {"model": cfg.model or "default"}
+        if uses_art(cfg):  # the ART model of art and best
+            robust_only = robust_only | {"model": cfg.model or "default"}
         return {
             "family": self.family, "seed": self.seed, "instances": self.instances,
             "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,

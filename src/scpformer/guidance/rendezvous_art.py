@@ -43,14 +43,16 @@ LEARNED = ("art", "best")
 
 
 @lru_cache(maxsize=4)
-def art_provider(model: str | None, config: RendezvousSolverConfig) -> ArtWarmStart:
-    """The ART provider of ``model`` (a training run or checkpoint; None or ``default``: the
-    shipped ``art-rendezvous``, checksum verified), loaded once per process and
-    configuration (``config`` solves the convex problem of ``J_CVX``)."""
+def art_provider(model: str | None, config: Any, family: str = "rendezvous") -> ArtWarmStart:
+    """The ART provider of ``model`` for ``family`` (a training run or checkpoint; None or
+    ``default``: the shipped model of the family, checksum verified), loaded once per
+    process and configuration (``config`` solves the convex problem of ``J_CVX``; for
+    ``robust-rendezvous`` the TPBVP, its passive-safety mode is the provider's)."""
     from scpformer.pretrained import resolve_model
 
-    path = resolve_model(model, "rendezvous")
-    return ArtWarmStart.from_checkpoint(path, family="rendezvous", config=config)
+    path = resolve_model(model, family)
+    mode = {"mode": config.safety_mode} if family == "robust-rendezvous" else {}
+    return ArtWarmStart.from_checkpoint(path, family=family, config=config, **mode)
 
 
 class FlownLog:

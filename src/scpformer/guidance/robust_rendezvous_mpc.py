@@ -59,8 +59,12 @@ Warm starts of a re-plan (:data:`WARMSTARTS`): ``cold`` is the family's default,
 three-stage procedure (TPBVP -> collision avoidance -> passive safety) from the estimate;
 ``previous`` the last accepted plan shifted in time to node ``k`` (its states from ``k`` on,
 the first replaced by the estimate, and its impulses), given to ``method="passive_safety"``
-(SCvx* on Eq. 17 straight from it, Table 1's 20 solves). The learned ART start is not
-offered: see :data:`UNSUPPORTED`.
+(SCvx* on Eq. 17 straight from it, Table 1's 20 solves); ``art`` is PS-ART-C from node
+``k``: the robust ART model (``MPCConfig.model``, default the shipped one) generates the
+remaining ``N - k`` impulses with the flown prefix as its context and ``R(t_k) = -J`` of the
+remaining TPBVP (:mod:`.rendezvous_art`, the deterministic loop's mid-horizon start), the
+post hoc check of Eq. 8 keeps its guess or falls back to the TPBVP, and SCvx* on passive
+safety starts from the result (the record's ``used``: ``art`` or ``tpbvp``).
 
 Success of a flown run (:class:`RobustClosedLoopResult`): the pre-docking state ``x_f`` is
 reached within :func:`derive_tolerance`, and no constraint is violated along the true flown
@@ -85,6 +89,7 @@ import numpy as np
 
 from scpformer.dynamics.orbits import oe_to_eci, rtn_dcm, rtn_to_eci
 from scpformer.dynamics.roe import psi_matrix
+from scpformer.guidance.rendezvous_art import FlownLog, art_provider
 from scpformer.guidance.rendezvous_mpc import (
     ClosedLoopResult,
     DockingTolerance,
@@ -113,17 +118,12 @@ from scpformer.robust_rendezvous import RobustInstance, RobustSolverConfig, solv
 from scpformer.scp.solution import Solution, Status, Trajectory
 from scpformer.scp.warmstart import GivenWarmStart
 from scpformer.validation import check_int, check_positive
+from scpformer.warmstart.art import FlownHistory
 
 #: Warm starts of a re-plan that the loop implements.
-WARMSTARTS = ("cold", "previous")
+WARMSTARTS = ("cold", "previous", "art")
 #: Warm starts a user may ask for that the loop does not implement, and why.
-UNSUPPORTED = {
-    "art": (
-        "not built for the robust loop yet: the mid-horizon ART generation the rendezvous "
-        "loop uses (the flown prefix as context, scpformer.warmstart.art) is not wired to "
-        "the robust family's remaining problem, its covariance and its Eq. 8 check"
-    ),
-}
+UNSUPPORTED: dict[str, str] = {}
 #: Smallest number of impulses of a remaining problem (the scenario's ``n_nodes >= 2``).
 MIN_REMAINING = 2
 
@@ -180,9 +180,13 @@ class MPCConfig:
     burn_threshold_m_s: float = 1e-6
     safety_samples: int = 200
     safety_confidence: float = 1e-4
+    model: str | None = None
 
     def __post_init__(self) -> None:
         check_loop_config(self, RobustSolverConfig, check_warmstart)
+        if self.model is not None and not isinstance(self.model, str):
+            raise ValueError(f"model must be a path string or None, got "
+                             f"{type(self.model).__name__}")  # fmt: skip
         if self.solver.safety_mode != "chance":
             raise ValueError(f"solver.safety_mode must be 'chance' (the chance-constrained "
                              f"rendezvous), got {self.solver.safety_mode!r}")  # fmt: skip
@@ -458,15 +462,24 @@ class RobustClosedLoopResult(ClosedLoopResult):
 # the loop
 # ======================================================================================
 def _solver(
-    sub: RobustInstance | None, previous: Solution, shift: int, cfg: MPCConfig
-) -> Callable[[str], Solution]:
+    sub: RobustInstance | None, previous: Solution, shift: int, cfg: MPCConfig,
+    history: FlownHistory | None = None,
+) -> Callable[[str], Solution]:  # fmt: skip
     """``solve_with(name)`` of a re-plan: ``cold`` the three-stage solve, ``previous`` passive
-    safety from the shifted plan (:func:`previous_plan`). The solution's ``iterations`` is the
-    count of convex solves of every stage it ran (:func:`stage_solves`)."""
+    safety from the shifted plan (:func:`previous_plan`), ``art`` passive safety from the
+    robust ART model's guess started mid-horizon with the flown ``history`` as its context
+    (PS-ART-C of the robust ART paper, its post hoc check of Eq. 8 with the TPBVP as the
+    fallback, ``R(t_k) = -J`` of the remaining TPBVP; :mod:`.rendezvous_art`). The
+    solution's ``iterations`` is the count of convex solves of every stage it ran
+    (:func:`stage_solves`)."""
 
     def solve_with(name: str) -> Solution:
         if name == "previous":
             warm = previous_plan(previous, shift, sub.roe0)
+            sol = solve(sub, cfg.solver, method="passive_safety", warmstart=warm)
+        elif name == "art":
+            provider = art_provider(cfg.model, cfg.solver, "robust-rendezvous")
+            warm = provider.guess(sub, history)
             sol = solve(sub, cfg.solver, method="passive_safety", warmstart=warm)
         else:
             sol = solve(sub, cfg.solver)
@@ -514,6 +527,7 @@ def fly(
     open_loop = open_loop or open_loop_plan(instance, cfg)
 
     starts: list[tuple[int, RobustInstance, Solution]] = [(0, instance, open_loop)]
+    log = FlownLog(instance, open_loop) if "art" in {cfg.warmstart, *cfg.compare} else None
 
     def replan(
         k: int, estimate: np.ndarray, target_oe: np.ndarray, plan: Solution, shift: int
@@ -523,8 +537,10 @@ def fly(
             prepare(sub)
         except ValueError as err:
             sub, error = None, str(err)
+        history = log.history(k, estimate, plan, shift) if log else None
         record, others, sol = replan_compared(sub, error, k, cfg.warmstart, cfg.compare,
-                                              _solver(sub, plan, shift, cfg), accepted)  # fmt: skip
+                                              _solver(sub, plan, shift, cfg, history),
+                                              accepted)  # fmt: skip
         if record.accepted and sol is not None and sub is not None:  # flown from k on
             starts.append((k, sub, sol))
         return record, others, sol

@@ -15,7 +15,8 @@ from scpformer.cli.commands import command_help, lazy_handler
 from scpformer.cli.dataclass_args import with_default
 
 WARMSTARTS = ("cold", "previous", "art", "best")  # scpformer.guidance.WARMSTARTS
-ROBUST_WARMSTARTS = ("cold", "previous")  # scpformer.guidance.robust_rendezvous_mpc.WARMSTARTS
+#: scpformer.guidance.robust_rendezvous_mpc.WARMSTARTS
+ROBUST_WARMSTARTS = ("cold", "previous", "art")
 INSTANCES = ("default", "sampled")  # scpformer.guidance.campaign.INSTANCES
 ERRORS = ("table2", "none")
 PDG_WARMSTARTS = ("cold", "previous", "tscvx", "best")  # scpformer.guidance.pdg6dof_mpc.WARMSTARTS
@@ -52,9 +53,10 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
         "actuation and process errors; success needs the pre-docking state reached and no "
         "keep-out or passive-safety violation (dense Monte Carlo) along the flown trajectory.",
         ROBUST_WARMSTARTS,
-        "warm start of each re-plan: cold (the three-stage solve) or previous (passive "
-        "safety from the last accepted plan shifted in time); the learned ART start cannot "
-        "start mid-horizon",
+        "warm start of each re-plan: cold (the three-stage solve), previous (passive "
+        "safety from the last accepted plan shifted in time) or art (passive safety from the "
+        "robust ART model of --model started from node k, its context the flown prefix; the "
+        "Eq. 8 check falls back to the TPBVP)",
     )
 
 
@@ -105,7 +107,7 @@ def _add_rendezvous(
             type=Path,
             metavar="RUN",
             help=with_default(
-                "ART model of --warmstart/--compare art or best: a training run folder or "
+                "ART model of --warmstart/--compare art (or best): a training run folder or "
                 "checkpoint file, or 'default': the pretrained model shipped with scpformer",
                 "default",
             ),
