@@ -47,6 +47,7 @@ def test_every_start_flies_the_same_run_and_tscvx_is_compared_on_its_re_plans(on
         assert set(data["replan_warmstart"].tolist()) == {"best"}
     results = json.loads((one_run / "results.json").read_text())
     assert results["experiment"] == "mpc-pdg6dof"
+    assert len(results["rows"]) == 3 and all(r["status"] == "not rated" for r in results["rows"])
     report = (one_run / "report.md").read_text()
     for section in ("## Summary", "## T-SCvx vs cold on the same re-plans",
                     "## T-SCvx vs previous on the same re-plans", "## Failures"):  # fmt: skip
