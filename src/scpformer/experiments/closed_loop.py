@@ -163,3 +163,21 @@ def percentile(values: np.ndarray, q: float) -> float:
 def fuel_ratio(table: list[dict[str, str]]) -> np.ndarray:
     """Each run's closed-loop fuel over its open-loop optimum's (delta-v or propellant)."""
     return column(table, "fuel") / column(table, "open_loop_fuel")
+
+
+def compared(arrays: dict[str, np.ndarray], other: str) -> dict[str, np.ndarray]:
+    """The comparison solves of ``other`` among a flight's re-plan arrays
+    (:func:`replan_arrays`; one per flown re-plan, in its order): every ``compare_*`` table
+    without its prefix (``iterations``, ``wall_s``, ``cost``, ``accepted``, ...)."""
+    sel = arrays["compare_warmstart"].astype(str) == other
+    return {k.removeprefix("compare_"): v[sel] for k, v in arrays.items()
+            if k.startswith("compare_")}  # fmt: skip
+
+
+def add_figures(report: rep.Report, out: Path, warmstarts: tuple[str, ...], flown: str) -> None:
+    """Each warm start's ``simulate.png`` that exists, captioned with what it shows
+    (``flown``: the flown trajectories or descents)."""
+    for w in warmstarts:
+        if (out / w / "simulate.png").exists():
+            report.figures.append((f"{w}/simulate.png", f"{w}: flown {flown} and re-plan "
+                                   "wall times against the re-planning period"))  # fmt: skip

@@ -31,7 +31,9 @@ import numpy as np
 
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
+    add_figures,
     column,
+    compared,
     fuel_ratio,
     percentile,
     replan_arrays,
@@ -111,10 +113,7 @@ def analyse(
                                 paired_text(flown, other)))  # fmt: skip
     report.sections.append(("Failures", failures_text(rows)))
     report.comparisons += comparisons(rows, arrays)
-    for w in WARMSTARTS:
-        if (out / w / "simulate.png").exists():
-            report.figures.append((f"{w}/simulate.png", f"{w}: flown descents and re-plan "
-                                   "wall times against the re-planning period"))  # fmt: skip
+    add_figures(report, out, WARMSTARTS, "descents")
 
 
 def summary_table(
@@ -172,17 +171,13 @@ def paired_text(arrays: dict[str, np.ndarray], other: str) -> str:
     """The flown ``tscvx`` re-plans against ``other`` solved on the same re-plan problems,
     re-plan by re-plan (:mod:`..paired`: accepted by both / one / neither, wall time,
     iterations, propellant where both were accepted)."""
-    sel = arrays["compare_warmstart"].astype(str) == other
-    if not arrays["replan_wall_s"].size or int(sel.sum()) != arrays["replan_wall_s"].size:
+    side = compared(arrays, other)
+    if not arrays["replan_wall_s"].size or side["wall_s"].size != arrays["replan_wall_s"].size:
         return "No comparison solves recorded."
     ours = Outcomes(time=arrays["replan_wall_s"], iterations=arrays["replan_iterations"],
                     solved=arrays["replan_accepted"], cost=arrays["replan_cost"])  # fmt: skip
-    base = Outcomes(
-        time=arrays["compare_wall_s"][sel],
-        iterations=arrays["compare_iterations"][sel],
-        solved=arrays["compare_accepted"][sel],
-        cost=arrays["compare_cost"][sel],
-    )
+    base = Outcomes(time=side["wall_s"], iterations=side["iterations"],
+                    solved=side["accepted"], cost=side["cost"])  # fmt: skip
     p99 = (f"Wall time p99: tscvx {np.percentile(ours.time, 99):.3f} s, {other} "
            f"{np.percentile(base.time, 99):.3f} s.")  # fmt: skip
     table = paired_table("tscvx (flown)", ours, f"{other} (same problems)", base,
@@ -207,9 +202,8 @@ def comparisons(
     flown = arrays["tscvx"]
     n = "n/a: the T-SCvx paper solves open loop only"
 
-    def compared(other: str) -> str:
-        sel = flown["compare_warmstart"].astype(str) == other
-        it_t, it_o = flown["replan_iterations"], flown["compare_iterations"][sel]
+    def iterations(other: str) -> str:
+        it_t, it_o = flown["replan_iterations"], compared(flown, other)["iterations"]
         if not it_t.size or it_o.size != it_t.size:
             return "no comparison solves"
         return (f"{np.median(it_t):g} vs {np.median(it_o):g} (median over {it_t.size} "
@@ -218,8 +212,8 @@ def comparisons(
     landed = ", ".join(f"{w} {int(succeeded(rows[w]).sum())}/{len(rows[w])}" for w in WARMSTARTS)
     rows_out = (
         ("closed-loop runs that land, per re-plan start", landed),
-        ("SCP iterations per re-plan, T-SCvx vs cold SCvx (same re-plans)", compared("cold")),
-        ("SCP iterations per re-plan, T-SCvx vs the shifted previous plan", compared("previous")),
+        ("SCP iterations per re-plan, T-SCvx vs cold SCvx (same re-plans)", iterations("cold")),
+        ("SCP iterations per re-plan, T-SCvx vs the shifted previous plan", iterations("previous")),
     )
     return [rep.Comparison(quantity=q, paper=n, ours=ours, status=rep.NOT_RATED)
             for q, ours in rows_out]  # fmt: skip

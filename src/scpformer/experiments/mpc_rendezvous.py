@@ -38,7 +38,9 @@ import numpy as np
 
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
+    add_figures,
     column,
+    compared,
     fuel_ratio,
     percentile,
     relative,
@@ -96,13 +98,6 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
         settings=settings, warmstarts=WARMSTARTS, campaign_of=campaign, family="rendezvous",
         run_columns=RUN_COLUMNS, analyse=analyse, differences=DIFFERENCES,
     )  # fmt: skip
-
-
-def compared(arrays: dict[str, np.ndarray], other: str) -> dict[str, np.ndarray]:
-    """The comparison solves of ``other`` among a flight's re-plan arrays (one per re-plan,
-    in the flown re-plans' order): ``iterations``, ``wall_s`` and ``cost``."""
-    sel = arrays["compare_warmstart"] == other
-    return {k: arrays[f"compare_{k}"][sel] for k in ("iterations", "wall_s", "cost")}
 
 
 def analyse(
@@ -176,10 +171,7 @@ def analyse(
                                 paired_text(flown, summaries[flown], arrays[flown])))  # fmt: skip
     report.sections.append(("Failures", failures_text(rows, tol)))
     add_celestini(report, arrays["art"])
-    for w in WARMSTARTS:
-        if (out / w / "simulate.png").exists():
-            report.figures.append((f"{w}/simulate.png", f"{w}: flown trajectories and re-plan "
-                                   "wall times against the re-planning period"))  # fmt: skip
+    add_figures(report, out, WARMSTARTS, "trajectories")
 
 
 def paired_text(flown: str, summary: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:

@@ -31,6 +31,7 @@ import numpy as np
 
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
+    add_figures,
     column,
     fuel_ratio,
     percentile,
@@ -145,10 +146,7 @@ def analyse(
     report.sections.append(("Previous vs cold on the same re-plans",
                             paired_text(summaries["previous"], arrays["previous"])))  # fmt: skip
     report.comparisons += comparisons(rows, arrays["previous"])
-    for w in WARMSTARTS:
-        if (out / w / "simulate.png").exists():
-            report.figures.append((f"{w}/simulate.png", f"{w}: flown trajectories and re-plan "
-                                   "wall times against the re-planning period"))  # fmt: skip
+    add_figures(report, out, WARMSTARTS, "trajectories")
 
 
 def comparisons(
