@@ -72,25 +72,27 @@ class DemoRow:
     figure: Path | None  # None without --out
 
 
-def _row(
-    problem: str,
-    instance: str,
-    warmstart: str,
-    cost: str,
-    solution: Any,
-    seconds: float,
-    figure: Path | None,
-) -> DemoRow:
-    return DemoRow(
-        problem,
-        instance,
-        warmstart,
-        cost,
-        solution.iterations,
-        seconds,
-        bool(solution.converged),
-        figure,
-    )
+@dataclass(frozen=True)
+class _Case:
+    """The problem and instance columns of the rows of one instance."""
+
+    problem: str
+    instance: str
+
+    def row(
+        self, warmstart: str, cost: str, solution: Any, seconds: float, figure: Path | None
+    ) -> DemoRow:
+        """The row of one solve of this instance from ``warmstart``."""
+        iterations, verified = solution.iterations, bool(solution.converged)
+        return DemoRow(
+            self.problem, self.instance, warmstart, cost, iterations, seconds, verified, figure
+        )
+
+    def delta_v_row(
+        self, warmstart: str, solution: Any, seconds: float, figure: Path | None
+    ) -> DemoRow:
+        """:meth:`row` of a rendezvous, whose cost is its delta-v sum in mm/s."""
+        return self.row(warmstart, f"{1e3 * solution.cost:.1f} mm/s", solution, seconds, figure)
 
 
 def _draw(target: str, *args: Any) -> None:
@@ -269,6 +271,7 @@ def rendezvous_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRo
     instance = rendezvous.sample_instances(np.random.default_rng(RENDEZVOUS_SEED), 1)[0]
     config = providers.rendezvous_config
     models = {"CVX": RendezvousConvexWarmStart("convex", config), "ART": providers.art}
+    case = _Case("rendezvous (ISS, Problem 3)", f"seed {RENDEZVOUS_SEED}")
     rows = []
     for label, model in models.items():
 
@@ -279,18 +282,7 @@ def rendezvous_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRo
         (warm, solution), seconds = _timed(run)
         figure = figures.path(f"rendezvous_{label.lower()}.png")
         figures.submit("scpformer.cli.rendezvous:write_figure", figure, solution, instance, warm)
-        cost = f"{1e3 * solution.cost:.1f} mm/s"
-        rows.append(
-            _row(
-                "rendezvous (ISS, Problem 3)",
-                f"seed {RENDEZVOUS_SEED}",
-                label,
-                cost,
-                solution,
-                seconds,
-                figure,
-            )
-        )
+        rows.append(case.delta_v_row(label, solution, seconds, figure))
     return rows
 
 
@@ -301,8 +293,9 @@ def robust_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
 
     config = providers.robust_config
     rows = []
-    for case, seed in ROBUST_SEEDS.items():
+    for check, seed in ROBUST_SEEDS.items():
         instance = robust_rendezvous.sample_instances(seed, 1)[0]
+        case = _Case("robust rendezvous (chance, Eq. 8)", f"seed {seed} ({check})")
         for label in ("PS-CVX", "PS-ART"):
 
             def run(label: str = label, instance: Any = instance) -> tuple[Any, Any]:
@@ -328,18 +321,7 @@ def robust_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
                 figures.submit(
                     "scpformer.plotting.robust_rendezvous:plot_solution", instance, x, u, figure
                 )
-            cost = f"{1e3 * solution.cost:.1f} mm/s"
-            rows.append(
-                _row(
-                    "robust rendezvous (chance, Eq. 8)",
-                    f"seed {seed} ({case})",
-                    name,
-                    cost,
-                    solution,
-                    seconds,
-                    figure,
-                )
-            )
+            rows.append(case.delta_v_row(name, solution, seconds, figure))
     return rows
 
 
@@ -348,6 +330,7 @@ def landing_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
     from scpformer import pdg6dof
 
     instance, config = pdg6dof.PDGInstance(), providers.landing_config
+    case = _Case("6-DoF Mars landing", "nominal")
     rows = []
     paths = {
         "cubic profile": ("scvx", "cubic_profile", "landing_scvx.png"),
@@ -365,5 +348,5 @@ def landing_rows(providers: _Providers, figures: FigureWriter) -> list[DemoRow]:
             figures.submit("scpformer.cli.pdg6dof:write_figures", figure, solution, instance)
             fuel = instance.m0 - solution.trajectory.x[-1, 13]
         cost = f"{fuel:.4f} U_M fuel"
-        rows.append(_row("6-DoF Mars landing", "nominal", label, cost, solution, seconds, figure))
+        rows.append(case.row(label, cost, solution, seconds, figure))
     return rows

@@ -6,25 +6,21 @@ import argparse
 from pathlib import Path
 
 from scpformer.cli.commands import add_command_parser
+from scpformer.cli.dataclass_args import with_default
+
+#: ``(flag, metavar, default, what it is)`` of the two paths of ``report``
+PATH_FLAGS: tuple[tuple[str, str, str, str], ...] = (
+    ("--results", "DIR", "docs/results", "folder of experiment folders"),
+    ("--out", "FILE", "docs/RESULTS.md", "the page to write"),
+)
 
 
 def add_report_parser(commands: argparse._SubParsersAction) -> None:
     """Register ``report`` on the top-level subparsers."""
     report = add_command_parser(commands, "", "report")
-    report.add_argument(
-        "--results",
-        type=Path,
-        default=Path("docs/results"),
-        metavar="DIR",
-        help="folder of experiment folders (default: docs/results)",
-    )
-    report.add_argument(
-        "--out",
-        type=Path,
-        default=Path("docs/RESULTS.md"),
-        metavar="FILE",
-        help="the page to write (default: docs/RESULTS.md)",
-    )
+    for name, metavar, default, what in PATH_FLAGS:
+        help_text = with_default(what, default)
+        report.add_argument(name, type=Path, default=Path(default), metavar=metavar, help=help_text)
     report.set_defaults(handler=run_report)
 
 

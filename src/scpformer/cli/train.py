@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from scpformer.cli.argtypes import count
 from scpformer.cli.commands import add_command_parser
@@ -39,8 +40,7 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
 
 def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
     """Flags of ``train art|gru|lstm``: data, run folder, presets and every TrainConfig field."""
-    parser.add_argument("--data", type=Path, required=True, help="dataset folder (split)")
-    parser.add_argument("--out", type=Path, required=True, help="run folder RUN")
+    _add_folder_arguments(parser, "dataset folder (split)")
     parser.add_argument(
         "--preset",
         choices=constant("train.presets"),
@@ -64,10 +64,7 @@ def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
         "tpbvp (Problem 1, Table 2), ps (robust) (default: the dataset's cvx and scp, or ps "
         "and cvx; a resumed run keeps its own)",
     )
-    parser.add_argument(
-        "--resume", action="store_true", help="continue the run in --out from its checkpoint"
-    )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_resume_arguments(parser, "checkpoint")
     add_training_arguments(parser)
 
 
@@ -78,32 +75,62 @@ def add_training_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_file_arguments(parser)
 
 
+def _add_folder_arguments(parser: argparse.ArgumentParser, data_help: str) -> None:
+    """``--data`` (the dataset folder, ``data_help``) and ``--out`` (the run folder) of every
+    ``train MODEL``."""
+    parser.add_argument("--data", type=Path, required=True, help=data_help)
+    parser.add_argument("--out", type=Path, required=True, help="run folder RUN")
+
+
+def _add_resume_arguments(parser: argparse.ArgumentParser, checkpoint: str) -> None:
+    """``--resume`` (from the run's ``checkpoint``, as ``--help`` names it) and
+    ``--no-progress`` of the trained models."""
+    parser.add_argument(
+        "--resume", action="store_true", help=f"continue the run in --out from its {checkpoint}"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
 def _check_output_folder(path: Path) -> None:
     from scpformer.files import check_output_folder
 
     check_output_folder(path, "--out")
 
 
-def _training_overrides(args: argparse.Namespace) -> dict:
+def _run_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of a training function given by the flags of
+    :func:`_add_folder_arguments`, :func:`_add_resume_arguments` and
+    :func:`add_training_arguments` (``--out`` is checked first).
+
+    Parameters
+    ----------
+    args
+        The parsed flags of ``train art|gru|lstm|tscvx``.
+
+    Returns
+    -------
+    dict
+        ``data``, ``out``, ``overrides`` (the ``TrainConfig`` fields given), ``resume`` and
+        ``progress``.
+    """
     from scpformer.train.config import TrainConfig
 
-    return overrides(args, TrainConfig)
+    _check_output_folder(args.out)
+    return {
+        "data": args.data,
+        "out": args.out,
+        "overrides": overrides(args, TrainConfig),
+        "resume": args.resume,
+        "progress": not args.no_progress,
+    }
 
 
 def run_train(args: argparse.Namespace) -> int:
     from scpformer.train.art import train_sequence_model
 
-    _check_output_folder(args.out)
+    options = _run_options(args)
     result = train_sequence_model(
-        args.kind,
-        data=args.data,
-        out=args.out,
-        preset=args.preset,
-        frame=args.frame,
-        twins=args.twin,
-        overrides=_training_overrides(args),
-        resume=args.resume,
-        progress=not args.no_progress,
+        args.kind, preset=args.preset, frame=args.frame, twins=args.twin, **options
     )
     if result.world.is_main:
         print(summary(result))
@@ -147,8 +174,7 @@ _TSCVX_HELP = (
 def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
     """``train tscvx``: both networks into RUN/tight and RUN/solution."""
     parser = models.add_parser("tscvx", help=_TSCVX_HELP, description=_TSCVX_HELP)
-    parser.add_argument("--data", type=Path, required=True, help="pdg6dof dataset folder (split)")
-    parser.add_argument("--out", type=Path, required=True, help="run folder RUN")
+    _add_folder_arguments(parser, "pdg6dof dataset folder (split)")
     parser.add_argument(
         "--preset",
         choices=("small", "paper"),
@@ -196,10 +222,7 @@ def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
         default=None,
         help="weight of f1's thrust outputs in its MSE (preset's: paper 1, the plain MSE; small 4)",
     )
-    parser.add_argument(
-        "--resume", action="store_true", help="continue the run in --out from its checkpoints"
-    )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_resume_arguments(parser, "checkpoints")
     add_training_arguments(parser)
     parser.set_defaults(handler=run_train_tscvx)
 
@@ -209,22 +232,18 @@ def run_train_tscvx(args: argparse.Namespace) -> int:
 
     if args.solution_epochs is not None and args.solution_epochs < 1:
         raise ValueError(f"--solution-epochs must be positive, got {args.solution_epochs}")
-    _check_output_folder(args.out)
+    options = _run_options(args)
     result = train_tscvx(
-        data=args.data,
-        out=args.out,
         preset_name=args.preset,
         networks=tuple(args.networks),
         folds=args.folds,
-        overrides=_training_overrides(args),
         solution_epochs=args.solution_epochs,
         model_overrides={"tokens": args.tokens} if args.tokens else None,
-        resume=args.resume,
         report_split=args.report_split,
         threads=args.threads,
-        progress=not args.no_progress,
         canonical=args.canonical,
         thrust_weight=args.thrust_weight,
+        **options,
     )
     if not result.world.is_main:
         return 0
@@ -255,8 +274,7 @@ def add_lookup_parsers(models: argparse._SubParsersAction) -> None:
     for kind, help_text in LOOKUP_HELP.items():
         preset = argparse.Namespace(**constant("lookup")[kind])
         parser = models.add_parser(kind, help=help_text, description=help_text)
-        parser.add_argument("--data", type=Path, required=True, help="dataset folder (split)")
-        parser.add_argument("--out", type=Path, required=True, help="run folder RUN")
+        _add_folder_arguments(parser, "dataset folder (split)")
         group = parser.add_argument_group("lookup table")
         group.add_argument(
             "--n-components",

@@ -85,15 +85,10 @@ def _add_rendezvous(
         replan_every=(10, "impulses flown between re-plans"),
         seed="seed of the errors (and sampled instances)",
     )
-    parser.add_argument(
-        "--instances",
-        choices=INSTANCES,
-        default="default",
-        help=with_default(
-            "default: every run flies the Table 1 default instance; sampled: one sampled "
-            "Table 1 instance per run",
-            "default",
-        ),
+    _add_instances_argument(
+        parser,
+        "default: every run flies the Table 1 default instance; sampled: one sampled Table 1 "
+        "instance per run",
     )
     parser.add_argument(
         "--errors",
@@ -138,15 +133,10 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
         replan_every=(5, "intervals of the current plan flown between re-plans"),
         seed="seed of the errors, dispersions (and sampled instances)",
     )
-    parser.add_argument(
-        "--instances",
-        choices=INSTANCES,
-        default="default",
-        help=with_default(
-            "default: the Table 1 instance with a dispersed initial state per run; sampled: "
-            "one instance of the nominal sampler per run",
-            "default",
-        ),
+    _add_instances_argument(
+        parser,
+        "default: the Table 1 instance with a dispersed initial state per run; sampled: one "
+        "instance of the nominal sampler per run",
     )
     parser.add_argument(
         "--errors",
@@ -207,6 +197,12 @@ def _add_loop_arguments(
                         help=with_default("number of runs", 20))  # fmt: skip
     parser.add_argument("--seed", type=count, default=0, metavar="S",
                         help=with_default(seed, 0))  # fmt: skip
+
+
+def _add_instances_argument(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """``--instances default|sampled``: what each run flies (``help_text``: in this family)."""
+    parser.add_argument("--instances", choices=INSTANCES, default="default",
+                        help=with_default(help_text, "default"))  # fmt: skip
 
 
 def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
