@@ -7,6 +7,7 @@ import pytest
 
 from scpformer.experiments.warmstart_study import (
     WARMSTARTS,
+    Bootstrap,
     Columns,
     analyse,
     bin_stats,
@@ -68,7 +69,9 @@ def test_the_ninety_percent_interval_covers_the_true_improvement_about_ninety_pe
     covered = 0
     for trial in range(trials):
         cols = _noisy_columns(rng, n)
-        lo, hi = improvement_interval(cols, "convex", np.ones(n, dtype=bool), draws=500, seed=trial)
+        lo, hi = improvement_interval(
+            cols, "convex", np.ones(n, dtype=bool), Bootstrap(draws=500, seed=trial)
+        )
         covered += lo <= 30.0 <= hi
     assert 0.8 * trials <= covered <= 0.97 * trials
 

@@ -28,20 +28,15 @@ from scpformer.data.storage import ShardedSamples
 from scpformer.experiments import report as rep
 from scpformer.experiments.runner import (
     KEY,
-    RESULTS_NAME,
     ModelSolver,
-    ResultsCSV,
     RunOptions,
-    check_settings,
     join_series,
     open_study,
     read_fields,
-    require_n,
     result_columns,
-    run_tasks,
-    select_test_instances,
+    select_and_record,
     series,
-    settings_dict,
+    solve_tasks,
 )
 
 NAME = "art-conditioning"
@@ -65,7 +60,6 @@ class ConditioningSolver(ModelSolver):
     """One instance's sweep through ART, as one batch (runs in the workers)."""
 
     def solve(self, task: Task) -> dict[str, Any]:
-        from scpformer.warmstart.art import generate
         from scpformer.warmstart.families import RendezvousArtFamily
 
         instance = self.instance(task.theta)
@@ -75,16 +69,7 @@ class ConditioningSolver(ModelSolver):
         rtg0 = -np.concatenate([np.full(nc, task.j_cvx), task.cost_requested])
         ctg0 = np.concatenate([task.ctg_requested, np.zeros(nr)])
         (ckpt,) = self.models
-        rollout = generate(
-            ckpt.model,
-            ckpt.normalization,
-            batch,
-            adapter,
-            frame=ckpt.frame,
-            art_mode="dynamics",
-            rtg0=rtg0,
-            ctg0=ctg0,
-        )
+        rollout = self.rollout(ckpt, batch, adapter, art_mode="dynamics", rtg0=rtg0, ctg0=ctg0)
         ctg = [
             adapter.trajectory_ctg(instance, batch.models[i], rollout.x[i], rollout.u[i])
             for i in range(nc)
@@ -163,26 +148,17 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     (c_lo, c_hi), (j_lo, j_hi) = training_ranges(data)
     ctg_sweep = tuple(float(v) for v in np.unique(np.round(np.linspace(0, 1.25 * c_hi, SWEEP))))
     costs = cost_sweep((j_lo, j_hi))
-    positions = select_test_instances(data, require_n(options), options.seed)
-    settings = settings_dict(
-        options,
-        study,
-        experiment=NAME,
-        n=int(positions.size),
-        ctg_sweep=ctg_sweep,
-        cost_sweep_m_s=costs,
-        training_ctg_range=(c_lo, c_hi),
-        training_cost_range_m_s=(j_lo, j_hi),
-    )
-    check_settings(options.out, settings)
+    positions, settings = select_and_record(
+        options, study, experiment=NAME, ctg_sweep=ctg_sweep, cost_sweep_m_s=costs,
+        training_ctg_range=(c_lo, c_hi), training_cost_range_m_s=(j_lo, j_hi),
+    )  # fmt: skip
     tasks = [
         Task(int(p), np.asarray(f["theta"]), float(f["cvx_cost"]), ctg_sweep, costs)
         for p, f in zip(positions, read_fields(data, positions, ["theta", "cvx_cost"]), strict=True)
         if np.isfinite(f["cvx_cost"])
     ]
-    results = ResultsCSV(options.out / RESULTS_NAME, COLUMNS)
-    rows = run_tasks(
-        ConditioningSolver(study.models, study.manifest.config), tasks, options, results
+    rows = solve_tasks(
+        ConditioningSolver(study.models, study.manifest.config), tasks, options, COLUMNS
     )
     report = rep.Report(
         name=NAME,

@@ -29,19 +29,14 @@ from scpformer.experiments import report as rep
 from scpformer.experiments.forecast import ForecastMetrics, forecast_metrics
 from scpformer.experiments.runner import (
     KEY,
-    RESULTS_NAME,
     ModelSolver,
-    ResultsCSV,
     RunOptions,
-    check_settings,
     column,
     open_study,
     read_fields,
-    require_n,
     result_columns,
-    run_tasks,
-    select_test_instances,
-    settings_dict,
+    select_and_record,
+    solve_tasks,
 )
 
 TWIN = {"art-forecast-tpbvp": "tpbvp", "art-forecast-scp": "scp", "robust-forecast": "ps"}
@@ -155,8 +150,6 @@ class ForecastSolver(ModelSolver):
         return RendezvousArtFamily()
 
     def solve(self, task: Task) -> dict[str, Any]:
-        from scpformer.warmstart.art import generate
-
         instance = self.instance(task.theta)
         adapter = self.adapter()
         batch = adapter.batch([instance])
@@ -170,16 +163,8 @@ class ForecastSolver(ModelSolver):
         }
         for ckpt in self.models:
             for mode in MODES:
-                rollout = generate(
-                    ckpt.model,
-                    ckpt.normalization,
-                    batch,
-                    adapter,
-                    frame=ckpt.frame,
-                    art_mode=mode,
-                    rtg0=np.array([task.rtg0]),
-                    ctg0=np.array([task.ctg0]),
-                )
+                rtg0, ctg0 = np.array([task.rtg0]), np.array([task.ctg0])
+                rollout = self.rollout(ckpt, batch, adapter, art_mode=mode, rtg0=rtg0, ctg0=ctg0)
                 x, u = rollout.x[0], rollout.u[0]
                 metrics = forecast_metrics(
                     batch.models[0].rtn(x), x, u, task.true_rtn, task.true_roe, task.true_dv
@@ -217,17 +202,10 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
     if len(set(kinds)) != len(kinds):
         raise ValueError(f"--model: one run per model kind, got kinds {kinds}")
     twin = TWIN[name]
-    positions = select_test_instances(data, require_n(options), options.seed)
-    settings = settings_dict(
-        options,
-        study,
-        experiment=name,
-        n=int(positions.size),
-        kinds=list(kinds),
-        twin=twin,
+    positions, settings = select_and_record(
+        options, study, experiment=name, kinds=list(kinds), twin=twin,
         conditioning=conditioning_text(twin),
-    )
-    check_settings(options.out, settings)
+    )  # fmt: skip
     report = rep.Report(
         name=name,
         reproduces=f"ART paper {TABLE[name]}",
@@ -272,11 +250,10 @@ def run(options: RunOptions, *, command: str = "", name: str = "art-forecast-scp
                 true_time,
             )
         )
-    results = ResultsCSV(options.out / RESULTS_NAME, columns(kinds))
     solver = (RobustForecastSolver if FAMILY[name] != "rendezvous" else ForecastSolver)(
         study.models, manifest.config
     )
-    rows = run_tasks(solver, tasks, options, results)
+    rows = solve_tasks(solver, tasks, options, columns(kinds))
     report.sections.append(
         (
             "Instances",

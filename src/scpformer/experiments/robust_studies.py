@@ -39,19 +39,14 @@ from scpformer.experiments import report as rep
 from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import (
     KEY,
-    RESULTS_NAME,
     InstanceTask,
     ModelSolver,
-    ResultsCSV,
     RunOptions,
-    check_settings,
     column,
     open_study,
-    require_n,
     result_columns,
-    run_tasks,
-    select_test_instances,
-    settings_dict,
+    select_and_record,
+    solve_tasks,
     theta_tasks,
 )
 from scpformer.experiments.warmstart_study import mean_over, plot_counts
@@ -234,26 +229,15 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     frames = tuple(c.frame for c in study.checkpoints)
     if len(set(frames)) != len(frames):
         raise ValueError(f"--model: one run per state frame (rtn, roe), got {frames}")
-    positions = select_test_instances(study.data, require_n(options), options.seed)
-    settings = settings_dict(
-        options,
-        study,
-        experiment=name,
-        n=int(positions.size),
-        frames=frames,
-        modes=modes,
-        conditioning="R(t_1) = -J_CVX, C(t_1) = 0, Algorithm 2, "
-        + (
-            "post hoc check (Eq. 8) with CVX fallback"
-            if check
-            else "no acceptance check (its decision is recorded)"
-        ),
-    )
-    check_settings(options.out, settings)
+    acceptance = ("post hoc check (Eq. 8) with CVX fallback" if check
+                  else "no acceptance check (its decision is recorded)")  # fmt: skip
+    positions, settings = select_and_record(
+        options, study, experiment=name, frames=frames, modes=modes,
+        conditioning=f"R(t_1) = -J_CVX, C(t_1) = 0, Algorithm 2, {acceptance}",
+    )  # fmt: skip
     tasks = theta_tasks(study.data, positions)
-    results = ResultsCSV(options.out / RESULTS_NAME, columns(frames, modes))
     solver = RobustWarmstartSolver(study.models, study.manifest.config, modes, check)
-    rows = run_tasks(solver, tasks, options, results)
+    rows = solve_tasks(solver, tasks, options, columns(frames, modes))
     report = rep.Report(
         name=name,
         reproduces=reproduces,

@@ -345,6 +345,33 @@ class ModelSolver:
         config = RendezvousDataConfig.from_dict(self.data_config)
         return instance_from_theta(theta, config.scenario)
 
+    @staticmethod
+    def rollout(
+        ckpt: Any, batch: Any, adapter: Any, *, art_mode: str, rtg0: np.ndarray, ctg0: np.ndarray
+    ) -> Any:
+        """ART's rollout (Algorithm 2) of the loaded checkpoint ``ckpt`` on ``batch``.
+
+        Parameters
+        ----------
+        ckpt : scpformer.train.checkpoint.Checkpoint
+            One of :attr:`models`: the network, its normalization and its state frame.
+        batch, adapter
+            The instances as the ART family ``adapter`` batches them.
+        art_mode : str
+            ``"transformer"`` (transformer only) or ``"dynamics"`` (dynamics in the loop).
+        rtg0, ctg0 : numpy.ndarray
+            The requested reward-to-go ``R(t_1)`` and constraint-to-go ``C(t_1)`` per instance.
+
+        Returns
+        -------
+        scpformer.warmstart.art.ArtRollout
+            The generated states ``x``, controls ``u`` and generation time.
+        """
+        from scpformer.warmstart.art import generate
+
+        return generate(ckpt.model, ckpt.normalization, batch, adapter, frame=ckpt.frame,
+                        art_mode=art_mode, rtg0=rtg0, ctg0=ctg0)  # fmt: skip
+
 
 def result_columns(*columns: str) -> tuple[str, ...]:
     """The columns of a ``results.csv``: the instance's :data:`KEY`, ``columns``, then the
@@ -439,6 +466,19 @@ def run_tasks(
             executor.close()
     wanted = {int(task.index) for task in tasks}
     return [r for r in results.rows() if int(r[KEY]) in wanted and r.get("status") == "ok"]
+
+
+def solve_tasks(
+    solver: Any, tasks: Sequence[Any], options: RunOptions, columns: Sequence[str]
+) -> list[dict[str, str]]:
+    """Run ``tasks`` into ``OUT/results.csv`` of ``columns`` (resumed: :func:`run_tasks`).
+
+    Returns
+    -------
+    list of dict
+        The finished rows (status ``ok``) of ``tasks``, done now or before.
+    """
+    return run_tasks(solver, tasks, options, ResultsCSV(options.out / RESULTS_NAME, columns))
 
 
 def make_executor(family: TaskFamily, options: RunOptions, tasks: int) -> Executor:
@@ -545,3 +585,27 @@ def settings_dict(options: RunOptions, study: Study | None = None, **extra: Any)
         out["checkpoints_sha256"] = [file_sha256(checkpoint_path(m)) for m in study.models]
     out.update(extra)
     return out
+
+
+def select_and_record(
+    options: RunOptions, study: Study, *, experiment: str, **extra: Any
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """The test instances of a study's run and its settings, recorded in ``OUT/config.json``.
+
+    Draws ``--n`` test instances (:func:`select_test_instances`), builds the settings
+    (:func:`settings_dict` with ``experiment``, the instance count ``n`` and ``extra``, in
+    that order) and records them, refusing a folder made with other settings
+    (:func:`check_settings`).
+
+    Returns
+    -------
+    positions : numpy.ndarray
+        The dataset positions of the selected test instances.
+    settings : dict
+        The recorded settings.
+    """
+    positions = select_test_instances(study.data, require_n(options), options.seed)
+    settings = settings_dict(options, study, experiment=experiment, n=int(positions.size),
+                             **extra)  # fmt: skip
+    check_settings(options.out, settings)
+    return positions, settings

@@ -39,21 +39,16 @@ from scpformer.experiments import report as rep
 from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import (
     KEY,
-    RESULTS_NAME,
     InstanceTask,
     ModelSolver,
-    ResultsCSV,
     RunOptions,
-    check_settings,
     column,
     join_series,
     open_study,
-    require_n,
     result_columns,
-    run_tasks,
-    select_test_instances,
+    select_and_record,
     series,
-    settings_dict,
+    solve_tasks,
     theta_tasks,
 )
 
@@ -174,21 +169,12 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME, verify: boo
     """
     study = open_study(options, "rendezvous", models=1)
     (ckpt,) = study.checkpoints
-    positions = select_test_instances(study.data, require_n(options), options.seed)
-    settings = settings_dict(
-        options,
-        study,
-        experiment=NAME,
-        n=int(positions.size),
-        verify=verify,
-        model_kind=ckpt.kind,
-        frame=ckpt.frame,
+    positions, settings = select_and_record(
+        options, study, experiment=NAME, verify=verify, model_kind=ckpt.kind, frame=ckpt.frame,
         conditioning="R(t_1) = -J_CVX, C(t_1) = 0, Algorithm 2, no acceptance check",
-    )
-    check_settings(options.out, settings)
-    results = ResultsCSV(options.out / RESULTS_NAME, COLUMNS)
+    )  # fmt: skip
     solver = WarmstartSolver(study.models[0], study.manifest.config, verify)
-    rows = run_tasks(solver, theta_tasks(study.data, positions), options, results)
+    rows = solve_tasks(solver, theta_tasks(study.data, positions), options, COLUMNS)
     zeta_1 = float(study.manifest.config["solver"]["scp"]["zeta_1"])
     report = analyse(rows, options.out, zeta_1)
     report.command, report.settings, report.provenance = command, settings, study.provenance()
@@ -278,13 +264,18 @@ def bin_stats(cols: Columns, mask: np.ndarray) -> dict[str, float]:
     return out
 
 
+@dataclass(frozen=True)
+class Bootstrap:
+    """How :func:`bootstrap_interval` resamples: the interval's two-sided ``level``, the
+    number of resamples ``draws`` and the ``seed`` of their draw."""
+
+    level: float = INTERVAL_LEVEL
+    draws: int = BOOTSTRAP_DRAWS
+    seed: int = 0
+
+
 def improvement_interval(
-    cols: Columns,
-    ws: str,
-    mask: np.ndarray,
-    level: float = INTERVAL_LEVEL,
-    draws: int = BOOTSTRAP_DRAWS,
-    seed: int = 0,
+    cols: Columns, ws: str, mask: np.ndarray, bootstrap: Bootstrap = Bootstrap()
 ) -> tuple[float, float]:
     """Percentile bootstrap interval of :func:`bin_stats`' ``improvement_vs_{ws}`` over ``mask``.
 
@@ -299,15 +290,11 @@ def improvement_interval(
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(reference > 0.0, 100.0 * (reference - art) / reference, np.nan)
 
-    return bootstrap_interval(cols, mask, ratio, level, draws, seed)
+    return bootstrap_interval(cols, mask, ratio, bootstrap)
 
 
 def iterations_saved_interval(
-    cols: Columns,
-    mask: np.ndarray,
-    level: float = INTERVAL_LEVEL,
-    draws: int = BOOTSTRAP_DRAWS,
-    seed: int = 0,
+    cols: Columns, mask: np.ndarray, bootstrap: Bootstrap = Bootstrap()
 ) -> tuple[float, float]:
     """Percentile bootstrap interval of the mean SCP iterations saved by ART against CVX
     (``iterations_CVX - iterations_ART``, paired per instance) over ``mask``."""
@@ -315,33 +302,34 @@ def iterations_saved_interval(
     def saved(picks: np.ndarray) -> np.ndarray:
         return (cols.iterations["convex"][picks] - cols.iterations["art"][picks]).mean(axis=1)
 
-    return bootstrap_interval(cols, mask, saved, level, draws, seed)
+    return bootstrap_interval(cols, mask, saved, bootstrap)
 
 
 def bootstrap_interval(
     cols: Columns,
     mask: np.ndarray,
     statistic: Callable[[np.ndarray], np.ndarray],
-    level: float = INTERVAL_LEVEL,
-    draws: int = BOOTSTRAP_DRAWS,
-    seed: int = 0,
+    bootstrap: Bootstrap = Bootstrap(),
 ) -> tuple[float, float]:
     """Percentile bootstrap interval of ``statistic`` over the instances of ``mask`` where all
     three SCP runs solved (Efron & Tibshirani 1993, Ch. 13).
 
-    The instances are resampled with replacement ``draws`` times (seeded); ``statistic`` maps
-    the (draws, n) instance indices of the resamples to one value per resample (NaN to drop
-    it), and the interval is the central ``level`` of those values. ``(nan, nan)`` with fewer
+    The instances are resampled with replacement ``bootstrap.draws`` times (seeded);
+    ``statistic`` maps the (draws, n) instance indices of the resamples to one value per
+    resample (NaN to drop it), and the interval is the central ``bootstrap.level`` of those
+    values. ``(nan, nan)`` with fewer
     than two instances or no finite value.
     """
     chosen = np.flatnonzero(mask & cols.all_feasible())
     if chosen.size < 2:
         return math.nan, math.nan
-    picks = chosen[np.random.default_rng(seed).integers(0, chosen.size, (draws, chosen.size))]
+    rng = np.random.default_rng(bootstrap.seed)
+    picks = chosen[rng.integers(0, chosen.size, (bootstrap.draws, chosen.size))]
     values = statistic(picks)
     values = values[np.isfinite(values)]
     if not values.size:
         return math.nan, math.nan
+    level = bootstrap.level
     lo, hi = np.percentile(values, [50.0 * (1.0 - level), 50.0 * (1.0 + level)])
     return float(lo), float(hi)
 
@@ -505,7 +493,6 @@ def _comparisons(cols: Columns, cum: list[dict]) -> list[rep.Comparison]:
     ``x`` in [30, 40]. The disjoint bins of the second table are a stricter view.
     """
     every = next(s for s in cum if s["x"] < 0)
-    C = rep.Comparison
     share = 100.0 * float(np.mean(cols.c > 0))
 
     def least(ws: str) -> tuple[str, str]:
@@ -524,88 +511,34 @@ def _comparisons(cols: Columns, cum: list[dict]) -> list[rep.Comparison]:
     saved_iterations = most(lambda s: s["convex_iterations"] - s["art_iterations"])
     fewest_saved = least_saved_iterations(cols, cum)
     saved_time = most(lambda s: s["convex_scp_time"] - s["art_scp_time"])
-    return [
-        C(
-            quantity="share of test instances with C_CVX(t_1) > 0 [%]",
-            paper="~50",
-            ours=rep.fmt(share),
-            note=f"{cols.c.size} instances",
-        ),
-        C(
-            quantity="gap of the CVX-started SCP to J_CVX, C_CVX > 0 [% of J_CVX]",
-            paper="Fig. 4 only",
-            ours=rep.fmt(relative_gap(cols, "convex", cols.c > 0)),
-            note="the room ART can improve on",
-        ),
-        C(
-            quantity="ART improvement of the gap vs CVX, every C_CVX(t_1) > x, x >= 0 [%]",
-            paper="> 20",
-            ours=vs_cvx[0],
-            note=vs_cvx[1],
-        ),
-        C(
-            quantity="ART improvement of the gap vs CVX-TPBVP, every C_CVX(t_1) > x, x >= 0 [%]",
-            paper="> 20",
-            ours=vs_tpbvp[0],
-            note=vs_tpbvp[1],
-        ),
-        C(
-            quantity="ART improvement vs CVX, C_CVX(t_1) > x, x in [30, 40] [%]",
-            paper="up to 80",
-            ours=up_cvx[0],
-            note=up_cvx[1],
-        ),
-        C(
-            quantity="ART improvement vs CVX-TPBVP, C_CVX(t_1) > x, x in [30, 40] [%]",
-            paper="up to ~90",
-            ours=up_tpbvp[0],
-            note=up_tpbvp[1],
-        ),
-        C(
-            quantity="SCP iterations saved by ART vs CVX, every C_CVX(t_1) > x, x >= 0",
-            paper="> 0 (fewer on average)",
-            ours=fewest_saved[0],
-            note=fewest_saved[1],
-        ),
-        C(
-            quantity="SCP iterations saved by ART vs CVX, C_CVX(t_1) > x, x in [30, 40]",
-            paper="up to ~1.5",
-            ours=saved_iterations[0],
-            note=saved_iterations[1],
-        ),
-        C(
-            quantity="ART generation time (Algorithm 2) [s]",
-            paper="~0.5 (GPU machine)",
-            ours=rep.fmt(every["art_generation_s"]),
-            note="mean, one instance per call, 1 thread",
-        ),
-        C(
-            quantity="convex warm start time (CVX) [s]",
-            paper="~0.15",
-            ours=rep.fmt(every["convex_ws_time"]),
-            note="mean",
-        ),
-        C(
-            quantity="SCP time saved by ART vs CVX, C_CVX(t_1) > x, x in [30, 40] [s]",
-            paper="up to 1",
-            ours=saved_time[0],
-            note=saved_time[1],
-        ),
-        C(
-            quantity="total time WS + SCP, CVX / CVX-TPBVP / ART [s]",
-            paper="~2 each",
-            ours=" / ".join(
-                rep.fmt(every[f"{ws}_ws_time"] + every[f"{ws}_scp_time"])
-                for ws in ("convex", "tpbvp", "art")
-            ),
-            note="mean over all",
-        ),
-        C(
-            quantity="SCP infeasibility rate, CVX-TPBVP / CVX / ART [%]",
-            paper="Fig. 6 only (no number in the text)",
-            ours=" / ".join(rep.fmt(every[f"{ws}_infeasible_pct"]) for ws in WARMSTARTS),
-        ),
-    ]
+    total = " / ".join(rep.fmt(every[f"{ws}_ws_time"] + every[f"{ws}_scp_time"])
+                       for ws in ("convex", "tpbvp", "art"))  # fmt: skip
+    infeasible = " / ".join(rep.fmt(every[f"{ws}_infeasible_pct"]) for ws in WARMSTARTS)
+    rows = (  # quantity, the paper's claim, ours, note
+        ("share of test instances with C_CVX(t_1) > 0 [%]", "~50", rep.fmt(share),
+         f"{cols.c.size} instances"),
+        ("gap of the CVX-started SCP to J_CVX, C_CVX > 0 [% of J_CVX]", "Fig. 4 only",
+         rep.fmt(relative_gap(cols, "convex", cols.c > 0)), "the room ART can improve on"),
+        ("ART improvement of the gap vs CVX, every C_CVX(t_1) > x, x >= 0 [%]", "> 20", *vs_cvx),
+        ("ART improvement of the gap vs CVX-TPBVP, every C_CVX(t_1) > x, x >= 0 [%]", "> 20",
+         *vs_tpbvp),
+        ("ART improvement vs CVX, C_CVX(t_1) > x, x in [30, 40] [%]", "up to 80", *up_cvx),
+        ("ART improvement vs CVX-TPBVP, C_CVX(t_1) > x, x in [30, 40] [%]", "up to ~90",
+         *up_tpbvp),
+        ("SCP iterations saved by ART vs CVX, every C_CVX(t_1) > x, x >= 0",
+         "> 0 (fewer on average)", *fewest_saved),
+        ("SCP iterations saved by ART vs CVX, C_CVX(t_1) > x, x in [30, 40]", "up to ~1.5",
+         *saved_iterations),
+        ("ART generation time (Algorithm 2) [s]", "~0.5 (GPU machine)",
+         rep.fmt(every["art_generation_s"]), "mean, one instance per call, 1 thread"),
+        ("convex warm start time (CVX) [s]", "~0.15", rep.fmt(every["convex_ws_time"]), "mean"),
+        ("SCP time saved by ART vs CVX, C_CVX(t_1) > x, x in [30, 40] [s]", "up to 1",
+         *saved_time),
+        ("total time WS + SCP, CVX / CVX-TPBVP / ART [s]", "~2 each", total, "mean over all"),
+        ("SCP infeasibility rate, CVX-TPBVP / CVX / ART [%]",
+         "Fig. 6 only (no number in the text)", infeasible, ""),
+    )  # fmt: skip
+    return [rep.Comparison(quantity=q, paper=p, ours=o, note=n) for q, p, o, n in rows]
 
 
 def least_saved_iterations(cols: Columns, cum: list[dict]) -> tuple[str, str]:
