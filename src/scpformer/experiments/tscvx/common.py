@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,6 +36,8 @@ from scpformer.models.predictors import predictor_kind
 
 PAPER = "T-SCvx paper (t-scvx-6dof-powered-descent.txt)"
 COLD = "cold"  # cold SCvx from the straight-line guess
+#: One paper-vs-ours row: quantity, the paper's number, ours and optionally a note.
+ComparisonRow = tuple[str, str, str] | tuple[str, str, str, str]
 PER_METHOD = (
     "status",
     "time_s",
@@ -84,6 +86,10 @@ class TscvxStudy:
     data: Path
     config: dict[str, Any]  # the dataset manifest's family configuration
     runs: dict[str, Path]  # kind (tscvx, kdtree, interp) -> run folder
+
+    def only(self, *kinds: str) -> TscvxStudy:
+        """This study with the runs of ``kinds`` alone."""
+        return TscvxStudy(self.data, self.config, {kind: self.runs[kind] for kind in kinds})
 
     def provenance(self) -> list[str]:
         """The commands that made the dataset (and its rotated source) and the runs."""
@@ -254,11 +260,10 @@ def solve_rows(
     study: TscvxStudy,
     options: RunOptions,
     positions: np.ndarray,
-    settings: dict[str, Any],
     extra: dict[int, dict[str, Any]] | None = None,
 ) -> list[dict[str, str]]:
-    """Run (or resume) the solve study on ``positions``; ``extra`` adds cells per position."""
-    check_settings(options.out, settings)
+    """Run (or resume) the solve study on ``positions`` (the settings checked by
+    :func:`start_report`); ``extra`` adds cells per position."""
     methods = [COLD, *study.runs]
     extra_names = sorted({k for cells in (extra or {}).values() for k in cells})
     results = ResultsCSV(options.out / RESULTS_NAME, columns_for(methods, extra_names))
@@ -372,76 +377,61 @@ def paired_section(rows: Sequence[dict[str, str]], methods: Sequence[str]) -> st
 
 
 def pct(value: float) -> str:
+    """``value`` as a percentage with three significant digits, ``n/a`` when not finite."""
     return "n/a" if not math.isfinite(value) else f"{100 * value:.3g}%"
 
 
-def plot_solve_times(rows: Sequence[dict[str, str]], methods: Sequence[str], path: Path) -> str:
-    """Fig. 2: box plots of the solve times of each method."""
-    figure, ax = rep.new_figure(ncols=1, width=6.0, height=4.0)
-    data = [column(rows, f"{m}_time_s") for m in methods]
-    ax.boxplot(data, tick_labels=[_label(m) for m in methods], showmeans=True)
-    ax.set_ylabel("solve time [s] (wall, inference included)")
-    ax.set_title(f"{len(rows)} held-out test instances")
-    ax.grid(axis="y", alpha=0.3)
-    return rep.save_figure(figure, path)
+def comparison_rows(rows: Iterable[ComparisonRow]) -> list[rep.Comparison]:
+    """The paper-vs-ours rows of a report from a table of ``(quantity, paper, ours[, note])``.
 
+    Parameters
+    ----------
+    rows
+        One tuple per row: the quantity, the paper's number as printed, ours, and optionally
+        a note.
 
-def _label(method: str) -> str:
-    return {COLD: "SCvx (cold)", "tscvx": "T-SCvx (networks)"}.get(method, f"T-SCvx ({method})")
-
-
-def solve_time_comparisons(rows: Sequence[dict[str, str]]) -> list[rep.Comparison]:
-    """Fig. 2's numbers beside ours."""
-    cold, warm = method_stats(rows, COLD), method_stats(rows, "tscvx")
-    cut_mean = 1.0 - warm["mean_s"] / cold["mean_s"]
-    cut_median = 1.0 - warm["median_s"] / cold["median_s"]
+    Returns
+    -------
+    list of Comparison
+        The rows, in order.
+    """
     return [
-        rep.Comparison(quantity="test instances", paper="545", ours=str(len(rows))),
-        rep.Comparison(
-            quantity="SCvx mean solve time", paper="14.61 s", ours=f"{rep.fmt(cold['mean_s'])} s"
-        ),
-        rep.Comparison(
-            quantity="T-SCvx mean solve-time reduction",
-            paper="66%",
-            ours=f"{100 * cut_mean:.3g}%",
-            note="issue goal: >= 3x (67%)",
-        ),
-        rep.Comparison(
-            quantity="T-SCvx median solve-time reduction",
-            paper="70%",
-            ours=f"{100 * cut_median:.3g}%",
-            note="issue goal: >= 3x",
-        ),
-        rep.Comparison(
-            quantity="T-SCvx std of solve time", paper="5.24 s", ours=f"{rep.fmt(warm['std_s'])} s"
-        ),
-        rep.Comparison(
-            quantity="converged rate SCvx / T-SCvx",
-            paper="n/a",
-            ours=f"{cold['converged']:.1%} / {warm['converged']:.1%}",
-        ),
-        rep.Comparison(
-            quantity="max propellant gap of T-SCvx to cold SCvx",
-            paper="n/a",
-            ours=pct(warm["gap_max"]),
-            note="issue goal: <= 0.5%",
-        ),
+        rep.Comparison(quantity=quantity, paper=paper, ours=ours, note=note[0] if note else "")
+        for quantity, paper, ours, *note in rows
     ]
 
 
-def new_report(name: str, reproduces: str, command: str, settings: dict, study: TscvxStudy):
-    """A :class:`~scpformer.experiments.report.Report` with the T-SCvx differences."""
-    return rep.Report(
-        name=name,
-        reproduces=reproduces,
-        command=command,
-        settings=settings,
-        provenance=study.provenance(),
-        differences=TSCVX_DIFFERENCES,
-    )
+def start_report(
+    options: RunOptions, study: TscvxStudy, name: str, command: str, reproduces: str, **extra: Any
+) -> rep.Report:
+    """Record this run's settings in ``--out`` (refusing a folder made with other settings) and
+    start its report, with the T-SCvx differences.
+
+    Parameters
+    ----------
+    options, study
+        The experiment's options and its checked dataset and runs.
+    name, command
+        The experiment's name and the command line that ran it.
+    reproduces
+        What of the T-SCvx paper it reproduces (e.g. ``"Fig. 2"``).
+    **extra
+        Further settings (:func:`study_settings`), e.g. ``n``.
+
+    Returns
+    -------
+    Report
+        The report, its settings those recorded in ``--out``.
+    """
+    settings = study_settings(options, study, name, **extra)
+    check_settings(options.out, settings)
+    return rep.Report(name, f"{PAPER} {reproduces}", command, settings, study.provenance(),
+                      differences=TSCVX_DIFFERENCES)  # fmt: skip
 
 
 def study_settings(options: RunOptions, study: TscvxStudy, name: str, **extra: Any) -> dict:
+    """The settings of experiment ``name`` on ``study``: the options, the dataset's solver, the
+    runs and the SHA-256 of their weight and table files, and ``extra``."""
     from scpformer.data.storage import file_sha256
 
     digests = {}

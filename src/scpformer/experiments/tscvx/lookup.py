@@ -11,22 +11,17 @@ from typing import Any
 import numpy as np
 
 from scpformer.experiments import report as rep
-from scpformer.experiments.runner import (
-    RunOptions,
-    require_n,
-)
+from scpformer.experiments.runner import RunOptions, require_n
 from scpformer.experiments.tscvx.common import (
     COLD,
-    PAPER,
     TSCVX_DIFFERENCES,
     TscvxStudy,
     method_stats,
-    new_report,
     open_tscvx_study,
     paired_section,
     solve_rows,
+    start_report,
     stats_table,
-    study_settings,
 )
 from scpformer.files import write_text_atomic
 
@@ -38,12 +33,13 @@ def run_lookup(options: RunOptions, *, command: str = "", name: str) -> Path:
     study = open_tscvx_study(options, kinds=("tscvx", "kdtree", "interp"))
     split = ood_split(study.data, "test")
     positions, ood = ood_selection(split, require_n(options), options.seed)
-    settings = study_settings(options, study, name, n=int(positions.size))
+    report = start_report(
+        options, study, name, command, "Tables 4-5, Fig. 4", n=int(positions.size)
+    )
     extra = {int(p): {"ood": bool(o)} for p, o in zip(positions, ood, strict=True)}
-    rows = solve_rows(study, options, positions, settings, extra)
+    rows = solve_rows(study, options, positions, extra)
     metrics = prediction_metrics(study)
     methods = [COLD, *study.runs]
-    report = new_report(name, f"{PAPER} Tables 4-5, Fig. 4", command, settings, study)
     report.comparisons = lookup_comparisons(metrics)
     report.sections += [
         ("Tables 4-5 (prediction, one thread, batch 1)", prediction_table(metrics)),

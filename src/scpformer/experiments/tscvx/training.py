@@ -9,16 +9,8 @@ import math
 from pathlib import Path
 
 from scpformer.experiments import report as rep
-from scpformer.experiments.runner import (
-    RunOptions,
-    check_settings,
-)
-from scpformer.experiments.tscvx.common import (
-    PAPER,
-    new_report,
-    open_tscvx_study,
-    study_settings,
-)
+from scpformer.experiments.runner import RunOptions
+from scpformer.experiments.tscvx.common import comparison_rows, open_tscvx_study, start_report
 from scpformer.files import write_text_atomic
 
 
@@ -28,15 +20,13 @@ def run_training(options: RunOptions, *, command: str = "", name: str) -> Path:
 
     study = open_tscvx_study(options)
     run_dir = study.runs["tscvx"]
-    settings = study_settings(options, study, name)
-    check_settings(options.out, settings)
+    report = start_report(options, study, name, command, "Table 3")
     metrics = evaluate_tscvx(run_dir, study.data, split="test")
     losses = {net: last_losses(run_dir / net) for net in ("tight", "solution")}
     run_config = run_dir / "config.json"
     stored = json.loads(run_config.read_text()) if run_config.is_file() else {}
     losses["solution"]["thrust_weight"] = float(stored.get("thrust_weight", 1.0))
     params = parameter_counts(run_dir)
-    report = new_report(name, f"{PAPER} Table 3", command, settings, study)
     report.comparisons = training_comparisons(metrics, losses, params)
     report.sections.append(("Tight rows per constraint (test split)", per_name_table(metrics)))
     write_text_atomic(
@@ -82,50 +72,27 @@ def training_comparisons(metrics: dict, losses: dict, params: dict) -> list[rep.
     """Table 3's rows beside ours."""
     tight, solution = metrics["tight"]["overall"], metrics["solution"]
     t, s = losses["tight"], losses["solution"]
-    return [
-        rep.Comparison(
-            quantity="constraint NN train / validation loss",
-            paper="0.024 / 0.024",
-            ours=f"{rep.fmt(t['train'])} / {rep.fmt(t['val'])}",
-            note=f"paper: MSE; ours: weighted BCE, epoch {t['best_epoch']} of {t['epochs']}",
-        ),
-        rep.Comparison(
-            quantity="constraint NN test binary accuracy",
-            paper="96.45%",
-            ours=f"{100 * tight['accuracy']:.2f}%",
-        ),
-        rep.Comparison(
-            quantity="predict-only-zeros accuracy",
-            paper="95.95%",
-            ours=f"{100 * tight['all_zeros_accuracy']:.2f}%",
-        ),
-        rep.Comparison(
-            quantity="predict-only-ones accuracy",
-            paper="4.05%",
-            ours=f"{100 * tight['all_ones_accuracy']:.2f}%",
-        ),
-        rep.Comparison(
-            quantity="tight rows: precision / recall",
-            paper="n/a",
-            ours=f"{rep.fmt(tight['precision'])} / {rep.fmt(tight['recall'])}",
-        ),
-        rep.Comparison(
-            quantity="constraint NN parameters", paper="8.91M", ours=f"{params['tight'] / 1e6:.3g}M"
-        ),
-        rep.Comparison(
-            quantity="solution NN train / validation MSE",
-            paper="0.975 / 1.092",
-            ours=f"{rep.fmt(s['train'])} / {rep.fmt(s['val'])}",
-            note=f"epoch {s['best_epoch']} of {s['epochs']}"
-            + _thrust_weight_note(s.get("thrust_weight", 1.0)),
-        ),
-        rep.Comparison(
-            quantity="solution NN test MSE", paper="1.040", ours=rep.fmt(solution["mse"])
-        ),
-        rep.Comparison(
-            quantity="solution NN parameters", paper="9M", ours=f"{params['solution'] / 1e6:.3g}M"
-        ),
-    ]
+    tight_loss_note = f"paper: MSE; ours: weighted BCE, epoch {t['best_epoch']} of {t['epochs']}"
+    solution_loss_note = f"epoch {s['best_epoch']} of {s['epochs']}" + _thrust_weight_note(
+        s.get("thrust_weight", 1.0)
+    )
+    return comparison_rows(
+        [
+            ("constraint NN train / validation loss", "0.024 / 0.024",
+             f"{rep.fmt(t['train'])} / {rep.fmt(t['val'])}", tight_loss_note),
+            ("constraint NN test binary accuracy", "96.45%", f"{100 * tight['accuracy']:.2f}%"),
+            ("predict-only-zeros accuracy", "95.95%",
+             f"{100 * tight['all_zeros_accuracy']:.2f}%"),
+            ("predict-only-ones accuracy", "4.05%", f"{100 * tight['all_ones_accuracy']:.2f}%"),
+            ("tight rows: precision / recall", "n/a",
+             f"{rep.fmt(tight['precision'])} / {rep.fmt(tight['recall'])}"),
+            ("constraint NN parameters", "8.91M", f"{params['tight'] / 1e6:.3g}M"),
+            ("solution NN train / validation MSE", "0.975 / 1.092",
+             f"{rep.fmt(s['train'])} / {rep.fmt(s['val'])}", solution_loss_note),
+            ("solution NN test MSE", "1.040", rep.fmt(solution["mse"])),
+            ("solution NN parameters", "9M", f"{params['solution'] / 1e6:.3g}M"),
+        ]
+    )  # fmt: skip
 
 
 def per_name_table(metrics: dict) -> str:

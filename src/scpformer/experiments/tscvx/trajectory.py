@@ -9,19 +9,13 @@ from typing import Any
 import numpy as np
 
 from scpformer.experiments import report as rep
-from scpformer.experiments.runner import (
-    RunOptions,
-    check_settings,
-    select_test_instances,
-    theta_tasks,
-)
+from scpformer.experiments.runner import RunOptions, select_test_instances, theta_tasks
 from scpformer.experiments.tscvx.common import (
-    PAPER,
-    new_report,
+    comparison_rows,
     open_tscvx_study,
     pct,
     solver_config,
-    study_settings,
+    start_report,
 )
 
 
@@ -33,8 +27,7 @@ def run_trajectory(options: RunOptions, *, command: str = "", name: str) -> Path
     from scpformer.warmstart.tscvx import TscvxWarmStart
 
     study = open_tscvx_study(options)
-    settings = study_settings(options, study, name)
-    check_settings(options.out, settings)
+    report = start_report(options, study, name, command, "Fig. 3")
     (position,) = select_test_instances(study.data, 1, options.seed)
     (task,) = theta_tasks(study.data, [int(position)])
     config = solver_config(study.config)
@@ -42,7 +35,6 @@ def run_trajectory(options: RunOptions, *, command: str = "", name: str) -> Path
     predictor = load_predictor(study.runs["tscvx"], "tscvx")
     cold = solve(instance, config.solver, method="scvx")
     solution = solve(instance, config.solver, method="tscvx", warmstart=TscvxWarmStart(predictor))
-    report = new_report(name, f"{PAPER} Fig. 3", command, settings, study)
     report.figures += trajectory_figures(
         instance, solution, cold, predictor, options.out, config.solver.tight_tol
     )
@@ -56,18 +48,13 @@ def trajectory_comparisons(instance: Any, solution: Any, cold: Any) -> list[rep.
     from scpformer.problems.pdg6dof.problem import propellant_gap
 
     gap = propellant_gap(instance, solution.cost, cold.cost)
-    return [
-        rep.Comparison(
-            quantity="subproblem solves, cold SCvx / T-SCvx",
-            paper="n/a (figure only)",
-            ours=f"{cold.iterations} / {solution.iterations}",
-        ),
-        rep.Comparison(
-            quantity="T-SCvx propellant beyond cold SCvx's",
-            paper="n/a (figure only)",
-            ours=pct(gap),
-        ),
-    ]
+    solves = f"{cold.iterations} / {solution.iterations}"
+    return comparison_rows(
+        [
+            ("subproblem solves, cold SCvx / T-SCvx", "n/a (figure only)", solves),
+            ("T-SCvx propellant beyond cold SCvx's", "n/a (figure only)", pct(gap)),
+        ]
+    )
 
 
 def trajectory_figures(
