@@ -101,14 +101,14 @@ def test_a_run_writes_checkpoint_metrics_plot_and_configuration(toy_rdv, tmp_pat
 
 def _killed_in_epoch(epoch, monkeypatch):
     """Make the run die (as on Ctrl-C) when it is about to checkpoint ``epoch``."""
-    from scpformer.train import art
+    from scpformer.train import checkpoint
 
     def save(path, **fields):
         if fields["metrics"]["epoch"] == epoch:
             raise KeyboardInterrupt
         return save_checkpoint(path, **fields)
 
-    monkeypatch.setattr(art, "save_checkpoint", save)
+    monkeypatch.setattr(checkpoint, "save_checkpoint", save)
 
 
 def _assert_same_weights(run_a, run_b):

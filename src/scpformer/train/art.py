@@ -40,12 +40,13 @@ from scpformer.data.torch_views import ArtSequenceDataset
 from scpformer.files import write_text_atomic
 from scpformer.train import distributed
 from scpformer.train.checkpoint import (
+    BEST_NAME,
     CHECKPOINT_NAME,
     from_plain,
     manifest_digest,
-    read_checkpoint,
+    read_resumable,
     refuse_resume_without_checkpoint,
-    save_checkpoint,
+    save_epoch_checkpoints,
 )
 from scpformer.train.config import TrainConfig, train_config
 from scpformer.train.loop import FitState, TensorData, fit, seed_everything
@@ -53,7 +54,6 @@ from scpformer.train.metrics import LOSS_PLOT_NAME, METRICS_NAME, plot_losses, w
 from scpformer.train.models_api import resolve
 
 CONFIG_NAME = "config.json"
-BEST_NAME = "best.pt"
 SEQUENCE_KEYS = ("rtg", "ctg", "state", "action")  # model inputs, (n, N, d) each
 
 
@@ -286,9 +286,7 @@ def _previous_run(out: Path, kind: str, frame: str | None, resume: bool) -> dict
             )
         _refuse_overwrite(out, kind)
         return None
-    payload = read_checkpoint(out, kind=kind, frame=frame)
-    payload["extra"] = from_plain(payload["extra"])
-    return payload
+    return read_resumable(out, kind=kind, frame=frame)
 
 
 def _refuse_overwrite(out: Path, kind: str) -> None:
@@ -458,9 +456,7 @@ def _run(
             metrics=state.metrics(),
             n_steps=data.n_steps,
         )
-        save_checkpoint(out, **fields, extra=extra)
-        if state.improved:
-            save_checkpoint(out / BEST_NAME, **fields)
+        save_epoch_checkpoints(out, fields, extra, state.improved)
         write_metrics(out, state.history)
         plot_losses(out, state.history, title=f"{kind} ({preset}, {frame}) on {data.family}")
 

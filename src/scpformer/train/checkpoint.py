@@ -1,9 +1,11 @@
 """Writing a checkpoint: one file per run, written atomically.
 
 Reading it is the models' (:mod:`scpformer.models.checkpoint`, which describes the format;
-its names are re-exported here). Writing stays with training: :func:`save_checkpoint` after
-every epoch, :func:`slim_checkpoint` for a packaged weights-only copy, and :func:`to_plain`,
-which stores numpy arrays as the tensors ``torch.load(weights_only=True)`` accepts.
+its names are re-exported here). Writing stays with training: :func:`save_checkpoint` (after
+every epoch :func:`save_epoch_checkpoints`: the run's and, when the epoch improved, the best
+one), :func:`slim_checkpoint` for a packaged weights-only copy, and :func:`to_plain`, which
+stores numpy arrays as the tensors ``torch.load(weights_only=True)`` accepts;
+:func:`read_resumable` reads a run's checkpoint back to resume it.
 """
 
 from __future__ import annotations
@@ -32,7 +34,10 @@ from scpformer.models.checkpoint import (
     read_checkpoint,
 )
 
+BEST_NAME = "best.pt"  # the checkpoint of the best validation loss, beside the run's
+
 __all__ = [
+    "BEST_NAME",
     "CHECKPOINT_NAME",
     "FORMAT",
     "FORMAT_VERSION",
@@ -43,8 +48,10 @@ __all__ = [
     "load_checkpoint",
     "manifest_digest",
     "read_checkpoint",
+    "read_resumable",
     "refuse_resume_without_checkpoint",
     "save_checkpoint",
+    "save_epoch_checkpoints",
     "slim_checkpoint",
     "to_plain",
 ]
@@ -60,6 +67,49 @@ def refuse_resume_without_checkpoint(folder: Path) -> None:
             f"--resume: {folder} holds no {CHECKPOINT_NAME} to resume from; its other files "
             "would be overwritten by a new run (give another --out, or empty the folder)"
         )
+
+
+def read_resumable(folder: Path, **wanted: str | None) -> dict[str, Any]:
+    """The checkpoint payload of run ``folder`` to resume training from.
+
+    Parameters
+    ----------
+    folder
+        The run folder.
+    **wanted
+        What the checkpoint must hold (``family``, ``frame``, ``kind``; see
+        :func:`read_checkpoint`).
+
+    Returns
+    -------
+    dict
+        The checked payload, its ``extra`` (the training state) decoded by :func:`from_plain`.
+    """
+    payload = read_checkpoint(folder, **wanted)
+    payload["extra"] = from_plain(payload["extra"])
+    return payload
+
+
+def save_epoch_checkpoints(
+    folder: Path, fields: Mapping[str, Any], extra: Mapping[str, Any], improved: bool
+) -> None:
+    """After an epoch: the run's checkpoint in ``folder`` and, when the validation loss
+    ``improved``, the best one (:data:`BEST_NAME`, without the training state).
+
+    Parameters
+    ----------
+    folder
+        The run folder.
+    fields
+        The keyword arguments of :func:`save_checkpoint` but ``extra``.
+    extra
+        The training state (optimizer, schedule, RNG) and what resuming checks.
+    improved
+        Whether this epoch's validation loss is the best so far.
+    """
+    save_checkpoint(folder, **fields, extra=extra)
+    if improved:
+        save_checkpoint(folder / BEST_NAME, **fields)
 
 
 def manifest_digest(folder: Path | str) -> str:

@@ -71,14 +71,16 @@ from scpformer.models.tscvx import (
     preset,
 )
 from scpformer.train import distributed
-from scpformer.train.art import BEST_NAME, CONFIG_NAME, carve_validation
+from scpformer.train.art import CONFIG_NAME, carve_validation
 from scpformer.train.checkpoint import (
+    BEST_NAME,
     CHECKPOINT_NAME,
     from_plain,
     manifest_digest,
     read_checkpoint,
+    read_resumable,
     refuse_resume_without_checkpoint,
-    save_checkpoint,
+    save_epoch_checkpoints,
 )
 from scpformer.train.config import TrainConfig, train_config
 from scpformer.train.loop import FitState, TensorData, fit, seed_everything
@@ -560,8 +562,7 @@ def _fit_fold(
     if resume:
         refuse_resume_without_checkpoint(folder)
     if resume and (folder / CHECKPOINT_NAME).is_file():
-        previous = read_checkpoint(folder, kind=kind, family=FAMILY)
-        previous["extra"] = from_plain(previous["extra"])
+        previous = read_resumable(folder, kind=kind, family=FAMILY)
         config = _resumed_config(previous, ctx.preset, config)
     seed_everything(config.seed)
     if previous is not None:
@@ -609,9 +610,7 @@ def _fit_fold(
         fields = dict(model=net, kind=kind, config=model_config, normalization=ctx.norm,
                       frame=None, family=FAMILY, manifest_digest=digest, seed=config.seed,
                       metrics=state.metrics(), n_steps=model_config.n_nodes)  # fmt: skip
-        save_checkpoint(folder, **fields, extra=extra)
-        if state.improved:
-            save_checkpoint(folder / BEST_NAME, **fields)
+        save_epoch_checkpoints(folder, fields, extra, state.improved)
         write_metrics(folder, state.history)
         if state.epoch % PLOT_EVERY == 0 or state.epoch == config.epochs:  # f1: many short epochs
             plot_losses(folder, state.history, title=f"{kind} ({ctx.preset})")
