@@ -20,6 +20,9 @@ from scpformer.cli.commands import add_command_parser
 from scpformer.cli.config_file import ConfigParser, add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
 from scpformer.cli.errors import Terminated, run_command
+from scpformer.cli.parsers import pdg6dof as pdg6dof_flags
+from scpformer.cli.parsers import rendezvous as rendezvous_flags
+from scpformer.cli.parsers import robust_rendezvous as robust_flags
 
 if TYPE_CHECKING:  # the parsers import none of the library (``--help`` stays fast)
     from scpformer.data.family import DatasetFamily
@@ -47,18 +50,90 @@ def register_family_arguments(
     FAMILY_ARGUMENTS[name] = FamilyArguments(add=add, build=build)
 
 
-def _add_pdg6dof_arguments(parser: argparse.ArgumentParser) -> None:
-    from scpformer.cli.parsers.pdg6dof import add_config_arguments
+#: one flag of a family's own: its name and the keywords of ``add_argument``, where
+#: ``choices`` names a snapshot constant (:func:`~scpformer.cli.dataclass_args.constant`)
+FlagSpec = tuple[str, dict[str, Any]]
 
-    parser.add_argument(
-        "--ranges",
-        choices=constant("pdg6dof.ranges"),
-        default="feasible",
-        help="sampling ranges of theta: Table 2's parameters drawn consistently with the "
+
+def add_flags(parser: argparse._ActionsContainer, flags: tuple[FlagSpec, ...]) -> None:
+    """Add the flags of a table to a parser or group, in its order (``choices``: the named
+    snapshot constant)."""
+    for name, options in flags:
+        if "choices" in options:
+            options = {**options, "choices": constant(options["choices"])}
+        parser.add_argument(name, **options)
+
+
+def family_flags(
+    flags: tuple[FlagSpec, ...],
+    add_config: Callable[[argparse.ArgumentParser], None],
+    ranges: str | None = None,
+) -> Callable[[argparse.ArgumentParser], None]:
+    """The ``add`` of :func:`register_family_arguments` of a family built from a table.
+
+    Parameters
+    ----------
+    flags
+        The family's own flags, in the order of ``--help``.
+    add_config
+        Adds the family's solver settings (``add_config_arguments`` of its parsers module).
+    ranges
+        The snapshot name of its sampling ranges, flags ``--range-NAME`` (None: none).
+
+    Returns
+    -------
+    Callable
+        Adds ``flags``, the ranges and the settings to a ``generate FAMILY`` parser.
+    """
+
+    def add(parser: argparse.ArgumentParser) -> None:
+        add_flags(parser, flags)
+        if ranges is not None:
+            add_dataclass_arguments(
+                parser, ranges, prefix="range", title="sampling ranges of theta (Table 1)"
+            )
+        add_config(parser)
+
+    return add
+
+
+PDG6DOF_FLAGS: tuple[FlagSpec, ...] = (
+    ("--ranges", {
+        "choices": "pdg6dof.ranges",
+        "default": "feasible",
+        "help": "sampling ranges of theta: Table 2's parameters drawn consistently with the "
         "constraints (feasible), Table 2 as an independent box (table2), or the nominal "
         "sub-range (default: feasible)",
-    )
-    add_config_arguments(parser)
+    }),
+)  # fmt: skip
+RENDEZVOUS_FLAGS: tuple[FlagSpec, ...] = (
+    ("--warmstart", {
+        "choices": "rendezvous.warmstarts",
+        "default": "convex",
+        "help": "initial reference of Problem 3 (default: convex, the stored convex twin)",
+    }),
+    ("--no-verify", {
+        "action": "store_true",
+        "help": "skip the nonlinear replay of the twins (about 4x faster; statuses then rest "
+        "on the linear model alone)",
+    }),
+    ("--no-tpbvp-twin", {
+        "action": "store_true",
+        "help": "store the Problem 2 and 3 twins only, not the Problem 1 (TPBVP) twin of "
+        "Table 2",
+    }),
+)  # fmt: skip
+ROBUST_RENDEZVOUS_FLAGS: tuple[FlagSpec, ...] = (
+    ("--mode", {
+        "choices": "robust.modes",
+        "default": "chance",
+        "help": "passive safety of the last stage: deterministic (X = 0) or chance (default)",
+    }),
+    ("--no-verify", {
+        "action": "store_true",
+        "help": "skip the final check of each stage (statuses then rest on SCvx* alone)",
+    }),
+)  # fmt: skip
 
 
 def _build_pdg6dof(args: argparse.Namespace) -> DatasetFamily:
@@ -72,35 +147,6 @@ def _build_pdg6dof(args: argparse.Namespace) -> DatasetFamily:
         ranges=RANGE_PRESETS[args.ranges](), constants=constants, solver=config_from_args(args)
     )
     return PDG6DoFFamily(config)
-
-
-register_family_arguments("pdg6dof", _add_pdg6dof_arguments, _build_pdg6dof)
-
-
-def _add_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
-    from scpformer.cli.parsers.rendezvous import add_config_arguments
-
-    parser.add_argument(
-        "--warmstart",
-        choices=constant("rendezvous.warmstarts"),
-        default="convex",
-        help="initial reference of Problem 3 (default: convex, the stored convex twin)",
-    )
-    parser.add_argument(
-        "--no-verify",
-        action="store_true",
-        help="skip the nonlinear replay of the twins (about 4x faster; statuses then rest on "
-        "the linear model alone)",
-    )
-    parser.add_argument(
-        "--no-tpbvp-twin",
-        action="store_true",
-        help="store the Problem 2 and 3 twins only, not the Problem 1 (TPBVP) twin of Table 2",
-    )
-    add_dataclass_arguments(
-        parser, "rendezvous.ranges", prefix="range", title="sampling ranges of theta (Table 1)"
-    )
-    add_config_arguments(parser)
 
 
 def _build_rendezvous(args: argparse.Namespace) -> DatasetFamily:
@@ -122,29 +168,6 @@ def _build_rendezvous(args: argparse.Namespace) -> DatasetFamily:
     return RendezvousFamily(config)
 
 
-register_family_arguments("rendezvous", _add_rendezvous_arguments, _build_rendezvous)
-
-
-def _add_robust_rendezvous_arguments(parser: argparse.ArgumentParser) -> None:
-    from scpformer.cli.parsers.robust_rendezvous import add_config_arguments
-
-    parser.add_argument(
-        "--mode",
-        choices=constant("robust.modes"),
-        default="chance",
-        help="passive safety of the last stage: deterministic (X = 0) or chance (default)",
-    )
-    parser.add_argument(
-        "--no-verify",
-        action="store_true",
-        help="skip the final check of each stage (statuses then rest on SCvx* alone)",
-    )
-    add_dataclass_arguments(
-        parser, "robust.ranges", prefix="range", title="sampling ranges of theta (Table 1)"
-    )
-    add_config_arguments(parser)
-
-
 def _build_robust_rendezvous(args: argparse.Namespace) -> DatasetFamily:
     from scpformer.cli.dataclass_args import overrides
     from scpformer.cli.robust_rendezvous import common_from_args, config_from_args
@@ -162,7 +185,17 @@ def _build_robust_rendezvous(args: argparse.Namespace) -> DatasetFamily:
 
 
 register_family_arguments(
-    "robust-rendezvous", _add_robust_rendezvous_arguments, _build_robust_rendezvous
+    "pdg6dof", family_flags(PDG6DOF_FLAGS, pdg6dof_flags.add_config_arguments), _build_pdg6dof
+)
+register_family_arguments(
+    "rendezvous",
+    family_flags(RENDEZVOUS_FLAGS, rendezvous_flags.add_config_arguments, "rendezvous.ranges"),
+    _build_rendezvous,
+)
+register_family_arguments(
+    "robust-rendezvous",
+    family_flags(ROBUST_RENDEZVOUS_FLAGS, robust_flags.add_config_arguments, "robust.ranges"),
+    _build_robust_rendezvous,
 )
 
 
@@ -199,39 +232,29 @@ def _family_summaries() -> dict[str, str]:
     return summaries
 
 
+#: the flags of every ``generate FAMILY``, group ``generation``
+GENERATION_FLAGS: tuple[FlagSpec, ...] = (
+    ("--n", {"type": positive, "required": True,
+             "help": "number of instances; a larger --n on an existing dataset grows it"}),
+    ("--out", {"type": Path, "required": True, "help": "dataset folder"}),
+    ("--seed", {"type": count, "default": 0,
+                "help": with_default("root seed of the dataset", 0)}),
+    ("--workers", {"type": positive,
+                   "help": "worker processes or Ray actors (default: every CPU)"}),
+    ("--ray", {"metavar": "ADDRESS",
+               "help": "run on the Ray cluster at ADDRESS ('auto', 'ray://host:port'; 'local' "
+               "starts one)"}),
+    ("--shard-size", {"type": positive, "default": 64,
+                      "help": with_default("instances per shard", 64)}),
+    ("--time-limit", {"type": float, "default": 300.0, "metavar": "SECONDS",
+                      "help": with_default("per-instance limit; past it the worker is restarted "
+                                           "and the instance stored with status timeout", 300.0)}),
+    ("--quiet", {"action": "store_true", "help": "no progress bar"}),
+)  # fmt: skip
+
+
 def _add_common_generate_arguments(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_argument_group("generation")
-    group.add_argument(
-        "--n",
-        type=positive,
-        required=True,
-        help="number of instances; a larger --n on an existing dataset grows it",
-    )
-    group.add_argument("--out", type=Path, required=True, help="dataset folder")
-    group.add_argument("--seed", type=count, default=0,
-                       help=with_default("root seed of the dataset", 0))  # fmt: skip
-    group.add_argument(
-        "--workers", type=positive, help="worker processes or Ray actors (default: every CPU)"
-    )
-    group.add_argument(
-        "--ray",
-        metavar="ADDRESS",
-        help="run on the Ray cluster at ADDRESS ('auto', 'ray://host:port'; 'local' starts one)",
-    )
-    group.add_argument("--shard-size", type=positive, default=64,
-                       help=with_default("instances per shard", 64))  # fmt: skip
-    group.add_argument(
-        "--time-limit",
-        type=float,
-        default=300.0,
-        metavar="SECONDS",
-        help=with_default(
-            "per-instance limit; past it the worker is restarted and the instance "
-            "stored with status timeout",
-            300.0,
-        ),
-    )
-    group.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_flags(parser.add_argument_group("generation"), GENERATION_FLAGS)
 
 
 class _ProgressBar:
@@ -339,36 +362,34 @@ def _solved_line(manifest: Manifest) -> str:
 
 # -- dataset -----------------------------------------------------------------------------------
 def add_dataset_parser(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``dataset info|verify|augment|split``."""
+    """Add ``dataset info|verify|repair|augment|split`` (see :data:`DATASET_COMMANDS`)."""
     parser = add_command_parser(subparsers, "", "dataset")
     commands = parser.add_subparsers(dest="dataset_command", required=True, metavar="COMMAND")
-    folder_commands = (
-        ("info", "summarize a dataset", run_info),
-        ("verify", "check checksums, fields and shapes", run_verify),
-        ("repair", "rebuild a deleted manifest.json from the headers the shards carry", run_repair),
-    )
-    for name, summary, handler in folder_commands:
-        sub = commands.add_parser(name, help=summary, description=summary)
-        sub.add_argument("dir", type=Path, metavar="DIR")
+    for name, summary, description, handler, add_arguments in DATASET_COMMANDS:
+        sub = commands.add_parser(name, help=summary, description=description or summary)
+        add_arguments(sub)
         sub.set_defaults(handler=handler)
-        if name == "info":
-            sub.add_argument(
-                "--table2",
-                action="store_true",
-                help="pdg6dof: min and max of theta and K over the converged samples, beside "
-                "Table 2 of the T-SCvx paper",
-            )
-    _add_augment_parser(commands)
-    _add_split_parser(commands)
 
 
-def _add_augment_parser(commands: argparse._SubParsersAction) -> None:
-    parser = commands.add_parser(
-        "augment",
-        help="rotate a pdg6dof dataset about Up (T-SCvx augmentation)",
-        description="Write the rotated copies of every converged sample as a new dataset; "
-        "each rotated solution is checked with the nonlinear model and its tight flags.",
-    )
+def _add_folder_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dir", type=Path, metavar="DIR")
+
+
+INFO_FLAGS: tuple[FlagSpec, ...] = (
+    ("--table2", {
+        "action": "store_true",
+        "help": "pdg6dof: min and max of theta and K over the converged samples, beside "
+        "Table 2 of the T-SCvx paper",
+    }),
+)  # fmt: skip
+
+
+def _add_info_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_folder_argument(parser)
+    add_flags(parser, INFO_FLAGS)
+
+
+def _add_augment_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("source", type=Path, metavar="SRC")
     parser.add_argument("--out", type=Path, required=True, help="augmented dataset folder")
     parser.add_argument(
@@ -391,17 +412,10 @@ def _add_augment_parser(commands: argparse._SubParsersAction) -> None:
         help="rotate only the first N base instances (a shard boundary; SRC may still be "
         "generating): the same draws as generate --n N with SRC's seed",
     )
-    parser.set_defaults(handler=run_augment)
 
 
-def _add_split_parser(commands: argparse._SubParsersAction) -> None:
-    parser = commands.add_parser(
-        "split",
-        help="grouped train/validation/test splits and training statistics",
-        description="Split by base instance (augmented copies stay together) and store the "
-        "training split's normalization statistics in DIR/splits.h5.",
-    )
-    parser.add_argument("dir", type=Path, metavar="DIR")
+def _add_split_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_folder_argument(parser)
     parser.add_argument(
         "--fractions",
         type=float,
@@ -417,7 +431,6 @@ def _add_split_parser(commands: argparse._SubParsersAction) -> None:
         help="replace existing splits made with other settings (runs trained on them then "
         "no longer match their data)",
     )
-    parser.set_defaults(handler=run_split)
 
 
 def run_info(args: argparse.Namespace) -> int:
@@ -559,6 +572,33 @@ def run_split(args: argparse.Namespace) -> int:
     sizes = ", ".join(f"{k} {len(v)}" for k, v in splits.indices.items())
     print(f"wrote {args.dir}/splits.h5: {sizes} samples; statistics of {sorted(splits.stats)}")
     return 0
+
+
+#: ``dataset`` sub-commands: name, summary, description (None: the summary), handler, and
+#: what adds their arguments
+DATASET_COMMANDS: tuple[
+    tuple[
+        str,
+        str,
+        str | None,
+        Callable[[argparse.Namespace], int],
+        Callable[[argparse.ArgumentParser], None],
+    ],
+    ...,
+] = (
+    ("info", "summarize a dataset", None, run_info, _add_info_arguments),
+    ("verify", "check checksums, fields and shapes", None, run_verify, _add_folder_argument),
+    ("repair", "rebuild a deleted manifest.json from the headers the shards carry", None,
+     run_repair, _add_folder_argument),
+    ("augment", "rotate a pdg6dof dataset about Up (T-SCvx augmentation)",
+     "Write the rotated copies of every converged sample as a new dataset; each rotated "
+     "solution is checked with the nonlinear model and its tight flags.",
+     run_augment, _add_augment_arguments),
+    ("split", "grouped train/validation/test splits and training statistics",
+     "Split by base instance (augmented copies stay together) and store the training "
+     "split's normalization statistics in DIR/splits.h5.",
+     run_split, _add_split_arguments),
+)  # fmt: skip
 
 
 # -- standalone entry point --------------------------------------------------------------------
