@@ -44,9 +44,9 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import lru_cache
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -58,7 +58,7 @@ from scpformer.guidance.pdg6dof_tracking import (
     project_thrust,
     tracking_gains,
 )
-from scpformer.guidance.records import replan_statistics, replan_tables
+from scpformer.guidance.records import flyable_plan, replan_statistics, replan_tables
 from scpformer.pdg6dof import PDGInstance, PDGSolverConfig, sample_instances, solve
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.scp.solution import Solution, Status, Trajectory
@@ -91,7 +91,27 @@ def check_warmstart(name: Any) -> str:
 # configuration
 # ======================================================================================
 @dataclass(frozen=True, kw_only=True)
-class NavigationErrors:
+class StateSigmas:
+    """1-sigma sizes per axis of the four parts of the vehicle's state: ``position`` [U_L],
+    ``velocity`` [U_L/U_T], ``attitude_deg`` (small rotation about each body axis) [deg] and
+    ``rate_deg`` [deg/U_T]; each finite and nonnegative (``ValueError`` naming
+    ``<label>.<field>``, the label a class attribute of the subclass)."""
+
+    label: ClassVar[str] = "sigmas"
+    position: float
+    velocity: float
+    attitude_deg: float
+    rate_deg: float
+
+    def __post_init__(self) -> None:
+        for f in fields(StateSigmas):
+            value = check_finite(f"{self.label}.{f.name}", getattr(self, f.name), shape=(),
+                                 nonnegative=True)  # fmt: skip
+            object.__setattr__(self, f.name, float(value))
+
+
+@dataclass(frozen=True, kw_only=True)
+class NavigationErrors(StateSigmas):
     """1-sigma error per axis of each navigation fix, nondimensional units of Table 1.
 
     Neither Szmuk & Acikmese (2018) nor the T-SCvx paper model navigation. The values are a
@@ -104,20 +124,15 @@ class NavigationErrors:
     0.1% of omega_max = 90 deg/U_T).
     """
 
+    label: ClassVar[str] = "navigation"
     position: float = 0.01  # [U_L]
     velocity: float = 0.005  # [U_L/U_T]
     attitude_deg: float = 0.1  # small rotation about each body axis [deg]
     rate_deg: float = 0.1  # [deg/U_T]
 
-    def __post_init__(self) -> None:
-        for name in ("position", "velocity", "attitude_deg", "rate_deg"):
-            value = float(check_finite(f"navigation.{name}", getattr(self, name), shape=(),
-                                       nonnegative=True))  # fmt: skip
-            object.__setattr__(self, name, value)
-
 
 @dataclass(frozen=True, kw_only=True)
-class InitialDispersion:
+class InitialDispersion(StateSigmas):
     """1-sigma dispersion per axis of the true initial state about the instance's, per run.
 
     Position 0.1 U_L and velocity 0.05 U_L/U_T (1.8% and 3.5% of the default ``|r0|`` and
@@ -127,16 +142,11 @@ class InitialDispersion:
     default instance starts upright and at rest). Applied by :func:`dispersed_instance`.
     """
 
+    label: ClassVar[str] = "dispersion"
     position: float = 0.1  # [U_L]
     velocity: float = 0.05  # [U_L/U_T]
     attitude_deg: float = 1.0  # [deg]
     rate_deg: float = 1.0  # [deg/U_T]
-
-    def __post_init__(self) -> None:
-        for name in ("position", "velocity", "attitude_deg", "rate_deg"):
-            value = float(check_finite(f"dispersion.{name}", getattr(self, name), shape=(),
-                                       nonnegative=True))  # fmt: skip
-            object.__setattr__(self, name, value)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -743,10 +753,7 @@ def open_loop_plan(instance: PDGInstance, config: MPCConfig | None = None) -> So
     Raises ``ValueError`` when it fails (no converged, verified trajectory to fly).
     """
     cfg = config or MPCConfig()
-    sol = solve(instance, cfg.solver)
-    if not _accepted(sol):
-        raise ValueError(f"the open-loop plan failed ({sol.status.value}): {sol.message}")
-    return sol
+    return flyable_plan(solve(instance, cfg.solver), _accepted)
 
 
 def navigation_fix(

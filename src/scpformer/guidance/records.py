@@ -1,5 +1,6 @@
-"""What every family's closed loop keeps of its re-plans: the ``runs.csv`` statistics and the
-per-re-plan tables of ``run-NNNN.npz``.
+"""What every family's closed loop shares: the check of the open-loop plan it starts from, and
+what it keeps of its re-plans (the ``runs.csv`` statistics and the per-re-plan tables of
+``run-NNNN.npz``).
 
 A family's re-plan record is a frozen dataclass with at least ``accepted`` (bool),
 ``iterations`` (int) and ``wall_s`` (float, the wall time of the whole re-plan: warm start,
@@ -10,15 +11,31 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+
+from scpformer.scp.solution import Solution
 
 #: numpy dtype of a record field by its annotation (fields of other types are left out).
 _DTYPES = {"int": int, "float": float, "bool": bool, "str": str}
 #: Fields kept out of the npz tables (free text, read from the logs instead).
 _UNTABLED = ("message",)
+
+
+def flyable_plan(sol: Solution, accepted: Callable[[Solution], bool]) -> Solution:
+    """``sol``, the open-loop plan a closed loop starts from, when the family's ``accepted``
+    says it may be flown.
+
+    Raises
+    ------
+    ValueError
+        When it may not (the plan failed): there is nothing to fly.
+    """
+    if not accepted(sol):
+        raise ValueError(f"the open-loop plan failed ({sol.status.value}): {sol.message}")
+    return sol
 
 
 def replan_statistics(replans: Sequence[Any]) -> dict[str, float | int]:

@@ -50,7 +50,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from os import PathLike
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -65,7 +65,7 @@ from scpformer.dynamics.orbits import (
 from scpformer.dynamics.roe import oe_to_roe, psi_matrix, qns_offset_to_roe
 from scpformer.dynamics.truth import propagate_relative
 from scpformer.dynamics.uncertainty import GatesModel, NavigationModel, ProcessNoise, burn_frame
-from scpformer.guidance.records import replan_statistics, replan_tables
+from scpformer.guidance.records import flyable_plan, replan_statistics, replan_tables
 from scpformer.guidance.rendezvous_art import (
     LEARNED,
     FlownLog,
@@ -279,88 +279,113 @@ class DockingTolerance:
 
 
 @dataclass(frozen=True, kw_only=True)
-class MPCConfig:
-    """How the closed loop re-plans and what it flies through.
+class LoopConfig:
+    """The settings the closed loops of both rendezvous families share; each family's
+    ``MPCConfig`` extends it with its ``solver`` (a :attr:`solver_type`) and its own settings,
+    and names its warm starts (:attr:`warmstarts`, :attr:`unsupported`).
 
     Attributes
     ----------
     replan_every
         ``K``, impulses flown between re-plans (>= 1); re-plans happen at nodes
-        ``K, 2K, ...`` up to ``N - 2``, through the final approach (:func:`replan_nodes`).
-        Default 10 (the waypoint offset of Table 1): 9 re-plans over the N = 100 impulses, at
-        nodes 10, 20, ..., 90 (the last at the waypoint node, re-planning the final approach).
+        ``K, 2K, ...`` up to ``N - 2`` (the family's ``replan_nodes``). Default 10: 9
+        re-plans over N = 100 impulses.
     warmstart
-        Warm start of every re-plan, one of :data:`WARMSTARTS`.
+        Warm start of every re-plan, one of the family's ``WARMSTARTS``.
     compare
         Other warm starts solved on the same re-plan instances for comparison only (their
-        plans are not flown): per re-plan cost, iterations and wall time of each.
-    solver
-        The family's SCP and verification constants (default: ART paper Table 1).
+        plans are not flown): per re-plan cost, iterations and wall time of each. The flown
+        start is dropped from it.
     errors
         Navigation, actuation and process errors (default: robust ART paper Table 2).
     tolerance
-        Success thresholds; ``None`` derives them (:meth:`DockingTolerance.derive`).
+        Success thresholds; ``None`` derives them from the instance and the errors.
     samples_per_interval
         Truth outputs per interval for the dense constraint check of the flown trajectory
-        (default 10: every ~11 s on the default 2-orbit, 100-impulse instance).
+        (default 10).
     burn_threshold_m_s
         Impulses of at least this norm are burns and executed with a Gates error; smaller
         ones are applied as planned (default 1e-6 m/s). A plan's impulses are either burns
-        (mm/s to cm/s) or conic round-off (the default instance's plan: 7 burns of 5-63 mm/s,
+        (mm/s to cm/s) or conic round-off (the default rendezvous plan: 7 burns of 5-63 mm/s,
         93 impulses below 3e-9 m/s); no thruster fires for the latter, and Eq. 12's fixed
         terms (0.3 mm/s) would otherwise add a burn error at every node.
-    accept_max_iterations
-        Accept a re-plan that reached the iteration limit when its verification passes
-        (default True): every SCP iterate of this family satisfies Problem 3 in the model
-        (the keep-out cut is conservative, Eqs. 15-16) and the best one is returned.
     model
-        The ART model of ``art`` and ``best``: a training run folder or checkpoint, or None
-        (``default``) for the shipped ``art-rendezvous``; only with one of those starts.
+        The ART model of the learned starts (``art``, ``best``): a training run folder or
+        checkpoint, or None (``default``) for the family's shipped model; only with one of
+        those starts.
+
+    Raises
+    ------
+    ValueError
+        Naming the field that is out of range or of the wrong type.
     """
+
+    warmstarts: ClassVar[tuple[str, ...]] = WARMSTARTS
+    unsupported: ClassVar[dict[str, str]] = UNSUPPORTED
+    solver_type: ClassVar[type] = RendezvousSolverConfig
 
     replan_every: int = 10
     warmstart: str = "cold"
     compare: tuple[str, ...] = ()
-    solver: RendezvousSolverConfig = field(default_factory=RendezvousSolverConfig)
     errors: ErrorModels = field(default_factory=ErrorModels)
     tolerance: DockingTolerance | None = None
     samples_per_interval: int = 10
-    accept_max_iterations: bool = True
     burn_threshold_m_s: float = 1e-6
     model: str | None = None
 
     def __post_init__(self) -> None:
-        check_loop_config(self, RendezvousSolverConfig, check_warmstart)
+        check_int("replan_every", self.replan_every, least=1)
+        for name in (self.warmstart, *self.compare):
+            check_warmstart(name, self.warmstarts, self.unsupported)
+        compare = tuple(n for n in self.compare if n != self.warmstart)
+        object.__setattr__(self, "compare", compare)
+        solver = getattr(self, "solver", None)
+        if not isinstance(solver, self.solver_type):
+            raise ValueError(f"solver must be a {self.solver_type.__name__}, got "
+                             f"{type(solver).__name__}")  # fmt: skip
+        if not isinstance(self.errors, ErrorModels):
+            raise ValueError(f"errors must be an ErrorModels, got {type(self.errors).__name__}")
+        if self.tolerance is not None and not isinstance(self.tolerance, DockingTolerance):
+            raise ValueError(f"tolerance must be a DockingTolerance or None, got "
+                             f"{type(self.tolerance).__name__}")  # fmt: skip
+        check_int("samples_per_interval", self.samples_per_interval, least=1)
+        check_positive("burn_threshold_m_s", self.burn_threshold_m_s)
+        self._check_model()
+
+    def _check_model(self) -> None:
+        if self.model is None:
+            return
+        if not isinstance(self.model, str | PathLike):
+            raise ValueError(f"model must be a path or None, got {type(self.model).__name__}")
+        if not uses_art(self):
+            raise ValueError("model: used with the warm starts art and best only")
+        object.__setattr__(self, "model", str(self.model))
+
+
+@dataclass(frozen=True, kw_only=True)
+class MPCConfig(LoopConfig):
+    """How the closed loop of the rendezvous re-plans and what it flies through: the settings
+    of :class:`LoopConfig` and the two below. With the default ``replan_every`` = 10 (the
+    waypoint offset of Table 1) the re-plans are at nodes 10, 20, ..., 90, the last at the
+    waypoint node, re-planning the final approach; the default ``samples_per_interval``
+    checks the flown trajectory every ~11 s on the default 2-orbit, 100-impulse instance.
+
+    Attributes
+    ----------
+    solver
+        The family's SCP and verification constants (default: ART paper Table 1).
+    accept_max_iterations
+        Accept a re-plan that reached the iteration limit when its verification passes
+        (default True): every SCP iterate of this family satisfies Problem 3 in the model
+        (the keep-out cut is conservative, Eqs. 15-16) and the best one is returned.
+    """
+
+    solver: RendezvousSolverConfig = field(default_factory=RendezvousSolverConfig)
+    accept_max_iterations: bool = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
         check_bool("accept_max_iterations", self.accept_max_iterations)
-        if self.model is not None:
-            if not isinstance(self.model, str | PathLike):
-                raise ValueError(f"model must be a path or None, got {type(self.model).__name__}")
-            if not uses_art(self):
-                raise ValueError("model: used with the warm starts art and best only")
-            object.__setattr__(self, "model", str(self.model))
-
-
-def check_loop_config(cfg: Any, solver_type: type, check: Callable[[Any], str]) -> None:
-    """Check the fields a rendezvous loop's ``MPCConfig`` shares (this family's and the robust
-    family's): ``replan_every``, ``warmstart`` and ``compare`` (by ``check``; ``compare``
-    loses the flown start), ``solver`` (a ``solver_type``), ``errors``, ``tolerance``,
-    ``samples_per_interval`` and ``burn_threshold_m_s``; ``ValueError`` naming the field."""
-    check_int("replan_every", cfg.replan_every, least=1)
-    check(cfg.warmstart)
-    compare = tuple(cfg.compare)
-    for name in compare:
-        check(name)
-    object.__setattr__(cfg, "compare", tuple(n for n in compare if n != cfg.warmstart))
-    if not isinstance(cfg.solver, solver_type):
-        raise ValueError(f"solver must be a {solver_type.__name__}, got "
-                         f"{type(cfg.solver).__name__}")  # fmt: skip
-    if not isinstance(cfg.errors, ErrorModels):
-        raise ValueError(f"errors must be an ErrorModels, got {type(cfg.errors).__name__}")
-    if cfg.tolerance is not None and not isinstance(cfg.tolerance, DockingTolerance):
-        raise ValueError(f"tolerance must be a DockingTolerance or None, got "
-                         f"{type(cfg.tolerance).__name__}")  # fmt: skip
-    check_int("samples_per_interval", cfg.samples_per_interval, least=1)
-    check_positive("burn_threshold_m_s", cfg.burn_threshold_m_s)
 
 
 # ======================================================================================
@@ -382,20 +407,19 @@ class ReplanRecord:
 
 
 @dataclass(frozen=True)
-class ClosedLoopResult:
-    """A flown rendezvous.
+class Flight:
+    """What :func:`fly_truth` flew, shared by the rendezvous families' closed loops.
 
     ``t`` (M,) and ``rtn`` (M, 6): the true relative state [m, m/s] every
     ``1 / samples_per_interval`` of an interval, node ``k`` at index ``k * m`` (pre-impulse),
     the final state last. ``dv_planned`` and ``dv_applied`` (N, 3) [m/s]: commanded and
-    executed impulses (RTN of the servicer). ``estimates`` (R, 6) [m]: the navigation
-    estimates of the re-plans (mean scaled ROE), ``truth_roe`` (R, 6) the true mean ROE.
+    executed impulses (RTN of the servicer). ``replans`` and ``comparisons``: the flown and
+    the comparison re-plans. ``estimates`` (R, 6) [m]: the navigation estimates of the
+    re-plans (mean scaled ROE), ``truth_roe`` (R, 6) the true mean ROE. ``chief_oe``
+    (N + 1, 6): the target's osculating elements at the nodes (the chief of the truth, for
+    checks from the flown states).
     """
 
-    instance: RendezvousInstance
-    config: MPCConfig
-    tolerance: DockingTolerance
-    open_loop: Solution
     t: np.ndarray
     rtn: np.ndarray
     dv_planned: np.ndarray
@@ -405,6 +429,22 @@ class ClosedLoopResult:
     estimates: np.ndarray
     truth_roe: np.ndarray
     samples_per_interval: int
+    chief_oe: np.ndarray
+
+    def flight_fields(self) -> dict[str, Any]:
+        """The fields of this flight by name (to build a result that extends it)."""
+        return {f.name: getattr(self, f.name) for f in fields(Flight)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class ClosedLoopResult(Flight):
+    """A flown rendezvous: its :class:`Flight` with the ``instance``, the loop's ``config``,
+    the success ``tolerance`` and the ``open_loop`` plan it started from."""
+
+    instance: RendezvousInstance
+    config: MPCConfig
+    tolerance: DockingTolerance
+    open_loop: Solution
 
     @property
     def n_nodes(self) -> int:
@@ -655,10 +695,9 @@ def open_loop_plan(instance: RendezvousInstance, config: MPCConfig | None = None
         When it fails (no verified trajectory): there is nothing to fly.
     """
     cfg = config or MPCConfig()
-    sol = solve(instance, cfg.solver)
-    if not _accepted(sol, cfg.accept_max_iterations):
-        raise ValueError(f"the open-loop plan failed ({sol.status.value}): {sol.message}")
-    return sol
+    return flyable_plan(
+        solve(instance, cfg.solver), lambda sol: _accepted(sol, cfg.accept_max_iterations)
+    )
 
 
 def fly(
@@ -714,29 +753,7 @@ def fly(
         instance, cfg.errors, cfg.solver.verification
     )
     return ClosedLoopResult(instance=instance, config=cfg, tolerance=tolerance,
-                            open_loop=open_loop, **flight.result_fields())  # fmt: skip
-
-
-@dataclass(frozen=True)
-class Flight:
-    """What :func:`fly_truth` flew: the fields of a family's ``ClosedLoopResult`` (see
-    :class:`ClosedLoopResult`) and the osculating target elements ``chief_oe`` (N + 1, 6) at
-    the nodes (the chief of the truth, for checks from the flown states)."""
-
-    t: np.ndarray
-    rtn: np.ndarray
-    dv_planned: np.ndarray
-    dv_applied: np.ndarray
-    replans: list[ReplanRecord]
-    comparisons: list[ReplanRecord]
-    estimates: np.ndarray
-    truth_roe: np.ndarray
-    samples_per_interval: int
-    chief_oe: np.ndarray
-
-    def result_fields(self) -> dict[str, Any]:
-        """The fields of ``ClosedLoopResult`` (all but ``chief_oe``)."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "chief_oe"}
+                            open_loop=open_loop, **flight.flight_fields())  # fmt: skip
 
 
 #: ``replan(k, estimate, target_oe, plan, shift) -> (flown record, comparison records,

@@ -83,19 +83,20 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from scpformer.dynamics.orbits import oe_to_eci, rtn_dcm, rtn_to_eci
 from scpformer.dynamics.roe import psi_matrix
+from scpformer.guidance.records import flyable_plan
 from scpformer.guidance.rendezvous_art import FlownLog, art_provider
 from scpformer.guidance.rendezvous_mpc import (
     ClosedLoopResult,
     DockingTolerance,
     ErrorModels,
+    LoopConfig,
     ReplanRecord,
-    check_loop_config,
     fly_truth,
     replan_compared,
     shifted_plan,
@@ -135,32 +136,18 @@ def check_warmstart(name: Any) -> str:
 
 
 @dataclass(frozen=True, kw_only=True)
-class MPCConfig:
-    """How the closed loop of the robust rendezvous re-plans and what it flies through.
+class MPCConfig(LoopConfig):
+    """How the closed loop of the robust rendezvous re-plans and what it flies through: the
+    settings of :class:`~scpformer.guidance.rendezvous_mpc.LoopConfig` (its warm starts are
+    :data:`WARMSTARTS`; the default ``replan_every`` = 10 re-plans every 710 s on the default
+    1.29-orbit horizon, the default ``samples_per_interval`` checks the keep-out every 7 s;
+    the default ``errors`` are the models of the instance's default ``uncertainty``, which
+    the chance constraint designs for) and those below.
 
     Attributes
     ----------
-    replan_every
-        ``K`` (>= 1), impulses flown between re-plans; re-plans at ``K, 2K, ...`` up to
-        ``N - 2`` (:func:`replan_nodes`). Default 10: 9 re-plans over the N = 100 impulses
-        (every 710 s on the default 1.29-orbit horizon).
-    warmstart
-        Warm start of every re-plan, one of :data:`WARMSTARTS`.
-    compare
-        Other warm starts solved on the same re-plan problems for comparison only.
     solver
         The family's configuration; its ``safety_mode`` must be ``"chance"``.
-    errors
-        Navigation, actuation and process errors of the flight (default: Table 2, the same
-        models as the instance's default ``uncertainty``, which the chance constraint
-        designs for).
-    tolerance
-        Success thresholds; ``None`` derives them (:func:`derive_tolerance`).
-    samples_per_interval
-        Truth outputs per interval for the dense keep-out check (default 10: every 7 s).
-    burn_threshold_m_s
-        Impulses of at least this norm are burns, executed with a Gates error (the
-        deterministic loop's convention; default 1e-6 m/s).
     safety_samples
         Draws per node of the family's Monte Carlo verification of the flown plans at the
         nodes they were flown (:func:`plans_passive_safety`; default 200, whose binomial
@@ -170,23 +157,16 @@ class MPCConfig:
         One-sided confidence of that binomial test (``MonteCarloResult.passes``).
     """
 
-    replan_every: int = 10
-    warmstart: str = "cold"
-    compare: tuple[str, ...] = ()
+    warmstarts: ClassVar[tuple[str, ...]] = WARMSTARTS
+    unsupported: ClassVar[dict[str, str]] = UNSUPPORTED
+    solver_type: ClassVar[type] = RobustSolverConfig
+
     solver: RobustSolverConfig = field(default_factory=RobustSolverConfig)
-    errors: ErrorModels = field(default_factory=ErrorModels)
-    tolerance: DockingTolerance | None = None
-    samples_per_interval: int = 10
-    burn_threshold_m_s: float = 1e-6
     safety_samples: int = 200
     safety_confidence: float = 1e-4
-    model: str | None = None
 
     def __post_init__(self) -> None:
-        check_loop_config(self, RobustSolverConfig, check_warmstart)
-        if self.model is not None and not isinstance(self.model, str):
-            raise ValueError(f"model must be a path string or None, got "
-                             f"{type(self.model).__name__}")  # fmt: skip
+        super().__post_init__()
         if self.solver.safety_mode != "chance":
             raise ValueError(f"solver.safety_mode must be 'chance' (the chance-constrained "
                              f"rendezvous), got {self.solver.safety_mode!r}")  # fmt: skip
@@ -263,10 +243,7 @@ def open_loop_plan(instance: RobustInstance, config: MPCConfig | None = None) ->
         When it fails (no converged, verified plan): there is nothing to fly.
     """
     cfg = config or MPCConfig()
-    sol = solve(instance, cfg.solver)
-    if not accepted(sol):
-        raise ValueError(f"the open-loop plan failed ({sol.status.value}): {sol.message}")
-    return sol
+    return flyable_plan(solve(instance, cfg.solver), accepted)
 
 
 # ======================================================================================
@@ -378,15 +355,14 @@ def plans_passive_safety(
 # ======================================================================================
 # results
 # ======================================================================================
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RobustClosedLoopResult(ClosedLoopResult):
     """A flown robust rendezvous: :class:`~scpformer.guidance.rendezvous_mpc.ClosedLoopResult`
-    with the target's osculating elements ``chief_oe`` (N + 1, 6) at the nodes and the plans
-    flown (``flown``, in order), the terminal errors taken against the pre-docking state
-    ``x_f`` and the path checks of this problem (keep-out of the active ellipsoid, passive
-    safety of the flown states and of the flown plans)."""
+    with the plans flown (``flown``, in order), the terminal errors taken against the
+    pre-docking state ``x_f`` and the path checks of this problem (keep-out of the active
+    ellipsoid, passive safety of the flown states and of the flown plans, from the target's
+    osculating elements ``chief_oe`` at the nodes)."""
 
-    chief_oe: np.ndarray
     flown: list[FlownPlan]
 
     @property
@@ -556,5 +532,5 @@ def fly(
     flown = [FlownPlan(start=k, nodes=end - k, instance=sub, plan=sol)
              for (k, sub, sol), end in zip(starts, ends, strict=True)]  # fmt: skip
     return RobustClosedLoopResult(instance=instance, config=cfg, tolerance=tolerance,
-                                  open_loop=open_loop, chief_oe=flight.chief_oe, flown=flown,
-                                  **flight.result_fields())  # fmt: skip
+                                  open_loop=open_loop, flown=flown,
+                                  **flight.flight_fields())  # fmt: skip
