@@ -170,3 +170,13 @@ def test_art_on_an_infeasible_instance_reports_the_convex_failure(norm):
     assert "no R(t_1) = -J_CVX: the convex warm start failed" in result.record.reason
     sol = solve(instance, "scp", provider, verify=False)
     assert sol.status is Status.INFEASIBLE_INSTANCE and "warm start failed" in sol.message
+
+
+def test_old_interface_module_forwards_with_a_deprecation_naming_the_new_home():
+    import scpformer.scp.warmstart as interface
+    from scpformer.warmstart import base
+
+    with pytest.warns(DeprecationWarning, match="import it from scpformer.scp.warmstart"):
+        assert base.WarmStartResult is interface.WarmStartResult
+    with pytest.raises(AttributeError):
+        base.not_an_interface_name  # noqa: B018
