@@ -23,6 +23,7 @@ from scpformer.cli.errors import Terminated, run_command
 from scpformer.cli.parsers import pdg6dof as pdg6dof_flags
 from scpformer.cli.parsers import rendezvous as rendezvous_flags
 from scpformer.cli.parsers import robust_rendezvous as robust_flags
+from scpformer.cli.parsers.common import FlagSpec, add_flags
 
 if TYPE_CHECKING:  # the parsers import none of the library (``--help`` stays fast)
     from scpformer.data.family import DatasetFamily
@@ -48,20 +49,6 @@ def register_family_arguments(
 ) -> None:
     """Give family ``name`` its own ``generate`` flags (e.g. ``--mode`` of robust-rendezvous)."""
     FAMILY_ARGUMENTS[name] = FamilyArguments(add=add, build=build)
-
-
-#: one flag of a family's own: its name and the keywords of ``add_argument``, where
-#: ``choices`` names a snapshot constant (:func:`~scpformer.cli.dataclass_args.constant`)
-FlagSpec = tuple[str, dict[str, Any]]
-
-
-def add_flags(parser: argparse._ActionsContainer, flags: tuple[FlagSpec, ...]) -> None:
-    """Add the flags of a table to a parser or group, in its order (``choices``: the named
-    snapshot constant)."""
-    for name, options in flags:
-        if "choices" in options:
-            options = {**options, "choices": constant(options["choices"])}
-        parser.add_argument(name, **options)
 
 
 def family_flags(

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from scpformer.cli.argtypes import count, positive
 from scpformer.cli.commands import add_command_parser
@@ -11,6 +13,19 @@ from scpformer.cli.dataclass_args import constant, with_default
 
 #: the usage line of the commands with many flags: the groups below list them
 USAGE = "%(prog)s [options]"
+
+#: one flag: its name and the keywords of ``add_argument``, where ``choices`` names a
+#: snapshot constant (:func:`~scpformer.cli.dataclass_args.constant`)
+FlagSpec = tuple[str, dict[str, Any]]
+
+
+def add_flags(container: argparse._ActionsContainer, flags: tuple[FlagSpec, ...]) -> None:
+    """Add the flags of a table to a parser or group, in its order (``choices``: the named
+    snapshot constant)."""
+    for name, options in flags:
+        if "choices" in options:
+            options = {**options, "choices": constant(options["choices"])}
+        container.add_argument(name, **options)
 
 
 def add_family_parser(
@@ -31,11 +46,71 @@ def add_benchmark_arguments(parser: argparse.ArgumentParser) -> argparse._Argume
     return group
 
 
-def add_csv_argument(group: argparse._ArgumentGroup, family: str) -> None:
+def csv_flag(family: str) -> FlagSpec:
     """``--csv``: the per-instance rows of ``bench FAMILY`` (default ``bench_FAMILY.csv``)."""
     name = f"bench_{family.replace('-', '_')}.csv"
-    group.add_argument("--csv", type=Path, default=Path(name),
-                       help=with_default("per-instance CSV", name))  # fmt: skip
+    return ("--csv", {"type": Path, "default": Path(name),
+                      "help": with_default("per-instance CSV", name)})  # fmt: skip
+
+
+def add_csv_argument(group: argparse._ArgumentGroup, family: str) -> None:
+    """Add :func:`csv_flag` of ``family`` to ``group``."""
+    add_flags(group, (csv_flag(family),))
+
+
+def add_bench_parser(
+    sub: argparse._SubParsersAction, family: str, epilog: str, flags: tuple[FlagSpec, ...]
+) -> argparse.ArgumentParser:
+    """``bench family`` (:func:`add_family_parser`) whose group ``benchmark`` has ``--n``,
+    ``--seed`` (:func:`add_benchmark_arguments`) and then ``flags``."""
+    parser = add_family_parser(sub, "bench", family, epilog)
+    add_flags(add_benchmark_arguments(parser), flags)
+    return parser
+
+
+@dataclass(frozen=True)
+class SolveFlags:
+    """The flags of ``solve FAMILY`` of a family whose instance is a file or sampled with a
+    seed (rendezvous, robust-rendezvous), in the order of ``--help``.
+
+    Attributes
+    ----------
+    problem
+        What is solved (``--problem``, ``--mode``).
+    warmstarts, warmstart, warmstart_help
+        The snapshot constant of the family's own warm starts, the default and their help
+        (:func:`add_warmstart_arguments`).
+    instance_help, seed_help
+        The help of ``--instance`` and ``--seed`` (:func:`add_instance_arguments`).
+    instance
+        The flags of the instance that replace its values, in group ``instance``.
+    output
+        The flags after ``--out`` and ``--plot`` in group ``output``.
+    """
+
+    problem: FlagSpec
+    warmstarts: str
+    warmstart: str
+    warmstart_help: str
+    instance_help: str
+    seed_help: str
+    instance: tuple[FlagSpec, ...]
+    output: tuple[FlagSpec, ...]
+
+
+def add_solve_parser(
+    sub: argparse._SubParsersAction, family: str, epilog: str, flags: SolveFlags
+) -> argparse.ArgumentParser:
+    """``solve family`` (:func:`add_family_parser`) with ``flags``; the caller adds the
+    family's configuration and handler."""
+    parser = add_family_parser(sub, "solve", family, epilog)
+    add_flags(parser, (flags.problem,))
+    add_warmstart_arguments(
+        parser, constant(flags.warmstarts), flags.warmstart, flags.warmstart_help
+    )
+    add_flags(add_instance_arguments(parser, flags.instance_help, flags.seed_help), flags.instance)
+    add_flags(add_output_arguments(parser), flags.output)
+    return parser
 
 
 def add_output_arguments(

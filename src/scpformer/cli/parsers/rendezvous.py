@@ -7,15 +7,9 @@ import argparse
 
 from scpformer.cli.commands import lazy_handler
 from scpformer.cli.config_file import add_config_file_arguments
-from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
-from scpformer.cli.parsers.common import (
-    add_benchmark_arguments,
-    add_csv_argument,
-    add_family_parser,
-    add_instance_arguments,
-    add_output_arguments,
-    add_warmstart_arguments,
-)
+from scpformer.cli.dataclass_args import add_dataclass_arguments, with_default
+from scpformer.cli.parsers import common
+from scpformer.cli.parsers.common import FlagSpec, SolveFlags, csv_flag
 
 CONSTANTS_NOTE = (
     "Table 1's scenario and target-orbit constants are flags --scenario-NAME and "
@@ -42,57 +36,50 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_file_arguments(parser)
 
 
+SOLVE_FLAGS = SolveFlags(
+    problem=("--problem", {
+        "choices": "rendezvous.problems",
+        "default": "scp",
+        "help": with_default("which OCP: tpbvp (1), convex (2) or scp (3)", "scp"),
+    }),
+    warmstarts="rendezvous.warmstarts",
+    warmstart="convex",
+    warmstart_help="initial guess of Problem 3: Problem 1 (tpbvp), 2 (convex)",
+    instance_help="instance JSON (roe0_m, horizon_orbits[, target, scenario]) (default: "
+    "Table 1's)",
+    seed_help="sample the instance from Table 1's last column with this seed",
+    instance=(
+        ("--roe0", {
+            "type": float,
+            "nargs": 6,
+            "metavar": "M",
+            "help": "initial mean ROE a*dalpha (da, dlambda, dex, dey, dix, diy) [m] (default: "
+            "the instance's)",
+        }),
+        ("--horizon-orbits", {"type": float,
+                              "help": "OCP horizon [orbits] (default: the instance's)"}),
+    ),
+    output=(
+        ("--no-verify", {"action": "store_true",
+                         "help": "skip the nonlinear replay of the impulses"}),
+    ),
+)  # fmt: skip
+BENCH_FLAGS: tuple[FlagSpec, ...] = (
+    ("--warmstart", {"choices": "rendezvous.warmstarts", "default": "convex",
+                     "help": with_default("warm start of Problem 3", "convex")}),
+    csv_flag("rendezvous"),
+    ("--no-verify", {"action": "store_true",
+                     "help": "skip the nonlinear replay (the default replays every solution)"}),
+)  # fmt: skip
+
+
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    parser = add_family_parser(sub, "solve", "rendezvous", CONSTANTS_NOTE)
-    parser.add_argument(
-        "--problem",
-        choices=constant("rendezvous.problems"),
-        default="scp",
-        help=with_default("which OCP: tpbvp (1), convex (2) or scp (3)", "scp"),
-    )
-    add_warmstart_arguments(
-        parser,
-        constant("rendezvous.warmstarts"),
-        "convex",
-        "initial guess of Problem 3: Problem 1 (tpbvp), 2 (convex)",
-    )
-    group = add_instance_arguments(
-        parser,
-        "instance JSON (roe0_m, horizon_orbits[, target, scenario]) (default: Table 1's)",
-        "sample the instance from Table 1's last column with this seed",
-    )
-    group.add_argument(
-        "--roe0",
-        type=float,
-        nargs=6,
-        metavar="M",
-        help="initial mean ROE a*dalpha (da, dlambda, dex, dey, dix, diy) [m] (default: the "
-        "instance's)",
-    )
-    group.add_argument("--horizon-orbits", type=float,
-                       help="OCP horizon [orbits] (default: the instance's)")  # fmt: skip
-    output = add_output_arguments(parser)
-    output.add_argument(
-        "--no-verify", action="store_true", help="skip the nonlinear replay of the impulses"
-    )
+    parser = common.add_solve_parser(sub, "rendezvous", CONSTANTS_NOTE, SOLVE_FLAGS)
     add_config_arguments(parser)
     parser.set_defaults(handler=lazy_handler("scpformer.cli.rendezvous:run_solve"))
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = add_family_parser(sub, "bench", "rendezvous", CONSTANTS_NOTE)
-    group = add_benchmark_arguments(parser)
-    group.add_argument(
-        "--warmstart",
-        choices=constant("rendezvous.warmstarts"),
-        default="convex",
-        help=with_default("warm start of Problem 3", "convex"),
-    )
-    add_csv_argument(group, "rendezvous")
-    group.add_argument(
-        "--no-verify",
-        action="store_true",
-        help="skip the nonlinear replay (the default replays every solution)",
-    )
+    parser = common.add_bench_parser(sub, "rendezvous", CONSTANTS_NOTE, BENCH_FLAGS)
     add_config_arguments(parser)
     parser.set_defaults(handler=lazy_handler("scpformer.cli.rendezvous:run_bench"))

@@ -10,14 +10,8 @@ from scpformer.cli.argtypes import count
 from scpformer.cli.commands import lazy_handler
 from scpformer.cli.config_file import add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, with_default
-from scpformer.cli.parsers.common import (
-    add_benchmark_arguments,
-    add_csv_argument,
-    add_family_parser,
-    add_instance_arguments,
-    add_output_arguments,
-    add_warmstart_arguments,
-)
+from scpformer.cli.parsers import common
+from scpformer.cli.parsers.common import SolveFlags, csv_flag
 
 CONSTANTS_NOTE = (
     "Tables 1-2's scenario and target-orbit constants are flags --scenario-NAME and "
@@ -54,46 +48,40 @@ def add_config_arguments(parser: argparse.ArgumentParser, unless: str | None = N
     add_config_file_arguments(parser)
 
 
+SOLVE_FLAGS = SolveFlags(
+    problem=("--mode", {
+        "choices": "robust.modes",
+        "default": "chance",
+        "help": with_default("passive safety: deterministic or chance-constrained", "chance"),
+    }),
+    warmstarts="robust.warmstarts",
+    warmstart="three_stage",
+    warmstart_help="three_stage (dataset procedure), tpbvp (PS-CVX)",
+    instance_help="instance JSON (x0_rtn, waypoint, ...) (default: Table 1's)",
+    seed_help="sample the instance (Table 1) with this seed",
+    instance=(
+        ("--waypoint", {"choices": "robust.waypoints",
+                        "help": "pre-docking state (default: the instance's)"}),
+    ),
+    output=(
+        ("--monte-carlo", {
+            "type": count, "default": 0, "metavar": "N",
+            "help": with_default("Monte Carlo draws per node through the two-body + J2 "
+                                 "propagator (0: skip)", 0),
+        }),
+        ("--mc-seed", {"type": count, "default": 0, "help": with_default("Monte Carlo seed", 0)}),
+    ),
+)  # fmt: skip
+
+
 def add_solve_parser(sub: argparse._SubParsersAction) -> None:
-    parser = add_family_parser(sub, "solve", "robust-rendezvous", CONSTANTS_NOTE)
-    parser.add_argument(
-        "--mode",
-        choices=constant("robust.modes"),
-        default="chance",
-        help=with_default("passive safety: deterministic or chance-constrained", "chance"),
-    )
-    add_warmstart_arguments(
-        parser,
-        constant("robust.warmstarts"),
-        "three_stage",
-        "three_stage (dataset procedure), tpbvp (PS-CVX)",
-    )
-    group = add_instance_arguments(
-        parser,
-        "instance JSON (x0_rtn, waypoint, ...) (default: Table 1's)",
-        "sample the instance (Table 1) with this seed",
-    )
-    group.add_argument(
-        "--waypoint",
-        choices=constant("robust.waypoints"),
-        help="pre-docking state (default: the instance's)",
-    )
-    output = add_output_arguments(parser)
-    output.add_argument(
-        "--monte-carlo", type=count, default=0, metavar="N",
-        help=with_default("Monte Carlo draws per node through the two-body + J2 propagator "
-                          "(0: skip)", 0),
-    )  # fmt: skip
-    output.add_argument(
-        "--mc-seed", type=count, default=0, help=with_default("Monte Carlo seed", 0)
-    )
+    parser = common.add_solve_parser(sub, "robust-rendezvous", CONSTANTS_NOTE, SOLVE_FLAGS)
     add_config_arguments(parser, unless="instance")
     parser.set_defaults(handler=lazy_handler("scpformer.cli.robust_rendezvous:run_solve"))
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
-    parser = add_family_parser(sub, "bench", "robust-rendezvous", CONSTANTS_NOTE)
-    group = add_benchmark_arguments(parser)
-    add_csv_argument(group, "robust-rendezvous")
+    flags = (csv_flag("robust-rendezvous"),)
+    parser = common.add_bench_parser(sub, "robust-rendezvous", CONSTANTS_NOTE, flags)
     add_config_arguments(parser)
     parser.set_defaults(handler=lazy_handler("scpformer.cli.robust_rendezvous:run_bench"))
