@@ -14,6 +14,7 @@ from scpformer.cli.argtypes import count
 from scpformer.cli.commands import add_command_parser
 from scpformer.cli.config_file import add_config_file_arguments
 from scpformer.cli.dataclass_args import add_dataclass_arguments, constant, overrides
+from scpformer.cli.parsers.common import FlagSpec, add_flags
 
 #: the training flags' defaults are the preset's (``--print-config`` writes given values only)
 TRAINING_TITLE = "training (default: the preset's values)"
@@ -38,32 +39,26 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
     add_lookup_parsers(models)
 
 
+#: the model flags of ``train art|gru|lstm`` (None: the preset's or, resumed, the run's)
+SEQUENCE_FLAGS: tuple[FlagSpec, ...] = (
+    ("--preset", {"choices": "train.presets", "default": None,
+                  "help": "model and training preset: 'paper' (Table 4) or 'small' (two CPU "
+                  "cores) (default: small; a resumed run keeps its own)"}),
+    ("--frame", {"choices": ("rtn", "roe"), "default": None,
+                 "help": "state frame of the sequences (default: rtn; a resumed run keeps its "
+                 "own)"}),
+    ("--twin", {"action": "append", "choices": ("cvx", "scp", "tpbvp", "ps"), "default": None,
+                "metavar": "TWIN",
+                "help": "trajectory twin to learn from, repeatable: cvx (Problem 2), scp "
+                "(Problem 3), tpbvp (Problem 1, Table 2), ps (robust) (default: the dataset's "
+                "cvx and scp, or ps and cvx; a resumed run keeps its own)"}),
+)  # fmt: skip
+
+
 def add_sequence_arguments(parser: argparse.ArgumentParser) -> None:
     """Flags of ``train art|gru|lstm``: data, run folder, presets and every TrainConfig field."""
     _add_folder_arguments(parser, "dataset folder (split)")
-    parser.add_argument(
-        "--preset",
-        choices=constant("train.presets"),
-        default=None,
-        help="model and training preset: 'paper' (Table 4) or 'small' (two CPU cores) "
-        "(default: small; a resumed run keeps its own)",
-    )
-    parser.add_argument(
-        "--frame",
-        choices=("rtn", "roe"),
-        default=None,
-        help="state frame of the sequences (default: rtn; a resumed run keeps its own)",
-    )
-    parser.add_argument(
-        "--twin",
-        action="append",
-        choices=("cvx", "scp", "tpbvp", "ps"),
-        default=None,
-        metavar="TWIN",
-        help="trajectory twin to learn from, repeatable: cvx (Problem 2), scp (Problem 3), "
-        "tpbvp (Problem 1, Table 2), ps (robust) (default: the dataset's cvx and scp, or ps "
-        "and cvx; a resumed run keeps its own)",
-    )
+    add_flags(parser, SEQUENCE_FLAGS)
     _add_resume_arguments(parser, "checkpoint")
     add_training_arguments(parser)
 
@@ -171,57 +166,38 @@ _TSCVX_HELP = (
 )
 
 
+#: the network and evaluation flags of ``train tscvx`` (None: the preset's or the library's)
+TSCVX_FLAGS: tuple[FlagSpec, ...] = (
+    ("--preset", {"choices": ("small", "paper"), "default": "small",
+                  "help": "network sizes, training values, epochs and folds: 'paper' (Sec. "
+                  "IV.A, III.E.3: 384/768 dims, 2 heads, 4 layers, 2 epochs, 3 folds) or "
+                  "'small' (default)"}),
+    ("--networks", {"nargs": "+", "choices": ("tight", "solution"),
+                    "default": ("tight", "solution"), "help": "which networks to train (both)"}),
+    ("--folds", {"type": int, "default": None,
+                 "help": "K-fold over train+validation (preset's: 3/1)"}),
+    ("--solution-epochs", {"type": int, "default": None,
+                           "help": "epochs of f1 (--epochs is f2's)"}),
+    ("--tokens", {"choices": ("single", "inputs"), "default": None,
+                  "help": "tokenization of both networks (preset's: single)"}),
+    ("--report-split", {"choices": ("validation", "test"), "default": "validation",
+                        "help": "split evaluated and written to RUN at the end (validation)"}),
+    ("--threads", {"type": int, "default": None, "help": "torch threads (torch's default)"}),
+    ("--canonical", {"action": argparse.BooleanOptionalAction, "default": True,
+                     "help": "networks see each instance in its canonical frame (yawed about "
+                     "Up, body rolled; exact symmetries of the problem) and f1 predicts there "
+                     "(default); --no-canonical: the raw frame, as the paper"}),
+    ("--thrust-weight", {"type": float, "default": None,
+                         "help": "weight of f1's thrust outputs in its MSE (preset's: paper 1, "
+                         "the plain MSE; small 4)"}),
+)  # fmt: skip
+
+
 def add_tscvx_parser(models: argparse._SubParsersAction) -> None:
     """``train tscvx``: both networks into RUN/tight and RUN/solution."""
     parser = models.add_parser("tscvx", help=_TSCVX_HELP, description=_TSCVX_HELP)
     _add_folder_arguments(parser, "pdg6dof dataset folder (split)")
-    parser.add_argument(
-        "--preset",
-        choices=("small", "paper"),
-        default="small",
-        help="network sizes, training values, epochs and folds: 'paper' (Sec. IV.A, III.E.3: "
-        "384/768 dims, 2 heads, 4 layers, 2 epochs, 3 folds) or 'small' (default)",
-    )
-    parser.add_argument(
-        "--networks",
-        nargs="+",
-        choices=("tight", "solution"),
-        default=("tight", "solution"),
-        help="which networks to train (both)",
-    )
-    parser.add_argument(
-        "--folds", type=int, default=None, help="K-fold over train+validation (preset's: 3/1)"
-    )
-    parser.add_argument(
-        "--solution-epochs", type=int, default=None, help="epochs of f1 (--epochs is f2's)"
-    )
-    parser.add_argument(
-        "--tokens",
-        choices=("single", "inputs"),
-        default=None,
-        help="tokenization of both networks (preset's: single)",
-    )
-    parser.add_argument(
-        "--report-split",
-        choices=("validation", "test"),
-        default="validation",
-        help="split evaluated and written to RUN at the end (validation)",
-    )
-    parser.add_argument("--threads", type=int, default=None, help="torch threads (torch's default)")
-    parser.add_argument(
-        "--canonical",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="networks see each instance in its canonical frame (yawed about Up, body rolled; "
-        "exact symmetries of the problem) and f1 predicts there (default); --no-canonical: "
-        "the raw frame, as the paper",
-    )
-    parser.add_argument(
-        "--thrust-weight",
-        type=float,
-        default=None,
-        help="weight of f1's thrust outputs in its MSE (preset's: paper 1, the plain MSE; small 4)",
-    )
+    add_flags(parser, TSCVX_FLAGS)
     _add_resume_arguments(parser, "checkpoints")
     add_training_arguments(parser)
     parser.set_defaults(handler=run_train_tscvx)

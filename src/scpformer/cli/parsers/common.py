@@ -14,16 +14,16 @@ from scpformer.cli.dataclass_args import constant, with_default
 #: the usage line of the commands with many flags: the groups below list them
 USAGE = "%(prog)s [options]"
 
-#: one flag: its name and the keywords of ``add_argument``, where ``choices`` names a
-#: snapshot constant (:func:`~scpformer.cli.dataclass_args.constant`)
+#: one flag: its name and the keywords of ``add_argument``, where ``choices`` is the values
+#: or, as a string, the name of a snapshot constant that holds them
+#: (:func:`~scpformer.cli.dataclass_args.constant`)
 FlagSpec = tuple[str, dict[str, Any]]
 
 
 def add_flags(container: argparse._ActionsContainer, flags: tuple[FlagSpec, ...]) -> None:
-    """Add the flags of a table to a parser or group, in its order (``choices``: the named
-    snapshot constant)."""
+    """Add the flags of a table to a parser or group, in its order."""
     for name, options in flags:
-        if "choices" in options:
+        if isinstance(options.get("choices"), str):
             options = {**options, "choices": constant(options["choices"])}
         container.add_argument(name, **options)
 
