@@ -1,6 +1,17 @@
 """What the closed-loop experiments (``mpc-*``) share: flying every warm start's campaign into
 its own folder of the experiment's output (with progress, summary and figure), the
-side-by-side ``results.csv``, and the per-re-plan tables read back from the runs' npz."""
+side-by-side ``results.csv``, and the per-re-plan tables read back from the runs' npz.
+
+Output of every closed-loop experiment (``OUT``): one resumable campaign folder ``OUT/<w>``
+per warm start ``w`` (``runs.csv``, ``run-NNNN.npz``, ``settings.json``, ``simulate.png``),
+``config.json``, ``results.csv`` (one row per run, the warm starts side by side),
+``report.md`` and ``results.json``.
+
+The sampled instances of the rendezvous experiments are never used in training: the
+sampler's stream of run ``r`` is ``SeedSequence([S, r])``, while the dataset engine draws
+instance ``i`` of a dataset of seed ``S'`` from ``SeedSequence(S', spawn_key=(i,))``
+(:mod:`scpformer.data.executors`); the two never coincide, whatever the seeds.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +19,11 @@ import csv
 import io
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -19,48 +32,148 @@ from scpformer.experiments.runner import RunOptions, check_settings, require_n
 from scpformer.files import write_text_atomic
 from scpformer.guidance.campaign import Campaign, plot_campaign, run_campaign, summarize
 
-#: ``analyse(rows, summaries, out, report)`` of an experiment: its sections of the report.
-Analysis = Callable[
-    [dict[str, list[dict[str, str]]], dict[str, dict[str, Any]], Path, rep.Report], None
-]
+#: A cell of a summary table: its text for a warm start.
+Cell = Callable[[str], str]
+
+
+@dataclass(frozen=True)
+class Flights:
+    """The flown campaigns of a closed-loop experiment, read back for its report.
+
+    Attributes
+    ----------
+    rows : dict
+        Each warm start's rows of ``runs.csv``.
+    summaries : dict
+        Each warm start's campaign summary (:func:`~scpformer.guidance.campaign.summarize`).
+    out : Path
+        The experiment's folder (each warm start's campaign in ``out / w``).
+    warmstarts : tuple of str
+        The warm starts flown, in order.
+    """
+
+    rows: dict[str, list[dict[str, str]]]
+    summaries: dict[str, dict[str, Any]]
+    out: Path
+    warmstarts: tuple[str, ...]
+
+    @property
+    def n_runs(self) -> int:
+        """The runs flown by every warm start (0 when one flew none)."""
+        return min((len(t) for t in self.rows.values()), default=0)
+
+    @cached_property
+    def arrays(self) -> dict[str, dict[str, np.ndarray]]:
+        """Each warm start's per-re-plan tables (:func:`replan_arrays`), read once."""
+        return {w: replan_arrays(self.out / w, self.rows[w]) for w in self.warmstarts}
+
+    def successes(self, warmstart: str) -> str:
+        """``"k/n"``: the runs of ``warmstart`` that succeeded, of those flown."""
+        table = self.rows[warmstart]
+        return f"{int(succeeded(table).sum())}/{len(table)}"
+
+    def replans(self, warmstart: str) -> str:
+        """``"re-plans (failed)"`` of ``warmstart``, summed over its runs."""
+        summary = self.summaries[warmstart]
+        return f"{summary['replans']} ({summary['replans_failed']})"
+
+    def replan_times(self, warmstart: str) -> str:
+        """The median and p99 re-plan wall time of ``warmstart`` [s]."""
+        summary = self.summaries[warmstart]
+        return (f"{rep.fmt(summary['replan_time_median_s'])} / "
+                f"{rep.fmt(summary['replan_time_p99_s'])}")  # fmt: skip
+
+    def replan_iterations(self, warmstart: str) -> str:
+        """The median, mean and p99 SCP iterations per re-plan of ``warmstart``."""
+        summary = self.summaries[warmstart]
+        mean = float(np.mean(self.arrays[warmstart]["replan_iterations"]))
+        return (f"{rep.fmt(summary['replan_iterations_median'])} / {rep.fmt(mean)} / "
+                f"{rep.fmt(summary['replan_iterations_p99'])}")  # fmt: skip
+
+    def spread(self, name: str, scale: float = 1.0, *, p95: bool = False) -> Cell:
+        """The cell of the float column ``name`` of ``runs.csv`` times ``scale``: its median
+        and maximum over a warm start's runs (``"median / max"``), or with ``p95`` its 95th
+        percentile too (``"median / p95 / max"``)."""
+
+        def cell(warmstart: str) -> str:
+            values = column(self.rows[warmstart], name)
+            stats = [float(np.median(values)), *([percentile(values, 95)] if p95 else []),
+                     float(values.max())]  # fmt: skip
+            return " / ".join(rep.fmt(scale * v) for v in stats)
+
+        return cell
+
+    def table(self, lines: Sequence[tuple[str, Cell]]) -> str:
+        """The markdown summary table: a row per ``(quantity, cell)`` of ``lines``, a column
+        per warm start."""
+        rows = [(quantity, *(cell(w) for w in self.warmstarts)) for quantity, cell in lines]
+        return rep.markdown_table(("quantity", *self.warmstarts), rows)
+
+
+class ClosedLoopExperiment(Protocol):
+    """What a closed-loop experiment module (``mpc_*``) defines for :func:`run_experiment`.
+
+    Attributes
+    ----------
+    NAME, REPRODUCES : str
+        The registry name and what the experiment reproduces.
+    FAMILY : str
+        The problem family flown (:func:`~scpformer.guidance.campaign.summarize`).
+    SETTINGS : dict
+        The experiment's own settings, recorded in ``OUT/config.json``.
+    WARMSTARTS : tuple of str
+        The warm starts flown, in order (a campaign folder ``OUT/<w>`` each).
+    RUN_COLUMNS : tuple of str
+        The columns of ``runs.csv`` that ``OUT/results.csv`` keeps per warm start.
+    DIFFERENCES : tuple of str
+        The report's differences from the reference.
+    """
+
+    NAME: str
+    REPRODUCES: str
+    FAMILY: str
+    SETTINGS: dict[str, Any]
+    WARMSTARTS: tuple[str, ...]
+    RUN_COLUMNS: tuple[str, ...]
+    DIFFERENCES: tuple[str, ...]
+
+    def campaign(self, n: int, seed: int, warmstart: str) -> Campaign:
+        """The campaign warm start ``warmstart`` flies: ``n`` runs of seed ``seed``."""
+
+    def runs_text(self, n_runs: int) -> str:
+        """The report's "Runs" section: what ``n_runs`` runs per warm start flew."""
+
+    def analyse(self, flights: Flights, report: rep.Report) -> None:
+        """The report's further sections, comparisons and figures (runs were flown)."""
 
 
 def run_experiment(
-    options: RunOptions,
-    *,
-    experiment: str,
-    name: str,
-    reproduces: str,
-    command: str,
-    settings: dict[str, Any],
-    warmstarts: tuple[str, ...],
-    campaign_of: Callable[[int, int, str], Campaign],
-    family: str,
-    run_columns: tuple[str, ...],
-    analyse: Analysis,
-    differences: tuple[str, ...],
+    options: RunOptions, experiment: ClosedLoopExperiment, *, command: str, name: str
 ) -> Path:
-    """Run the closed-loop experiment ``experiment`` into ``options.out`` (its report
-    named ``name``); returns the report's path.
+    """Run the closed-loop ``experiment`` into ``options.out`` (its report named ``name``);
+    returns the report's path.
 
-    Records ``settings`` (with the experiment's name, run count, seed, folder and warm
+    Records the experiment's settings (with its name, run count, seed, folder and warm
     starts) in ``OUT/config.json`` and refuses a folder of other settings; flies
-    ``campaign_of(n, seed, w)`` for every warm start ``w`` (:func:`fly_warmstarts`, resumed
-    run by run); writes ``OUT/results.csv`` (:func:`results_csv`) and the report, whose
-    sections ``analyse`` adds.
+    ``experiment.campaign(n, seed, w)`` for every warm start ``w`` (:func:`fly_warmstarts`,
+    resumed run by run); writes ``OUT/results.csv`` (:func:`results_csv`) and the report:
+    its "Runs" section, then, when every warm start flew, what ``experiment.analyse`` adds.
     """
-    n, out = require_n(options), Path(options.out)
-    record = {"experiment": experiment, "n": n, "seed": options.seed, "out": str(out),
-              **settings, "warmstarts": list(warmstarts)}  # fmt: skip
+    n, out, warmstarts = require_n(options), Path(options.out), experiment.WARMSTARTS
+    record = {"experiment": experiment.NAME, "n": n, "seed": options.seed, "out": str(out),
+              **experiment.SETTINGS, "warmstarts": list(warmstarts)}  # fmt: skip
     check_settings(out, record)
     rows, summaries = fly_warmstarts(
-        experiment, out, warmstarts, lambda w: campaign_of(n, options.seed, w),
-        family=family, workers=options.workers or 1, ray=options.ray,
+        experiment.NAME, out, warmstarts, lambda w: experiment.campaign(n, options.seed, w),
+        family=experiment.FAMILY, workers=options.workers or 1, ray=options.ray,
     )  # fmt: skip
-    write_text_atomic(out / "results.csv", results_csv(rows, warmstarts, run_columns))
-    report = rep.Report(name=name, reproduces=reproduces, command=command, settings=record,
-                        differences=differences)  # fmt: skip
-    analyse(rows, summaries, out, report)
+    write_text_atomic(out / "results.csv", results_csv(rows, warmstarts, experiment.RUN_COLUMNS))
+    report = rep.Report(name=name, reproduces=experiment.REPRODUCES, command=command,
+                        settings=record, differences=experiment.DIFFERENCES)  # fmt: skip
+    flights = Flights(rows, summaries, out, warmstarts)
+    report.sections.append(("Runs", experiment.runs_text(flights.n_runs)))
+    if flights.n_runs:
+        experiment.analyse(flights, report)
     return report.write(out)
 
 

@@ -17,28 +17,24 @@ Instances never used in training: the dispersion of run ``r`` is drawn from
 ``SeedSequence(S', spawn_key=(i,))`` (:mod:`scpformer.data.executors`) of the nominal
 sampler, and no training instance is a dispersed Table 1 state.
 
-Output (``OUT``): ``cold/``, ``previous/``, ``tscvx/``, ``best/`` (each a resumable campaign folder:
-``runs.csv``, ``run-NNNN.npz``, ``settings.json``, ``simulate.png``), ``results.csv`` (one
-row per run, the warm starts side by side), ``report.md`` and ``results.json``.
+Output: as every closed-loop experiment's (:mod:`scpformer.experiments.closed_loop`).
 """
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
+    Flights,
     add_figures,
-    column,
     compared,
     fuel_ratio,
     percentile,
-    replan_arrays,
     run_experiment,
-    succeeded,
 )
 from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import RunOptions
@@ -53,6 +49,13 @@ WARMSTARTS = ("cold", "previous", "tscvx", "best")
 #: The classical starts solved on the re-plans of the ``tscvx`` flights.
 COMPARED = ("cold", "previous")
 REPLAN_EVERY = 5  # K: a re-plan every tenth of the remaining descent (N = 50)
+FAMILY = "pdg6dof"
+#: The experiment's own settings in ``OUT/config.json``.
+SETTINGS = {
+    "instances": "Table 1 with a dispersed initial state (SeedSequence([seed, run]))",
+    "errors": "thrust, mass, inertia, aerodynamic, navigation, initial dispersion",
+    "replan_every": REPLAN_EVERY, "tracking": "lqr",
+}  # fmt: skip
 #: Columns of ``OUT/results.csv`` (per warm start ``W``: ``W_<column>``).
 RUN_COLUMNS = (
     "success", "terminal_position_error", "terminal_velocity_error", "terminal_tilt_deg",
@@ -72,28 +75,13 @@ def campaign(n: int, seed: int, warmstart: str) -> Campaign:
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``mpc-pdg6dof`` into ``options.out``; returns the report's path."""
-    settings = {
-        "instances": "Table 1 with a dispersed initial state (SeedSequence([seed, run]))",
-        "errors": "thrust, mass, inertia, aerodynamic, navigation, initial dispersion",
-        "replan_every": REPLAN_EVERY, "tracking": "lqr",
-    }  # fmt: skip
-    return run_experiment(
-        options, experiment=NAME, name=name, reproduces=REPRODUCES, command=command,
-        settings=settings, warmstarts=WARMSTARTS, campaign_of=campaign, family="pdg6dof",
-        run_columns=RUN_COLUMNS, analyse=analyse, differences=DIFFERENCES,
-    )  # fmt: skip
+    return run_experiment(options, sys.modules[__name__], command=command, name=name)
 
 
-def analyse(
-    rows: dict[str, list[dict[str, str]]],
-    summaries: dict[str, dict[str, Any]],
-    out: Path,
-    report: rep.Report,
-) -> None:
-    """The summary table, the paired comparisons of ``tscvx`` and the failures."""
-    n_runs = min((len(t) for t in rows.values()), default=0)
+def runs_text(n_runs: int) -> str:
+    """The "Runs" section: descents, errors, re-plans and what counts as a success."""
     tol = LandingTolerance.derive(MPCConfig().errors, MPCConfig())
-    report.sections.append(("Runs", (
+    return (
         f"{n_runs} runs per warm start: the Table 1 descent from a dispersed initial state "
         "(a fresh seed), every error of `pdg6dof_mpc.ErrorModels` on, re-planning every "
         f"K = {REPLAN_EVERY} intervals down to 1 U_T left, LQR tracking of the plan in between, "
@@ -102,64 +90,51 @@ def analyse(
         "tolerances (`LandingTolerance.derive`, per run with its open-loop plan), and no "
         "glideslope, tilt, rate, mass, thrust or gimbal violation along the dense flown "
         "trajectory."
-    )))  # fmt: skip
-    if not n_runs:
-        return
-    arrays = {w: replan_arrays(out / w, rows[w]) for w in WARMSTARTS}
-    report.sections.append(("Summary", summary_table(rows, summaries, arrays)))
-    flown = arrays["tscvx"]
+    )  # fmt: skip
+
+
+def analyse(flights: Flights, report: rep.Report) -> None:
+    """The summary table, the paired comparisons of ``tscvx`` and the failures."""
+    report.sections.append(("Summary", summary_table(flights)))
+    flown = flights.arrays["tscvx"]
     for other in COMPARED:
         report.sections.append((f"T-SCvx vs {other} on the same re-plans",
                                 paired_text(flown, other)))  # fmt: skip
-    report.sections.append(("Failures", failures_text(rows)))
-    report.comparisons += comparisons(rows, arrays)
-    add_figures(report, out, WARMSTARTS, "descents")
+    report.sections.append(("Failures", failures_text(flights.rows)))
+    report.comparisons += comparisons(flights)
+    add_figures(report, flights.out, WARMSTARTS, "descents")
 
 
-def summary_table(
-    rows: dict[str, list[dict[str, str]]],
-    summaries: dict[str, dict[str, Any]],
-    arrays: dict[str, dict[str, np.ndarray]],
-) -> str:
+def summary_table(flights: Flights) -> str:
     """One column per warm start: success, propellant, touchdown errors, re-plan cost."""
-    table_rows = []
+    rows, summaries, arrays = flights.rows, flights.summaries, flights.arrays
 
-    def line(quantity: str, value) -> None:
-        table_rows.append((quantity, *(value(w) for w in WARMSTARTS)))
+    def best_starts(w: str) -> str:
+        if w != "best":
+            return "-"
+        used = _used(arrays[w])
+        return f"{int((used == 'previous').sum())} / {int((used == 'tscvx').sum())}"
 
-    line("success", lambda w: f"{int(succeeded(rows[w]).sum())}/{len(rows[w])}")
-    line("propellant / open loop, median (p95)", lambda w: (
-        f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
-        f"({rep.fmt(percentile(fuel_ratio(rows[w]), 95), 4)})"
-    ))  # fmt: skip
-    for col, unit in (("terminal_position_error", "U_L"), ("terminal_velocity_error", "U_L/U_T"),
-                      ("terminal_tilt_deg", "deg"), ("terminal_rate_deg", "deg/U_T")):  # fmt: skip
-        line(f"{col.replace('_', ' ')} median / max [{unit}]", lambda w, c=col: (
-            f"{rep.fmt(float(np.median(column(rows[w], c))))} / "
-            f"{rep.fmt(float(column(rows[w], c).max()))}"
-        ))  # fmt: skip
-    line("re-plan wall time median / p99 [s]", lambda w: (
-        f"{rep.fmt(summaries[w]['replan_time_median_s'])} / "
-        f"{rep.fmt(summaries[w]['replan_time_p99_s'])}"
-    ))  # fmt: skip
-    line("re-planning period, median [U_T]", lambda w: rep.fmt(summaries[w]["replan_period_s"]))
-    line("SCP iterations per re-plan median / mean / p99", lambda w: (
-        f"{rep.fmt(summaries[w]['replan_iterations_median'])} / "
-        f"{rep.fmt(float(np.mean(arrays[w]['replan_iterations'])))} / "
-        f"{rep.fmt(summaries[w]['replan_iterations_p99'])}"
-    ))  # fmt: skip
-    line("re-plans (failed)",
-         lambda w: f"{summaries[w]['replans']} ({summaries[w]['replans_failed']})")  # fmt: skip
-    line("T-SCvx cold fallbacks", lambda w: str(summaries[w]["tscvx_fallbacks"]))
-    line("best: re-plans started from previous / tscvx", lambda w: (
-        f"{int((_used(arrays[w]) == 'previous').sum())} / "
-        f"{int((_used(arrays[w]) == 'tscvx').sum())}" if w == "best" else "-"
-    ))  # fmt: skip
-    line("path-constraint violations (samples)", lambda w: str(summaries[w]["violations"]))
-    return rep.markdown_table(("quantity", *WARMSTARTS), table_rows) + (
+    errors = (("terminal_position_error", "U_L"), ("terminal_velocity_error", "U_L/U_T"),
+              ("terminal_tilt_deg", "deg"), ("terminal_rate_deg", "deg/U_T"))  # fmt: skip
+    return flights.table([
+        ("success", flights.successes),
+        ("propellant / open loop, median (p95)", lambda w: (
+            f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
+            f"({rep.fmt(percentile(fuel_ratio(rows[w]), 95), 4)})")),
+        *((f"{col.replace('_', ' ')} median / max [{unit}]", flights.spread(col))
+          for col, unit in errors),
+        ("re-plan wall time median / p99 [s]", flights.replan_times),
+        ("re-planning period, median [U_T]", lambda w: rep.fmt(summaries[w]["replan_period_s"])),
+        ("SCP iterations per re-plan median / mean / p99", flights.replan_iterations),
+        ("re-plans (failed)", flights.replans),
+        ("T-SCvx cold fallbacks", lambda w: str(summaries[w]["tscvx_fallbacks"])),
+        ("best: re-plans started from previous / tscvx", best_starts),
+        ("path-constraint violations (samples)", lambda w: str(summaries[w]["violations"])),
+    ]) + (
         "\n\nThe re-planning period is in Table 1's nondimensional time: set against wall "
         "seconds it says what share of the flight a re-plan takes if U_T is one second."
-    )
+    )  # fmt: skip
 
 
 def _used(arrays: dict[str, np.ndarray]) -> np.ndarray:
@@ -193,13 +168,11 @@ def paired_text(arrays: dict[str, np.ndarray], other: str) -> str:
     )
 
 
-def comparisons(
-    rows: dict[str, list[dict[str, str]]], arrays: dict[str, dict[str, np.ndarray]]
-) -> list[rep.Comparison]:
+def comparisons(flights: Flights) -> list[rep.Comparison]:
     """The rows of ``results.json``: the T-SCvx paper solves open loop only, so nothing is
     rated; the rows keep what the closed loop adds to its claim (T-SCvx fewer SCP iterations
     than cold SCvx) beside the shifted plan, the classical MPC start."""
-    flown = arrays["tscvx"]
+    flown = flights.arrays["tscvx"]
     n = "n/a: the T-SCvx paper solves open loop only"
 
     def iterations(other: str) -> str:
@@ -209,7 +182,7 @@ def comparisons(
         return (f"{np.median(it_t):g} vs {np.median(it_o):g} (median over {it_t.size} "
                 "re-plans)")  # fmt: skip
 
-    landed = ", ".join(f"{w} {int(succeeded(rows[w]).sum())}/{len(rows[w])}" for w in WARMSTARTS)
+    landed = ", ".join(f"{w} {flights.successes(w)}" for w in WARMSTARTS)
     rows_out = (
         ("closed-loop runs that land, per re-plan start", landed),
         ("SCP iterations per re-plan, T-SCvx vs cold SCvx (same re-plans)", iterations("cold")),

@@ -11,10 +11,8 @@ mid-horizon from the flown prefix, :mod:`scpformer.guidance.rendezvous_art`) fro
 from ``previous`` (compared, not flown), which gives the per-re-plan win/tie/loss and the
 iterations and wall times of the starts on identical problems.
 
-Instances never used in training: the sampler's stream of run ``r`` is ``SeedSequence([S,
-r])``, while the dataset engine draws instance ``i`` of a dataset of seed ``S'`` from
-``SeedSequence(S', spawn_key=(i,))`` (:mod:`scpformer.data.executors`); the two never
-coincide, whatever the seeds.
+Instances never used in training: a sampled campaign's runs and a dataset's instances are
+drawn from streams that never coincide (:mod:`scpformer.experiments.closed_loop`).
 
 Beside ours the report cites the numbers that Celestini et al. report for transformer warm
 starts of an MPC of the same rendezvous ("Transformer-based model predictive control:
@@ -23,14 +21,13 @@ up to 45% fewer solver iterations and a 7x shorter MPC run time, quoted as repor
 ours for the ART start against the cold one on the same re-plans (their model, horizon and
 solver differ from ours).
 
-Output (``OUT``): one resumable campaign folder per warm start (``runs.csv``,
-``run-NNNN.npz``, ``settings.json``, ``simulate.png``), ``results.csv`` (one row per run,
-the warm starts side by side), ``report.md`` and ``results.json``.
+Output: one campaign folder per warm start in ``OUT`` (:mod:`scpformer.experiments.closed_loop`).
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -38,21 +35,18 @@ import numpy as np
 
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
+    Flights,
     add_figures,
-    column,
     compared,
     fuel_ratio,
     percentile,
     relative,
-    replan_arrays,
     run_experiment,
     speedup,
     succeeded,
 )
 from scpformer.experiments.runner import RunOptions
-from scpformer.guidance.campaign import (
-    Campaign,
-)
+from scpformer.guidance.campaign import Campaign
 from scpformer.guidance.rendezvous_mpc import DockingTolerance, MPCConfig
 from scpformer.rendezvous import RendezvousInstance
 
@@ -64,6 +58,12 @@ WARMSTARTS = ("cold", "previous", "art", "best")
 COMPARED = {"cold": (), "previous": ("cold",), "art": ("cold", "previous"),
             "best": ("cold", "previous")}  # fmt: skip
 REPLAN_EVERY = 10  # K: the waypoint offset of Table 1, 9 re-plans over N = 100 impulses
+FAMILY = "rendezvous"
+#: The experiment's own settings in ``OUT/config.json``.
+SETTINGS = {
+    "instances": "sampled (Table 1 sampler, SeedSequence([seed, run]))",
+    "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
+}  # fmt: skip
 #: Celestini et al. (RA-L 2024), as reported (not re-measured).
 CELESTINI = "Celestini et al., RA-L 9(11) 2024"
 CELESTINI_ITERATIONS = "up to 45% fewer"
@@ -89,27 +89,13 @@ def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     import torch
 
     torch.set_num_threads(1)  # batch-1 ART rollouts: a second thread only synchronizes
-    settings = {
-        "instances": "sampled (Table 1 sampler, SeedSequence([seed, run]))",
-        "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
-    }  # fmt: skip
-    return run_experiment(
-        options, experiment=NAME, name=name, reproduces=REPRODUCES, command=command,
-        settings=settings, warmstarts=WARMSTARTS, campaign_of=campaign, family="rendezvous",
-        run_columns=RUN_COLUMNS, analyse=analyse, differences=DIFFERENCES,
-    )  # fmt: skip
+    return run_experiment(options, sys.modules[__name__], command=command, name=name)
 
 
-def analyse(
-    rows: dict[str, list[dict[str, str]]],
-    summaries: dict[str, dict[str, Any]],
-    out: Path,
-    report: rep.Report,
-) -> None:
-    """The summary table, the paired comparison, the failures and Celestini's numbers."""
-    n_runs = min((len(t) for t in rows.values()), default=0)
+def runs_text(n_runs: int) -> str:
+    """The "Runs" section: instances, errors, re-plans and what counts as a success."""
     tol = DockingTolerance.derive(RendezvousInstance())
-    report.sections.append(("Runs", (
+    return (
         f"{n_runs} runs per warm start on sampled Table 1 instances (fresh seed, never in a "
         f"training set), Table 2 errors, re-planning every K = {REPLAN_EVERY} impulses through "
         "the final approach (re-plans at nodes 10, 20, ..., 90; the one at 90, the waypoint "
@@ -117,50 +103,14 @@ def analyse(
         f"terminal miss <= {tol.position_m:.2f} m and <= {1e3 * tol.velocity_m_s:.2f} mm/s "
         f"(`DockingTolerance.derive`), no keep-out (> {tol.keep_out:g}) or cone "
         f"(> {tol.cone_m:g} m) violation along the dense flown trajectory."
-    )))  # fmt: skip
-    if not n_runs:
-        return
-    header = ("quantity", *WARMSTARTS)
-    table_rows = []
+    )  # fmt: skip
 
-    def line(quantity: str, value) -> None:
-        table_rows.append((quantity, *(value(w) for w in WARMSTARTS)))
 
-    arrays = {w: replan_arrays(out / w, rows[w]) for w in WARMSTARTS}
-    line("success", lambda w: f"{int(succeeded(rows[w]).sum())}/{len(rows[w])} "
-         f"({100 * succeeded(rows[w]).mean():.1f}%)")  # fmt: skip
-    line("delta-v / open loop, median (p95)", lambda w: (
-        f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
-        f"({rep.fmt(percentile(fuel_ratio(rows[w]), 95), 4)})"
-    ))  # fmt: skip
-    line("delta-v median [mm/s] (open loop)", lambda w: (
-        f"{1e3 * summaries[w]['fuel_median']:.2f} "
-        f"({1e3 * summaries[w]['open_loop_fuel_median']:.2f})"
-    ))  # fmt: skip
-    for col, unit, scale in (("terminal_position_error", "m", 1.0),
-                             ("terminal_velocity_error", "mm/s", 1e3)):  # fmt: skip
-        line(f"{col.replace('_', ' ')} median / p95 / max [{unit}]", lambda w, c=col, s=scale: (
-            f"{rep.fmt(s * float(np.median(column(rows[w], c))))} / "
-            f"{rep.fmt(s * percentile(column(rows[w], c), 95))} / "
-            f"{rep.fmt(s * float(column(rows[w], c).max()))}"
-        ))  # fmt: skip
-    line("re-plan wall time median / p99 [s]", lambda w: (
-        f"{rep.fmt(summaries[w]['replan_time_median_s'])} / "
-        f"{rep.fmt(summaries[w]['replan_time_p99_s'])}"
-    ))  # fmt: skip
-    line("re-planning period (median over runs) [s]",
-         lambda w: f"{summaries[w]['replan_period_s']:.0f}")  # fmt: skip
-    line("p99 re-plan time / period", lambda w: rep.fmt(
-        summaries[w]["replan_time_p99_s"] / summaries[w]["replan_period_s"]))  # fmt: skip
-    line("SCP iterations per re-plan median / mean / p99", lambda w: (
-        f"{rep.fmt(summaries[w]['replan_iterations_median'])} / "
-        f"{rep.fmt(float(np.mean(arrays[w]['replan_iterations'])))} / "
-        f"{rep.fmt(summaries[w]['replan_iterations_p99'])}"
-    ))  # fmt: skip
-    line("re-plans (failed)",
-         lambda w: f"{summaries[w]['replans']} ({summaries[w]['replans_failed']})")  # fmt: skip
-    line("path-constraint violations (samples)", lambda w: str(summaries[w]["violations"]))
-    report.sections.append(("Summary", rep.markdown_table(header, table_rows)))
+def analyse(flights: Flights, report: rep.Report) -> None:
+    """The summary table, the paired comparison, the failures and Celestini's numbers."""
+    tol = DockingTolerance.derive(RendezvousInstance())
+    arrays, summaries = flights.arrays, flights.summaries
+    report.sections.append(("Summary", summary_table(flights)))
     report.sections.append(("Who wins", verdict_text(summaries, arrays)))
     for flown, title in (
         ("previous", "Previous vs cold"),
@@ -169,9 +119,35 @@ def analyse(
     ):
         report.sections.append((f"{title} on the same re-plans",
                                 paired_text(flown, summaries[flown], arrays[flown])))  # fmt: skip
-    report.sections.append(("Failures", failures_text(rows, tol)))
+    report.sections.append(("Failures", failures_text(flights.rows, tol)))
     add_celestini(report, arrays["art"])
-    add_figures(report, out, WARMSTARTS, "trajectories")
+    add_figures(report, flights.out, WARMSTARTS, "trajectories")
+
+
+def summary_table(flights: Flights) -> str:
+    """One column per warm start: success, delta-v, terminal errors, re-plan cost."""
+    rows, summaries = flights.rows, flights.summaries
+    return flights.table([
+        ("success", lambda w: f"{flights.successes(w)} ({100 * succeeded(rows[w]).mean():.1f}%)"),
+        ("delta-v / open loop, median (p95)", lambda w: (
+            f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
+            f"({rep.fmt(percentile(fuel_ratio(rows[w]), 95), 4)})")),
+        ("delta-v median [mm/s] (open loop)", lambda w: (
+            f"{1e3 * summaries[w]['fuel_median']:.2f} "
+            f"({1e3 * summaries[w]['open_loop_fuel_median']:.2f})")),
+        ("terminal position error median / p95 / max [m]",
+         flights.spread("terminal_position_error", p95=True)),
+        ("terminal velocity error median / p95 / max [mm/s]",
+         flights.spread("terminal_velocity_error", 1e3, p95=True)),
+        ("re-plan wall time median / p99 [s]", flights.replan_times),
+        ("re-planning period (median over runs) [s]",
+         lambda w: f"{summaries[w]['replan_period_s']:.0f}"),
+        ("p99 re-plan time / period", lambda w: rep.fmt(
+            summaries[w]["replan_time_p99_s"] / summaries[w]["replan_period_s"])),
+        ("SCP iterations per re-plan median / mean / p99", flights.replan_iterations),
+        ("re-plans (failed)", flights.replans),
+        ("path-constraint violations (samples)", lambda w: str(summaries[w]["violations"])),
+    ])  # fmt: skip
 
 
 def paired_text(flown: str, summary: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
@@ -321,22 +297,17 @@ def add_celestini(report: rep.Report, arrays: dict[str, np.ndarray]) -> None:
             "conic solver and SCP differ); ours is the shipped ART model started mid-horizon "
             "from the flown prefix against the cold (convex Problem 2) start, on the same "
             "re-plan problems, rollout and convex solve of R(t_k) included")  # fmt: skip
+    rows = (  # quantity, Celestini et al.'s claim, ours
+        ("SCP iterations per MPC re-plan, warm vs cold start", CELESTINI_ITERATIONS,
+         f"{relative(fewer, 'fewer', 'more')} (ART vs cold, {it_p.size} re-plans)"),
+        ("MPC run time (re-plan wall time), warm vs cold start", CELESTINI_RUNTIME,
+         f"{speedup(t_c.sum() / t_p.sum())} (ART vs cold, total wall time)"),
+    )  # fmt: skip
     report.comparisons += [
-        rep.Comparison(
-            quantity="SCP iterations per MPC re-plan, warm vs cold start",
-            paper=f"{CELESTINI_ITERATIONS} ({CELESTINI})",
-            ours=f"{relative(fewer, 'fewer', 'more')} (ART vs cold, {it_p.size} re-plans)",
-            note=note,
-            status=rep.NOT_RATED,
-        ),
-        rep.Comparison(
-            quantity="MPC run time (re-plan wall time), warm vs cold start",
-            paper=f"{CELESTINI_RUNTIME} ({CELESTINI})",
-            ours=f"{speedup(t_c.sum() / t_p.sum())} (ART vs cold, total wall time)",
-            note=note,
-            status=rep.NOT_RATED,
-        ),
-    ]
+        rep.Comparison(quantity=q, paper=f"{claim} ({CELESTINI})", ours=ours, note=note,
+                       status=rep.NOT_RATED)
+        for q, claim, ours in rows
+    ]  # fmt: skip
 
 
 DIFFERENCES: tuple[str, ...] = (

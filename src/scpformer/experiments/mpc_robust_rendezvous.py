@@ -11,19 +11,16 @@ r])``). The flights of ``previous`` also solve every re-plan from ``cold`` (comp
 flown): the per-re-plan win/tie/loss, iterations and wall times of the two starts on
 identical problems.
 
-Instances never used in training: the sampler's stream of run ``r`` is ``SeedSequence([S,
-r])``, while the dataset engine draws instance ``i`` of a dataset of seed ``S'`` from
-``SeedSequence(S', spawn_key=(i,))`` (:mod:`scpformer.data.executors`); the two never
-coincide, whatever the seeds.
+Instances never used in training: a sampled campaign's runs and a dataset's instances are
+drawn from streams that never coincide (:mod:`scpformer.experiments.closed_loop`).
 
-Output (``OUT``): ``cold/`` and ``previous/`` (each a resumable campaign folder: ``runs.csv``,
-``run-NNNN.npz``, ``settings.json``, ``simulate.png``), ``results.csv`` (one row per run,
-both warm starts side by side), ``report.md`` and ``results.json``.
+Output: ``OUT/cold`` and ``OUT/previous`` beside the closed-loop experiments' files.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -31,15 +28,13 @@ import numpy as np
 
 from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
+    Flights,
     add_figures,
-    column,
     fuel_ratio,
     percentile,
     relative,
-    replan_arrays,
     run_experiment,
     speedup,
-    succeeded,
 )
 from scpformer.experiments.runner import RunOptions
 from scpformer.guidance.campaign import Campaign
@@ -51,6 +46,13 @@ REPRODUCES = "closed-loop MPC of the chance-constrained, passively safe rendezvo
 WARMSTARTS = ("cold", "previous")
 REPLAN_EVERY = 10  # K: 9 re-plans over N = 100 impulses, every 710 s
 SAFETY_SAMPLES = 200  # Monte Carlo draws per flown node (MPCConfig.safety_samples)
+FAMILY = "robust-rendezvous"
+#: The experiment's own settings in ``OUT/config.json``.
+SETTINGS = {
+    "instances": "sampled (robust Table 1 sampler, SeedSequence([seed, run]))",
+    "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
+    "safety_samples": SAFETY_SAMPLES,
+}  # fmt: skip
 #: Columns of ``OUT/results.csv`` (per warm start ``W``: ``W_<column>``).
 RUN_COLUMNS = (
     "success", "terminal_position_error", "terminal_velocity_error", "fuel",
@@ -71,17 +73,7 @@ def campaign(n: int, seed: int, warmstart: str) -> Campaign:
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``mpc-robust-rendezvous`` into ``options.out``; returns the report's path."""
-    settings = {
-        "instances": "sampled (robust Table 1 sampler, SeedSequence([seed, run]))",
-        "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
-        "safety_samples": SAFETY_SAMPLES,
-    }  # fmt: skip
-    return run_experiment(
-        options, experiment=NAME, name=name, reproduces=REPRODUCES, command=command,
-        settings=settings, warmstarts=WARMSTARTS, campaign_of=campaign,
-        family="robust-rendezvous", run_columns=RUN_COLUMNS, analyse=analyse,
-        differences=DIFFERENCES,
-    )  # fmt: skip
+    return run_experiment(options, sys.modules[__name__], command=command, name=name)
 
 
 def _med_p99(values: np.ndarray) -> str:
@@ -89,15 +81,9 @@ def _med_p99(values: np.ndarray) -> str:
     return f"{rep.fmt(median)} / {rep.fmt(percentile(values, 99))}"
 
 
-def analyse(
-    rows: dict[str, list[dict[str, str]]],
-    summaries: dict[str, dict[str, Any]],
-    out: Path,
-    report: rep.Report,
-) -> None:
-    """The summary table per warm start and the paired comparison of previous vs cold."""
-    n_runs = min((len(t) for t in rows.values()), default=0)
-    report.sections.append(("Runs", (
+def runs_text(n_runs: int) -> str:
+    """The "Runs" section: instances, errors, re-plans and what counts as a success."""
+    return (
         f"{n_runs} runs per warm start on sampled robust Table 1 instances (fresh seed, never "
         f"in a training set), Table 2 errors, re-planning every K = {REPLAN_EVERY} impulses "
         "(nodes 10, 20, ..., 90) on a shrinking horizon to the pre-docking state. Success: "
@@ -110,53 +96,45 @@ def analyse(
         "the family's dense Monte Carlo verification of passive safety at the nodes it was "
         "flown (200 draws per node, failing when more than 3 enter: the binomial threshold at "
         "Delta = 1e-3, confidence 1e-4)."
-    )))  # fmt: skip
-    if not n_runs:
-        return
-    arrays = {w: replan_arrays(out / w, rows[w]) for w in WARMSTARTS}
-    table_rows = []
+    )  # fmt: skip
 
-    def line(quantity: str, value) -> None:
-        table_rows.append((quantity, *(value(w) for w in WARMSTARTS)))
 
-    line("success", lambda w: f"{int(succeeded(rows[w]).sum())}/{len(rows[w])}")
-    line("delta-v / open loop, median (max)", lambda w: (
-        f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
-        f"({rep.fmt(float(np.max(fuel_ratio(rows[w]))), 4)})"
-    ))  # fmt: skip
-    line("terminal miss median / max [m]", lambda w: (
-        f"{rep.fmt(float(np.median(column(rows[w], 'terminal_position_error'))))} / "
-        f"{rep.fmt(float(np.max(column(rows[w], 'terminal_position_error'))))}"
-    ))  # fmt: skip
-    line("terminal velocity median / max [mm/s]", lambda w: (
-        f"{rep.fmt(1e3 * float(np.median(column(rows[w], 'terminal_velocity_error'))))} / "
-        f"{rep.fmt(1e3 * float(np.max(column(rows[w], 'terminal_velocity_error'))))}"
-    ))  # fmt: skip
-    line("re-plan wall time median / p99 [s]",
-         lambda w: _med_p99(arrays[w]["replan_wall_s"]))  # fmt: skip
-    line("re-planning period [s]", lambda w: f"{summaries[w]['replan_period_s']:.0f}")
-    line("convex solves per re-plan median / p99",
-         lambda w: _med_p99(arrays[w]["replan_iterations"]))  # fmt: skip
-    line("re-plans (failed)",
-         lambda w: f"{summaries[w]['replans']} ({summaries[w]['replans_failed']})")  # fmt: skip
-    line("violations (keep-out samples, drift entries, failing nodes)",
-         lambda w: str(summaries[w]["violations"]))  # fmt: skip
-    report.sections.append(("Summary", rep.markdown_table(("quantity", *WARMSTARTS),
-                                                          table_rows)))  # fmt: skip
+def analyse(flights: Flights, report: rep.Report) -> None:
+    """The summary table per warm start and the paired comparison of previous vs cold."""
+    previous = flights.arrays["previous"]
+    report.sections.append(("Summary", summary_table(flights)))
     report.sections.append(("Previous vs cold on the same re-plans",
-                            paired_text(summaries["previous"], arrays["previous"])))  # fmt: skip
-    report.comparisons += comparisons(rows, arrays["previous"])
-    add_figures(report, out, WARMSTARTS, "trajectories")
+                            paired_text(flights.summaries["previous"], previous)))  # fmt: skip
+    report.comparisons += comparisons(flights, previous)
+    add_figures(report, flights.out, WARMSTARTS, "trajectories")
 
 
-def comparisons(
-    rows: dict[str, list[dict[str, str]]], arrays: dict[str, np.ndarray]
-) -> list[rep.Comparison]:
+def summary_table(flights: Flights) -> str:
+    """One column per warm start: success, delta-v, terminal errors, re-plan cost, violations."""
+    rows, summaries, arrays = flights.rows, flights.summaries, flights.arrays
+    return flights.table([
+        ("success", flights.successes),
+        ("delta-v / open loop, median (max)", lambda w: (
+            f"{rep.fmt(summaries[w]['fuel_ratio_median'], 4)} "
+            f"({rep.fmt(float(np.max(fuel_ratio(rows[w]))), 4)})")),
+        ("terminal miss median / max [m]", flights.spread("terminal_position_error")),
+        ("terminal velocity median / max [mm/s]", flights.spread("terminal_velocity_error", 1e3)),
+        ("re-plan wall time median / p99 [s]", lambda w: _med_p99(arrays[w]["replan_wall_s"])),
+        ("re-planning period [s]", lambda w: f"{summaries[w]['replan_period_s']:.0f}"),
+        ("convex solves per re-plan median / p99",
+         lambda w: _med_p99(arrays[w]["replan_iterations"])),
+        ("re-plans (failed)", flights.replans),
+        ("violations (keep-out samples, drift entries, failing nodes)",
+         lambda w: str(summaries[w]["violations"])),
+    ])  # fmt: skip
+
+
+def comparisons(flights: Flights, arrays: dict[str, np.ndarray]) -> list[rep.Comparison]:
     """The rows of ``results.json``: the robust ART paper plans open loop only, so nothing is
     rated; the rows keep the closed loop's outcome and the shifted plan's convex solves
     against the three-stage cold start on the same re-plans."""
     n = "n/a: the robust ART paper plans open loop only"
-    safe = ", ".join(f"{w} {int(succeeded(rows[w]).sum())}/{len(rows[w])}" for w in WARMSTARTS)
+    safe = ", ".join(f"{w} {flights.successes(w)}" for w in WARMSTARTS)
     flown, cold = arrays["replan_iterations"], arrays["compare_iterations"]
     solves = (f"{np.median(flown):g} vs {np.median(cold):g} (median over {flown.size} re-plans)"
               if flown.size and cold.size == flown.size else "no comparison solves")  # fmt: skip
