@@ -1,4 +1,6 @@
-"""Flags shared by several commands: output files, warm starts, configuration sections."""
+"""Flags shared by several commands: output files, warm starts, configuration sections; flag
+tables (:data:`FlagSpec`, :func:`add_flags`); the solve and bench parsers of the rendezvous
+families (:class:`SolveFlags`, :func:`add_solve_parser`, :func:`add_bench_parser`)."""
 
 from __future__ import annotations
 
