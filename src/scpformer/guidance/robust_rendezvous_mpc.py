@@ -64,7 +64,11 @@ the first replaced by the estimate, and its impulses), given to ``method="passiv
 remaining ``N - k`` impulses with the flown prefix as its context and ``R(t_k) = -J`` of the
 remaining TPBVP (:mod:`.rendezvous_art`, the deterministic loop's mid-horizon start), the
 post hoc check of Eq. 8 keeps its guess or falls back to the TPBVP, and SCvx* on passive
-safety starts from the result (the record's ``used``: ``art`` or ``tpbvp``).
+safety starts from the result (the record's ``used``: ``art`` or ``tpbvp``); ``best`` puts
+ART's guess (as ``art`` makes it) and the shifted plan of ``previous`` through the same Eq. 8
+check, against the ``R(t_k) = -J`` and ``C(t_k) = 0`` ART was conditioned on, and SCvx* on
+passive safety starts from the one it prefers (:func:`best_guess`; ``used``: ``art``,
+``previous`` or, when the check accepts neither, ``tpbvp``, the fallback of ``art``).
 
 Success of a flown run (:class:`RobustClosedLoopResult`): the pre-docking state ``x_f`` is
 reached within :func:`derive_tolerance`, and no constraint is violated along the true flown
@@ -80,6 +84,7 @@ the chance constraint of what was flown, checked in the truth model).
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -90,7 +95,7 @@ import numpy as np
 from scpformer.dynamics.orbits import oe_to_eci, rtn_dcm, rtn_to_eci
 from scpformer.dynamics.roe import psi_matrix
 from scpformer.guidance.records import flyable_plan
-from scpformer.guidance.rendezvous_art import FlownLog, art_provider
+from scpformer.guidance.rendezvous_art import FlownLog, art_provider, uses_art
 from scpformer.guidance.rendezvous_mpc import (
     ClosedLoopResult,
     DockingTolerance,
@@ -114,15 +119,17 @@ from scpformer.problems.robust_rendezvous.plan_dynamics import (
     osculating_rtn_map,
     target_mean_osc_map,
 )
-from scpformer.problems.robust_rendezvous.safety import drift_offsets
+from scpformer.problems.robust_rendezvous.safety import drift_offsets, trajectory_violations
 from scpformer.robust_rendezvous import RobustInstance, RobustSolverConfig, solve
 from scpformer.scp.solution import Solution, Status, Trajectory
-from scpformer.scp.warmstart import GivenWarmStart
+from scpformer.scp.warmstart import GivenWarmStart, WarmStartResult, timed, trajectory_cost
 from scpformer.validation import check_int, check_positive
-from scpformer.warmstart.art import FlownHistory
+from scpformer.warmstart.art import AcceptanceCheck, FlownHistory, preferred_guess
 
 #: Warm starts of a re-plan that the loop implements.
-WARMSTARTS = ("cold", "previous", "art")
+WARMSTARTS = ("cold", "previous", "art", "best")
+#: The family of the robust ART model (:func:`~.rendezvous_art.art_provider`).
+FAMILY = "robust-rendezvous"
 #: Warm starts a user may ask for that the loop does not implement, and why.
 UNSUPPORTED: dict[str, str] = {}
 #: Smallest number of impulses of a remaining problem (the scenario's ``n_nodes >= 2``).
@@ -435,33 +442,123 @@ class RobustClosedLoopResult(ClosedLoopResult):
 
 
 # ======================================================================================
+# the warm start best
+# ======================================================================================
+def previous_candidate(sub: RobustInstance, warm: GivenWarmStart, mode: str) -> WarmStartResult:
+    """The shifted plan of ``previous`` (:func:`previous_plan`) as a candidate of the post hoc
+    check: its guess with the record's ``cost`` = ``sum |u|`` [m/s] and ``constraint_to_go`` =
+    ``C(t_k)``, the Eq. 7 budget of its states and impulses in the remaining problem ``sub``
+    (passive safety ``mode``; the measure ART's own guess is given,
+    ``RobustArtFamily.trajectory_ctg``); ``time_s`` is the time this took."""
+    start = time.perf_counter()
+    prev = warm.guess(sub)
+    x, u = prev.trajectory.x, prev.trajectory.u
+    ctg = float(trajectory_violations(sub, x, u, mode)[0])
+    record = replace(prev.record, cost=trajectory_cost(prev.trajectory), constraint_to_go=ctg)
+    return replace(prev, record=timed(record, start))
+
+
+def best_guess(
+    art: WarmStartResult, previous: WarmStartResult, check: AcceptanceCheck
+) -> WarmStartResult:
+    """The guess of the warm start ``best``: of ART's guess and the shifted plan, the one the
+    post hoc check prefers (robust ART paper, Eq. 8).
+
+    Both are put through Eq. 8, ``E_R = (R - R_des) / R_des`` and ``E_C = C - C_des``, against
+    the desired ``R_des = R(t_k) = -J`` (the remaining TPBVP) and ``C_des = C(t_k)`` ART was
+    conditioned on (``art.record.details``: ``rtg0``, ``ctg0``; ART's own guess by its
+    ``art_cost`` and ``art_constraint_to_go``, whatever its decision); the preferred one
+    (:func:`~scpformer.warmstart.art.preferred_guess`: accepted first, then the smaller
+    ``E_C``, then the smaller ``|E_R|``, ART on a tie) is returned when the check accepts it.
+
+    When the check accepts neither, the paper's logic holds (Sec. 5: a guess that fails the
+    check is replaced by the CVX fallback): ``art``'s own result is returned, the remaining
+    TPBVP (its ``used`` is ``tpbvp``); an unaccepted shifted plan is never preferred to it.
+    When ART has no guess (the TPBVP failed: no ``R(t_k)`` to condition on, nothing to fall
+    back to) the shifted plan is returned unchecked.
+
+    Parameters
+    ----------
+    art
+        ``ArtWarmStart.guess`` of the remaining problem (the start ``art``).
+    previous
+        :func:`previous_candidate` of the same problem.
+    check
+        The Eq. 8 acceptance region (the ART provider's).
+
+    Returns
+    -------
+    WarmStartResult
+        The chosen guess; its record names it (``used``: ``art``, ``previous`` or ``tpbvp``),
+        ``time_s`` covers ART's guess (TPBVP and generation) and the checks, ``details`` adds
+        ``best`` (the start chosen), ``accepted`` (each candidate's decision) and the shifted
+        plan's ``previous_E_R`` and ``previous_E_C``; ``solution`` is ART's TPBVP, a stage of
+        the re-plan's solve whichever guess starts it.
+    """
+    start = time.perf_counter()
+    details = art.record.details
+    if "rtg0" not in details:  # ART generated nothing
+        reason = f"best: previous (ART has no guess: {art.record.reason})"
+        record = replace(previous.record, reason=reason, time_s=art.record.time_s,
+                         details={**details, "best": "previous"})  # fmt: skip
+        return replace(previous, record=record)
+    chosen, decisions = preferred_guess(
+        check, rtg_desired=details["rtg0"], ctg_desired=details["ctg0"],
+        candidates={"art": (details["art_cost"], details["art_constraint_to_go"]),
+                    "previous": (previous.record.cost, previous.record.constraint_to_go)},
+    )  # fmt: skip
+    reason = "best: " + "; ".join(f"{n} ({d.reason})" for n, d in decisions.items())
+    result = previous if chosen == "previous" and decisions[chosen].accepted else art
+    used = "previous" if result is previous else art.record.used
+    extra = {"best": used, "accepted": {n: d.accepted for n, d in decisions.items()},
+             "previous_E_R": decisions["previous"].E_R,
+             "previous_E_C": decisions["previous"].E_C}  # fmt: skip
+    elapsed = art.record.time_s + previous.record.time_s + time.perf_counter() - start
+    record = replace(result.record, reason=reason, time_s=elapsed, details={**details, **extra})
+    return WarmStartResult(result.trajectory, record, art.solution)
+
+
+# ======================================================================================
 # the loop
 # ======================================================================================
 def _solver(
     sub: RobustInstance | None, previous: Solution, shift: int, cfg: MPCConfig,
     history: FlownHistory | None = None,
 ) -> Callable[[str], Solution]:  # fmt: skip
-    """``solve_with(name)`` of a re-plan: ``cold`` the three-stage solve, ``previous`` passive
-    safety from the shifted plan (:func:`previous_plan`), ``art`` passive safety from the
-    robust ART model's guess started mid-horizon with the flown ``history`` as its context
-    (PS-ART-C of the robust ART paper, its post hoc check of Eq. 8 with the TPBVP as the
-    fallback, ``R(t_k) = -J`` of the remaining TPBVP; :mod:`.rendezvous_art`). The
-    solution's ``iterations`` is the count of convex solves of every stage it ran
-    (:func:`stage_solves`)."""
+    """``solve_with(name)`` of a re-plan: ``cold`` the three-stage solve, the others passive
+    safety from the warm start of :func:`_warmstart`. The solution's ``iterations`` is the
+    count of convex solves of every stage it ran (:func:`stage_solves`)."""
 
     def solve_with(name: str) -> Solution:
-        if name == "previous":
-            warm = previous_plan(previous, shift, sub.roe0)
-            sol = solve(sub, cfg.solver, method="passive_safety", warmstart=warm)
-        elif name == "art":
-            provider = art_provider(cfg.model, cfg.solver, "robust-rendezvous")
-            warm = provider.guess(sub, history)
-            sol = solve(sub, cfg.solver, method="passive_safety", warmstart=warm)
-        else:
+        if name == "cold":
             sol = solve(sub, cfg.solver)
+        else:
+            warm = _warmstart(name, sub, previous, shift, cfg, history)
+            sol = solve(sub, cfg.solver, method="passive_safety", warmstart=warm)
         return replace(sol, iterations=stage_solves(sol))
 
     return solve_with
+
+
+def _warmstart(
+    name: str, sub: RobustInstance, previous: Solution, shift: int, cfg: MPCConfig,
+    history: FlownHistory | None,
+) -> GivenWarmStart | WarmStartResult:  # fmt: skip
+    """The passive-safety warm start ``name`` of a re-plan: ``previous`` the shifted plan
+    (:func:`previous_plan`); ``art`` the robust ART model's guess started mid-horizon with the
+    flown ``history`` as its context (PS-ART-C of the robust ART paper, its post hoc check of
+    Eq. 8 with the TPBVP as the fallback, ``R(t_k) = -J`` of the remaining TPBVP;
+    :mod:`.rendezvous_art`); ``best`` the one of the two Eq. 8 prefers (:func:`best_guess`).
+    Everything here runs inside the re-plan's timing."""
+    warm = previous_plan(previous, shift, sub.roe0)
+    if name == "previous":
+        return warm
+    provider = art_provider(cfg.model, cfg.solver, FAMILY)
+    art = provider.guess(sub, history)
+    if name == "art":
+        return art
+    candidate = previous_candidate(sub, warm, cfg.solver.safety_mode)
+    return best_guess(art, candidate, provider.acceptance or AcceptanceCheck())
 
 
 def stage_solves(sol: Solution) -> int:
@@ -503,7 +600,9 @@ def fly(
     open_loop = open_loop or open_loop_plan(instance, cfg)
 
     starts: list[tuple[int, RobustInstance, Solution]] = [(0, instance, open_loop)]
-    log = FlownLog(instance, open_loop) if "art" in {cfg.warmstart, *cfg.compare} else None
+    log = FlownLog(instance, open_loop) if uses_art(cfg) else None
+    if log:  # the model is loaded before the re-plans are timed
+        art_provider(cfg.model, cfg.solver, FAMILY)
 
     def replan(
         k: int, estimate: np.ndarray, target_oe: np.ndarray, plan: Solution, shift: int
