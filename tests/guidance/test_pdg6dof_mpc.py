@@ -45,6 +45,19 @@ def test_with_no_error_and_no_replan_the_loop_flies_the_open_loop_plan(plan):
     assert result.success and result.path_violations()["count"] == 0
 
 
+def test_re_plans_over_the_time_budget_are_not_flown(plan):
+    """A budget no solve can meet: every re-plan is late and the loop flies the open-loop
+    plan to touchdown, as the no-re-plan flight does."""
+    cfg = mpc.MPCConfig(replan_every=10, errors=mpc.ErrorModels.none(), time_budget_s=1e-9,
+                        **UNTRACKED)  # fmt: skip
+    result = mpc.fly(INSTANCE, cfg, seed=0, open_loop=plan)
+    assert result.replans and all(r.late and not r.accepted for r in result.replans)
+    assert result.t[-1] == pytest.approx(float(plan.trajectory.p[0]))
+    np.testing.assert_allclose(result.x[:: mpc.SAMPLES_PER_INTERVAL], plan.trajectory.x,
+                               atol=TOL.defect)  # fmt: skip
+    assert Campaign(runs=1, config=cfg).settings()["time_budget_s"] == 1e-9
+
+
 def test_with_no_error_the_previous_plan_replans_keep_the_propellant(plan):
     """Re-planned from the true state with the shifted plan as the start, every re-plan
     finds the same optimum (Bellman): measured 14 re-plans of 2 iterations each, propellant

@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from scpformer.guidance import pdg6dof_mpc, rendezvous_mpc
-from scpformer.guidance.records import record_table, replan_statistics
+from scpformer.guidance.records import check_budget, record_table, replan_statistics, within_budget
 
 
 def _rendezvous_record(accepted: bool, iterations: int, wall_s: float):
@@ -50,5 +51,38 @@ def test_a_table_holds_one_array_per_field_in_record_order():
         "iterations",
         "wall_s",
         "used",
+        "late",
     ]
     assert table["iterations"].tolist() == [3, 7] and table["accepted"].tolist() == [True, False]
+
+
+@pytest.mark.parametrize("record_type", [rendezvous_mpc.ReplanRecord, pdg6dof_mpc.ReplanRecord])
+def test_a_re_plan_over_the_budget_is_late_and_not_accepted(record_type):
+    record = _rendezvous_record(True, 3, 0.5)
+    if record_type is pdg6dof_mpc.ReplanRecord:
+        record = pdg6dof_mpc.ReplanRecord(
+            node=5, time=0.5, warmstart="cold", accepted=True, status="converged", cost=-2.0,
+            iterations=3, wall_s=0.5, period=0.5, fallback="", message="free text",
+        )  # fmt: skip
+    assert within_budget(record, None) is record  # no budget
+    assert within_budget(record, 0.5) is record  # on the budget is in time
+    late = within_budget(record, 0.25)
+    assert late.late and not late.accepted and late.wall_s == record.wall_s
+    assert late.message.startswith("late: 0.5 s against a budget of 0.25 s")
+    assert record_table([late], record_type)["late"].tolist() == [True]
+    assert replan_statistics([record, late])["replans_failed"] == 1
+
+
+@pytest.mark.parametrize(
+    ("budget", "match"),
+    [(0.0, "positive"), (-1.0, "positive"), (math.inf, "finite"), (math.nan, "finite"),
+     ("1", "number of seconds"), (True, "number of seconds")],
+)  # fmt: skip
+def test_a_bad_budget_is_refused_naming_the_field(budget, match):
+    with pytest.raises(ValueError, match=f"time_budget_s.*{match}"):
+        check_budget(budget)
+    with pytest.raises(ValueError, match="time_budget_s"):
+        rendezvous_mpc.MPCConfig(time_budget_s=budget)
+    with pytest.raises(ValueError, match="time_budget_s"):
+        pdg6dof_mpc.MPCConfig(time_budget_s=budget)
+    assert check_budget(2) == 2.0 and check_budget(None) is None

@@ -86,6 +86,23 @@ def test_the_previous_plan_warm_starts_the_replans(plan):
         assert abs(flown.cost - other.cost) <= 1e-3 * other.cost  # one optimum, two starts
 
 
+def test_re_plans_over_the_time_budget_are_not_flown(plan):
+    """A budget no solve can meet: every re-plan is late, recorded, and the loop flies the
+    open-loop plan to the end, exactly as without re-plans."""
+    cfg = MPCConfig(replan_every=45, errors=ErrorModels.none(), time_budget_s=1e-9,
+                    compare=("previous",))  # fmt: skip
+    result = fly(INSTANCE, cfg, seed=0, open_loop=plan)
+    assert [r.node for r in result.replans] == [45, 90]
+    assert all(r.late and not r.accepted for r in [*result.replans, *result.comparisons])
+    assert all(r.status == "converged" for r in result.replans)  # solved, but too late
+    np.testing.assert_array_equal(result.dv_applied, plan.trajectory.u)
+    assert result.summary()["replans_failed"] == 2
+    assert result.arrays()["replan_late"].tolist() == [True, True]
+    settings = Campaign(runs=1, config=cfg).settings()
+    assert settings["time_budget_s"] == 1e-9
+    assert "time_budget_s" not in Campaign(runs=1, config=MPCConfig()).settings()
+
+
 def test_replan_nodes_run_through_the_final_approach_to_two_nodes_before_the_end():
     assert replan_nodes(100, 10, 10) == [10, 20, 30, 40, 50, 60, 70, 80, 90]
     assert replan_nodes(100, 10, 30) == [30, 60, 90]

@@ -1,8 +1,10 @@
-"""Argument types for counts and seeds: argparse names the flag when a value is refused."""
+"""Argument types for counts, seeds and durations: argparse names the flag when a value is
+refused."""
 
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 
 
@@ -24,3 +26,17 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
 
 count = int_at_least(0)  # instance counts that may be zero, seeds
 positive = int_at_least(1)  # instance counts, workers, shard sizes
+
+
+def positive_seconds(text: str) -> float:
+    """An argparse ``type`` accepting a positive, finite number of seconds."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be positive and finite, got {text}")
+    return value
+
+
+positive_seconds.__name__ = "positive seconds"

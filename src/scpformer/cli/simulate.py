@@ -33,6 +33,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             errors=pdg.ErrorModels() if args.errors == "default" else pdg.ErrorModels.none(),
             tracking=pdg.TrackingWeights() if args.tracking == "lqr" else None,
             model=None if args.model is None else str(args.model),
+            time_budget_s=args.time_budget,
         )
     else:
         from scpformer.guidance import robust_rendezvous_mpc as robust
@@ -45,6 +46,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             compare=(args.compare,) if args.compare else (),
             errors=ErrorModels() if args.errors == "table2" else ErrorModels.none(),
             **({"model": str(model)} if model is not None else {}),
+            time_budget_s=args.time_budget,
         )
         if {args.warmstart, args.compare} & {"art", "best"}:
             from scpformer.cli.warmstart import single_thread_inference

@@ -74,6 +74,12 @@ TIE_M_S = 1e-6
 FAMILIES = ("rendezvous", "pdg6dof", "robust-rendezvous")
 
 
+def _budget_setting(config: Any) -> dict[str, float]:
+    """The time budget as a setting when one is set (folders flown without one resume)."""
+    budget = config.time_budget_s
+    return {} if budget is None else {"time_budget_s": budget}
+
+
 def family_of(config: Any) -> str:
     """The family whose ``MPCConfig`` ``config`` is; ``ValueError`` for anything else."""
     if isinstance(config, MPCConfig):
@@ -144,6 +150,7 @@ class Campaign:
                 "tracking": asdict(cfg.tracking) if cfg.tracking is not None else None,
                 "thrust_margin": cfg.thrust_margin, "gimbal_margin_deg": cfg.gimbal_margin_deg,
                 **({"model": cfg.model} if cfg.model not in (None, "default") else {}),
+                **_budget_setting(cfg),
                 "errors": {
                     name: getattr(errors, name) for name in (
                         "thrust_magnitude", "pointing_deg", "mass_fraction",
@@ -162,7 +169,7 @@ class Campaign:
                 name: getattr(cfg.errors, name) is not None
                 for name in ("navigation", "actuation", "process_noise")
             },
-        } | robust_only  # fmt: skip
+        } | robust_only | _budget_setting(cfg)  # fmt: skip
 
     def run_seed(self, run: int) -> int:
         return int(np.random.SeedSequence([self.seed, run]).generate_state(1)[0])

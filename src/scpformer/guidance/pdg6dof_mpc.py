@@ -58,7 +58,13 @@ from scpformer.guidance.pdg6dof_tracking import (
     project_thrust,
     tracking_gains,
 )
-from scpformer.guidance.records import flyable_plan, replan_statistics, replan_tables
+from scpformer.guidance.records import (
+    check_budget,
+    flyable_plan,
+    replan_statistics,
+    replan_tables,
+    within_budget,
+)
 from scpformer.pdg6dof import PDGInstance, PDGSolverConfig, sample_instances, solve
 from scpformer.problems.pdg6dof import constraints as con
 from scpformer.scp.solution import Solution, Status, Trajectory
@@ -390,6 +396,12 @@ class MPCConfig:
     model
         T-SCvx networks of the ``tscvx`` and ``best`` starts: a training run folder
         (``scpformer train tscvx``), or None / ``"default"`` for the shipped ones.
+    time_budget_s
+        Wall seconds a re-plan may take (warm start, solve, verification and the tracking
+        gains of its plan); a later one is not flown and recorded as late
+        (:func:`~scpformer.guidance.records.within_budget`). None (default): no budget. The
+        re-planning period is in Table 1's nondimensional time, so what a budget in seconds
+        means depends on the time unit U_T of the vehicle flown.
     """
 
     replan_every: int = 5
@@ -404,8 +416,10 @@ class MPCConfig:
     thrust_margin: float = 0.06
     gimbal_margin_deg: float = 2.0
     model: str | None = None
+    time_budget_s: float | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "time_budget_s", check_budget(self.time_budget_s))
         check_finite("thrust_margin", self.thrust_margin, shape=(), nonnegative=True)
         check_finite("gimbal_margin_deg", self.gimbal_margin_deg, shape=(), nonnegative=True)
         c = PDGInstance().constants
@@ -464,6 +478,7 @@ class ReplanRecord:
     fallback: str  # T-SCvx's fallback ("" when none or not T-SCvx)
     message: str
     used: str = ""  # the start the solve ran from (best: previous or tscvx; else the name)
+    late: bool = False  # over the time budget: not accepted (records.within_budget)
 
 
 @dataclass(frozen=True)
@@ -893,9 +908,11 @@ def fly(
                 start = time.perf_counter()
                 new_gains = _gains(instance, sol, cfg)
                 record = replace(record, wall_s=record.wall_s + time.perf_counter() - start)
+            record = within_budget(record, cfg.time_budget_s)
             replans.append(record)
             for other in cfg.compare:
-                comparisons.append(_replan(*args, other, *rest)[0])
+                comparisons.append(within_budget(_replan(*args, other, *rest)[0],
+                                                 cfg.time_budget_s))  # fmt: skip
             if record.accepted and sol is not None:
                 plan, node, gains = sol, 0, new_gains
                 continue

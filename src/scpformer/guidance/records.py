@@ -1,6 +1,6 @@
-"""What every family's closed loop shares: the check of the open-loop plan it starts from, and
-what it keeps of its re-plans (the ``runs.csv`` statistics and the per-re-plan tables of
-``run-NNNN.npz``).
+"""What every family's closed loop shares: the check of the open-loop plan it starts from, the
+time budget of a re-plan, and what it keeps of its re-plans (the ``runs.csv`` statistics and
+the per-re-plan tables of ``run-NNNN.npz``).
 
 A family's re-plan record is a frozen dataclass with at least ``accepted`` (bool),
 ``iterations`` (int) and ``wall_s`` (float, the wall time of the whole re-plan: warm start,
@@ -12,12 +12,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from scpformer.scp.solution import Solution
 
+#: A family's re-plan record (a frozen dataclass with ``accepted``, ``wall_s``, ``late`` and
+#: ``message``).
+R = TypeVar("R")
 #: numpy dtype of a record field by its annotation (fields of other types are left out).
 _DTYPES = {"int": int, "float": float, "bool": bool, "str": str}
 #: Fields kept out of the npz tables (free text, read from the logs instead).
@@ -36,6 +39,36 @@ def flyable_plan(sol: Solution, accepted: Callable[[Solution], bool]) -> Solutio
     if not accepted(sol):
         raise ValueError(f"the open-loop plan failed ({sol.status.value}): {sol.message}")
     return sol
+
+
+def within_budget(record: R, budget_s: float | None) -> R:
+    """``record`` as the loop takes it under a re-plan time budget.
+
+    A re-plan whose wall time (``record.wall_s``: warm start, solve and verification) exceeds
+    ``budget_s`` [s] is late: its plan would reach the actuators after the vehicle has moved
+    on, so it is not accepted and the last accepted plan keeps being flown. The returned
+    record then has ``accepted`` False, ``late`` True and a message saying by how much.
+    ``budget_s`` None is no budget (the default of every loop: wall times depend on the
+    machine, so a budget makes a run's outcome depend on it too).
+    """
+    if budget_s is None or record.wall_s <= budget_s:
+        return record
+    late = f"late: {record.wall_s:.3g} s against a budget of {budget_s:.3g} s"
+    return dataclasses.replace(record, accepted=False, late=True,
+                               message=f"{late}; {record.message}")  # fmt: skip
+
+
+def check_budget(budget_s: Any) -> float | None:
+    """``time_budget_s`` of a loop's configuration: None or a positive finite number of
+    seconds; ``ValueError`` naming the field otherwise."""
+    if budget_s is None:
+        return None
+    if isinstance(budget_s, bool) or not isinstance(budget_s, int | float):
+        raise ValueError(f"time_budget_s must be a number of seconds or None, got "
+                         f"{type(budget_s).__name__}")  # fmt: skip
+    if not (math.isfinite(budget_s) and budget_s > 0.0):
+        raise ValueError(f"time_budget_s must be positive and finite, got {budget_s}")
+    return float(budget_s)
 
 
 def replan_statistics(replans: Sequence[Any]) -> dict[str, float | int]:

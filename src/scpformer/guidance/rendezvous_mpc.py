@@ -65,7 +65,13 @@ from scpformer.dynamics.orbits import (
 from scpformer.dynamics.roe import oe_to_roe, psi_matrix, qns_offset_to_roe
 from scpformer.dynamics.truth import propagate_relative
 from scpformer.dynamics.uncertainty import GatesModel, NavigationModel, ProcessNoise, burn_frame
-from scpformer.guidance.records import flyable_plan, replan_statistics, replan_tables
+from scpformer.guidance.records import (
+    check_budget,
+    flyable_plan,
+    replan_statistics,
+    replan_tables,
+    within_budget,
+)
 from scpformer.guidance.rendezvous_art import (
     LEARNED,
     FlownLog,
@@ -313,6 +319,11 @@ class LoopConfig:
         The ART model of the learned starts (``art``, ``best``): a training run folder or
         checkpoint, or None (``default``) for the family's shipped model; only with one of
         those starts.
+    time_budget_s
+        Wall seconds a re-plan may take (warm start, solve and verification); a later one is
+        not flown and recorded as late (:func:`~scpformer.guidance.records.within_budget`).
+        None (default): no budget. The re-planning period (710 s by default) is far above
+        any re-plan measured here, so the budget is for studying slower computers.
 
     Raises
     ------
@@ -332,9 +343,11 @@ class LoopConfig:
     samples_per_interval: int = 10
     burn_threshold_m_s: float = 1e-6
     model: str | None = None
+    time_budget_s: float | None = None
 
     def __post_init__(self) -> None:
         check_int("replan_every", self.replan_every, least=1)
+        object.__setattr__(self, "time_budget_s", check_budget(self.time_budget_s))
         for name in (self.warmstart, *self.compare):
             check_warmstart(name, self.warmstarts, self.unsupported)
         compare = tuple(n for n in self.compare if n != self.warmstart)
@@ -404,6 +417,7 @@ class ReplanRecord:
     wall_s: float  # wall time of the solve, warm start and verification included [s]
     message: str
     used: str = ""  # the start the SCP began from, as its solve records it (cold: convex)
+    late: bool = False  # over the time budget: not accepted (records.within_budget)
 
 
 @dataclass(frozen=True)
@@ -642,11 +656,12 @@ def _accepted(sol: Solution, accept_max_iterations: bool) -> bool:
 
 def replan_once(
     sub: Any, error: str, k: int, name: str, solve_with: Callable[[str], Solution],
-    accepted: Callable[[Solution], bool],
+    accepted: Callable[[Solution], bool], budget_s: float | None = None,
 ) -> tuple[ReplanRecord, Solution | None]:  # fmt: skip
     """One re-plan (or comparison solve) of the remaining problem ``sub`` from node ``k`` with
     warm start ``name``: ``solve_with(name)`` timed (warm start, solve and verification) and
-    recorded; ``sub`` None records the ``error`` that kept the node from posing a problem."""
+    recorded, not accepted when over ``budget_s`` (:func:`within_budget`); ``sub`` None
+    records the ``error`` that kept the node from posing a problem."""
     if sub is None:
         return ReplanRecord(k, name, False, "invalid_instance", math.nan, 0, 0.0, error), None
     start = time.perf_counter()
@@ -655,17 +670,20 @@ def replan_once(
     used = str((sol.extras.get("warmstart") or {}).get("used", ""))
     record = ReplanRecord(k, name, accepted(sol), sol.status.value, float(sol.cost),
                           sol.iterations, wall, sol.message, used)  # fmt: skip
-    return record, sol
+    return within_budget(record, budget_s), sol
 
 
 def replan_compared(
     sub: Any, error: str, k: int, flown: str, compare: tuple[str, ...],
     solve_with: Callable[[str], Solution], accepted: Callable[[Solution], bool],
+    budget_s: float | None = None,
 ) -> tuple[ReplanRecord, list[ReplanRecord], Solution | None]:  # fmt: skip
     """The flown re-plan (:func:`replan_once` with ``flown``), then the comparison solves of
-    the same problem with each warm start of ``compare`` (recorded, never flown)."""
-    record, sol = replan_once(sub, error, k, flown, solve_with, accepted)
-    others = [replan_once(sub, error, k, name, solve_with, accepted)[0] for name in compare]
+    the same problem with each warm start of ``compare`` (recorded, never flown), all under
+    the time budget ``budget_s``."""
+    record, sol = replan_once(sub, error, k, flown, solve_with, accepted, budget_s)
+    others = [replan_once(sub, error, k, name, solve_with, accepted, budget_s)[0]
+              for name in compare]  # fmt: skip
     return record, others, sol
 
 
@@ -743,7 +761,8 @@ def fly(
         history = log.history(k, estimate, plan, shift) if log else None
         return replan_compared(sub, error, k, cfg.warmstart, cfg.compare,
                                _solver(sub, plan, shift, cfg, history),
-                               lambda sol: _accepted(sol, cfg.accept_max_iterations))  # fmt: skip
+                               lambda sol: _accepted(sol, cfg.accept_max_iterations),
+                               cfg.time_budget_s)  # fmt: skip
 
     schedule = replan_nodes(sc.n_nodes, sc.waypoint_offset, cfg.replan_every)
     flight = fly_truth(instance, open_loop, schedule, replan, cfg.errors, seed=seed,

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from scpformer.cli.argtypes import count, positive
+from scpformer.cli.argtypes import count, positive, positive_seconds
 from scpformer.cli.commands import command_help, lazy_handler
 from scpformer.cli.dataclass_args import with_default
 
@@ -193,6 +193,14 @@ def _add_loop_arguments(
     default, unit = replan_every
     parser.add_argument("--replan-every", type=positive, default=default, metavar="K",
                         help=with_default(unit, default))  # fmt: skip
+    parser.add_argument(
+        "--time-budget",
+        type=positive_seconds,
+        default=None,
+        metavar="SECONDS",
+        help="wall seconds a re-plan may take; a later plan is not flown (the last accepted "
+        "one flies on) and is recorded as late (default: no budget)",
+    )
     parser.add_argument("--runs", type=positive, default=20, metavar="N",
                         help=with_default("number of runs", 20))  # fmt: skip
     parser.add_argument("--seed", type=count, default=0, metavar="S",
