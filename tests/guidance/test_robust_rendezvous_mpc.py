@@ -15,6 +15,9 @@ from scpformer.guidance.campaign import ROBUST_COLUMNS, Campaign, run_campaign
 from scpformer.guidance.rendezvous_mpc import ErrorModels
 from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.robust_rendezvous import RobustInstance, RobustSolverConfig
+from scpformer.scp.solution import Trajectory
+from scpformer.scp.warmstart import WarmStartRecord, WarmStartResult
+from scpformer.warmstart.art import AcceptanceCheck
 
 INSTANCE = RobustInstance()
 #: One re-plan, at node 50 (halfway): the loop corrects the plan's model error once.
@@ -97,11 +100,120 @@ def test_art_replans_from_the_flown_prefix_and_records_the_start_it_used(plan):
     assert Campaign(runs=1, config=cfg).settings()["model"] == "default"
 
 
+#: ``J`` of the remaining TPBVP in the constructed candidates [m/s]: ``R(t_k) = -J``.
+J_TPBVP = 1.0
+
+
+def _guess(value: float) -> Trajectory:
+    """A recognizable guess: every state and impulse equals ``value``."""
+    return Trajectory(x=np.full((4, 6), value), u=np.full((3, 3), value), p=np.zeros(0))
+
+
+def _art(cost: float, ctg: float) -> WarmStartResult:
+    """What ``ArtWarmStart`` returns for ART's guess of ``sum |u|`` = ``cost`` and ``C`` =
+    ``ctg`` conditioned on ``R = -J_TPBVP``, ``C = 0``: the guess (marked 1) when Eq. 8 accepts
+    it, the TPBVP (marked 0) otherwise."""
+    decision = AcceptanceCheck().evaluate(rtg_desired=-J_TPBVP, ctg_desired=0.0,
+                                          rtg_realized=-cost, ctg_realized=ctg)  # fmt: skip
+    details = {"rtg0": -J_TPBVP, "ctg0": 0.0, "art_cost": cost, "art_constraint_to_go": ctg}
+    if decision.accepted:
+        record = WarmStartRecord(source="art", time_s=0.5, cost=cost, constraint_to_go=ctg,
+                                 details=details)  # fmt: skip
+        return WarmStartResult(_guess(1.0), record)
+    record = WarmStartRecord(source="art", time_s=0.5, cost=J_TPBVP, constraint_to_go=4.0,
+                             accepted=False, fallback_source="tpbvp", details=details)  # fmt: skip
+    return WarmStartResult(_guess(0.0), record)
+
+
+def _previous(cost: float, ctg: float) -> WarmStartResult:
+    """The shifted plan (marked 2) as :func:`previous_candidate` records it."""
+    record = WarmStartRecord(source="previous", time_s=0.25, cost=cost, constraint_to_go=ctg)
+    return WarmStartResult(_guess(2.0), record)
+
+
+@pytest.mark.parametrize(
+    ("art", "previous", "used", "mark"),
+    [
+        # an accepted shifted plan beats a rejected ART guess (100 E_R = 20 > 3.5) ...
+        ((1.2, 0.0), (1.01, 0.0), "previous", 2.0),
+        # ... and an accepted ART guess a rejected shifted plan (E_R, then E_C = 3 > 2)
+        ((1.01, 0.0), (1.2, 0.0), "art", 1.0),
+        ((1.01, 1.0), (1.0, 3.0), "art", 1.0),
+        # both accepted: the fewer violations left, then the cost nearer J
+        ((1.0, 1.0), (1.03, 0.0), "previous", 2.0),
+        ((1.0, 0.0), (1.03, 0.0), "art", 1.0),
+        # neither accepted: the fallback of art, the TPBVP
+        ((1.2, 0.0), (1.0, 3.0), "tpbvp", 0.0),
+    ],
+)
+def test_best_starts_from_the_guess_the_post_hoc_check_prefers(art, previous, used, mark):
+    """Eq. 8 against the R and C ART was conditioned on: accepted first, then E_C, then
+    |E_R|; when neither guess passes, the paper's CVX fallback (the TPBVP)."""
+    result = robust.best_guess(_art(*art), _previous(*previous), AcceptanceCheck())
+    assert result.record.used == used and result.record.details["best"] == used
+    np.testing.assert_array_equal(result.trajectory.x, _guess(mark).x)
+    accepted = result.record.details["accepted"]
+    assert accepted == {"art": art[0] <= 1.035 and art[1] <= 2.0,
+                        "previous": previous[0] <= 1.035 and previous[1] <= 2.0}  # fmt: skip
+    assert "art (100 E_R" in result.record.reason and "previous (100 E_R" in result.record.reason
+    assert result.record.time_s >= 0.5 + 0.25  # ART's guess and the shifted plan's check
+
+
+def test_best_without_an_art_guess_starts_from_the_shifted_plan():
+    record = WarmStartRecord(source="art", time_s=0.5, cost=float("nan"),
+                             constraint_to_go=float("nan"), accepted=False,
+                             fallback_source="tpbvp", reason="no R(t_1)")  # fmt: skip
+    result = robust.best_guess(WarmStartResult(None, record), _previous(1.0, 0.0),
+                               AcceptanceCheck())  # fmt: skip
+    assert result.record.used == "previous" and "ART has no guess" in result.record.reason
+    np.testing.assert_array_equal(result.trajectory.x, _guess(2.0).x)
+
+
+@pytest.fixture
+def one_thread():
+    """One torch thread for the batch-1 ART inference, as the CLI runs it."""
+    torch = pytest.importorskip("torch")
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_best_replans_from_the_preferred_start_and_times_the_whole_path(plan, one_thread):
+    """``best`` at node 50, compared with ``art`` and ``previous`` on the same problem: the
+    start it used is the one Eq. 8 prefers (``art``'s own decision on ART's guess, ``tpbvp``
+    when neither passes), its plan is the plan of that start, and its wall time holds ART's
+    guess (TPBVP and generation), the checks and the passive-safety solve."""
+    cfg = _config(warmstart="best", compare=("art", "previous"), model="default")
+    result = robust.fly(INSTANCE, cfg, seed=0, open_loop=plan)
+    (best,), (art, previous) = result.replans, result.comparisons
+    assert best.warmstart == "best" and best.accepted and result.success
+    warm = result.flown[-1].plan.extras["warmstart"]
+    accepted = warm["details"]["accepted"]
+    assert best.used == warm["used"] == warm["details"]["best"]
+    assert art.used == ("art" if accepted["art"] else "tpbvp")
+    allowed = {(True, True): {"art", "previous"}, (True, False): {"art"},
+               (False, True): {"previous"}, (False, False): {"tpbvp"}}  # fmt: skip
+    assert best.used in allowed[accepted["art"], accepted["previous"]]
+    same = previous if best.used == "previous" else art
+    assert best.cost == pytest.approx(same.cost, rel=1e-9)  # same guess, same SCvx*
+    details = warm["details"]
+    assert warm["time_s"] >= details["generation_s"] + details["convex_s"] > 0.0
+    stages = result.flown[-1].plan.extras["stage_wall_s"]
+    assert best.wall_s >= warm["time_s"] + stages["passive_safety"]
+    assert best.iterations == sum(result.flown[-1].plan.extras["stage_iterations"].values())
+
+
+def test_the_art_model_goes_with_best():
+    assert robust.MPCConfig(warmstart="best", model="run").model == "run"
+    assert robust.MPCConfig(compare=("best",), model="run").model == "run"
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
         ({"replan_every": 0}, "replan_every"),
-        ({"warmstart": "best"}, "warmstart must be one of cold, previous, art"),
+        ({"warmstart": "tscvx"}, "warmstart must be one of cold, previous, art, best"),
         ({"warmstart": "hot"}, "warmstart must be one of cold, previous"),
         ({"model": 3, "warmstart": "art"}, "model must be a path or None"),
         ({"model": "run"}, "model: used with the warm starts art and best only"),
@@ -142,7 +254,6 @@ def test_runs_csv_has_the_columns_and_resumes(tmp_path, plan):
     [
         (["--replan-every", "0"], "--replan-every: must be at least 1"),
         (["--runs", "0"], "--runs: must be at least 1"),
-        (["--warmstart", "best"], "invalid choice: 'best'"),
         (["--warmstart", "tscvx"], "invalid choice: 'tscvx'"),
     ],
 )
