@@ -65,6 +65,16 @@ def test_with_no_error_the_closed_loop_reproduces_the_open_loop_delta_v(plan):
     assert result.replans[0].iterations >= 1 and result.replans[0].wall_s > 0.0
 
 
+def test_a_re_plan_over_the_time_budget_is_not_flown(plan):
+    """A budget no solve meets: the re-plan at node 50 is late and the open-loop plan's
+    impulses are flown to the end (the shared truth flight draws no error here)."""
+    cfg = _config(warmstart="previous", time_budget_s=1e-9)
+    result = robust.fly(INSTANCE, cfg, seed=0, open_loop=plan)
+    assert [(r.node, r.late, r.accepted) for r in result.replans] == [(K_ONE, True, False)]
+    np.testing.assert_array_equal(result.dv_applied, plan.trajectory.u)
+    assert [seg.start for seg in result.flown] == [0]
+
+
 def test_the_remaining_problem_starts_from_the_estimate_with_the_domains_of_its_nodes():
     model = linear_model(INSTANCE)
     estimate = INSTANCE.roe0 + np.array([5.0, -20.0, 1.0, 1.0, 0.5, 0.5])

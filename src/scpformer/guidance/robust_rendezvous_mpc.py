@@ -615,7 +615,7 @@ def fly(
         history = log.history(k, estimate, plan, shift) if log else None
         record, others, sol = replan_compared(sub, error, k, cfg.warmstart, cfg.compare,
                                               _solver(sub, plan, shift, cfg, history),
-                                              accepted)  # fmt: skip
+                                              accepted, cfg.time_budget_s)  # fmt: skip
         if record.accepted and sol is not None and sub is not None:  # flown from k on
             starts.append((k, sub, sol))
         return record, others, sol

@@ -16,7 +16,7 @@ from scpformer.cli.dataclass_args import with_default
 
 WARMSTARTS = ("cold", "previous", "art", "best")  # scpformer.guidance.WARMSTARTS
 #: scpformer.guidance.robust_rendezvous_mpc.WARMSTARTS
-ROBUST_WARMSTARTS = ("cold", "previous", "art")
+ROBUST_WARMSTARTS = ("cold", "previous", "art", "best")
 INSTANCES = ("default", "sampled")  # scpformer.guidance.campaign.INSTANCES
 ERRORS = ("table2", "none")
 PDG_WARMSTARTS = ("cold", "previous", "tscvx", "best")  # scpformer.guidance.pdg6dof_mpc.WARMSTARTS
@@ -54,9 +54,11 @@ def add_simulate_parser(commands: argparse._SubParsersAction) -> None:
         "keep-out or passive-safety violation (dense Monte Carlo) along the flown trajectory.",
         ROBUST_WARMSTARTS,
         "warm start of each re-plan: cold (the three-stage solve), previous (passive "
-        "safety from the last accepted plan shifted in time) or art (passive safety from the "
+        "safety from the last accepted plan shifted in time), art (passive safety from the "
         "robust ART model of --model started from node k, its context the flown prefix; the "
-        "Eq. 8 check falls back to the TPBVP)",
+        "Eq. 8 check falls back to the TPBVP) or best (passive safety from art's guess or "
+        "the shifted plan, the one the Eq. 8 check prefers; the TPBVP when it accepts "
+        "neither)",
     )
 
 
