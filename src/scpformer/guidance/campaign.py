@@ -28,6 +28,7 @@ import multiprocessing as mp
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
+from itertools import islice
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +68,8 @@ PDG_COLUMNS = (
 #: probability of a node (``robust_rendezvous_mpc.RobustClosedLoopResult.path_violations``).
 ROBUST_COLUMNS = (*COLUMNS, "drift_entries", "passive_safety_nodes", "passive_safety_p_max")
 INSTANCES = ("default", "sampled")
+#: Draws of a run's instance stream tried for one with a flyable open-loop plan.
+MAX_DRAWS = 10
 #: Cost difference below which two re-plans tie [m/s]: the SCP's cost tolerance J_tol of
 #: Eq. 19 (Table 1, 1e-6 m/s).
 TIE_M_S = 1e-6
@@ -175,16 +178,51 @@ class Campaign:
         return int(np.random.SeedSequence([self.seed, run]).generate_state(1)[0])
 
     def instance(self, run: int) -> Any:
+        """The first instance of run ``run``'s stream (the one it flies unless its open-loop
+        plan fails: :meth:`planned`)."""
+        return next(self._draws(run))
+
+    def _draws(self, run: int) -> Iterator[Any]:
+        """The instances of run ``run``'s stream, in order (a fixed instance every time)."""
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, run]))
-        if self.family == "pdg6dof":
-            if self.instances == "default":
-                return pdg.dispersed_instance(PDGInstance(), self.config.errors.dispersion, rng)
-            return pdg.sampled_instance(rng)
-        if self.family == "robust-rendezvous":
-            return RobustInstance() if self.instances == "default" else sample_robust(rng, 1)[0]
-        if self.instances == "default":
-            return RendezvousInstance()
-        return sample_instances(rng, 1)[0]
+        while True:
+            if self.family == "pdg6dof":
+                if self.instances == "default":
+                    yield pdg.dispersed_instance(PDGInstance(), self.config.errors.dispersion,
+                                                 rng)  # fmt: skip
+                else:
+                    yield pdg.sampled_instance(rng)
+            elif self.family == "robust-rendezvous":
+                yield RobustInstance() if self.instances == "default" else sample_robust(rng, 1)[0]
+            else:
+                yield RendezvousInstance() if self.instances == "default" else sample_instances(
+                    rng, 1)[0]  # fmt: skip
+
+    def planned(self, run: int) -> tuple[Any, Any, int]:
+        """The instance run ``run`` flies, its open-loop plan, and which draw of the run's
+        stream it is (0: the first).
+
+        A mission starts only from a flyable plan, so a drawn instance whose open-loop plan
+        fails (e.g. a chance-constrained draw whose three-stage solve ends at the iteration
+        cap, as about 0.2% of the dataset's draws do) is replaced by the next draw of the same
+        stream, up to :data:`MAX_DRAWS` draws. Runs whose first draw is flyable fly exactly
+        what they flew before this rule; a fixed instance (the rendezvous families'
+        ``default``) is never replaced.
+
+        Raises
+        ------
+        ValueError
+            When no draw has a flyable plan (naming the run and the last failure).
+        """
+        fixed = self.instances == "default" and self.family != "pdg6dof"
+        failures: list[str] = []
+        for draw, instance in enumerate(islice(self._draws(run), 1 if fixed else MAX_DRAWS)):
+            try:
+                return instance, _open_loop(self, instance), draw
+            except ValueError as err:
+                failures.append(str(err))
+        raise ValueError(f"run {run}: no flyable open-loop plan in {len(failures)} draw(s) of "
+                         f"its instance; the last: {failures[-1]}")  # fmt: skip
 
     def open_loop_plan(self, instance: Any) -> Any:
         if self.family == "pdg6dof":
@@ -253,7 +291,8 @@ def run_campaign(
     """Fly the runs not yet in ``folder/runs.csv``; return every row (old and new).
 
     ``on_start(done, total)`` is called once before the first new run, ``on_run(row)`` after
-    each (a progress bar). Open-loop plans are solved once per instance and process.
+    each (a progress bar). Open-loop plans are solved once per instance and process; a
+    sampled instance without one is replaced by the next draw (:meth:`Campaign.planned`).
     ``workers > 1`` flies runs in that many local processes (``forkserver``, as the dataset
     engine's pool); a run's numbers do not depend on it (each run has its own seed), but the
     re-plan wall times then share the cores: time with one worker. ``ray`` (an address, or
@@ -263,7 +302,8 @@ def run_campaign(
     Raises
     ------
     ValueError
-        When the folder holds runs of other settings, or an instance's open-loop plan fails.
+        When the folder holds runs of other settings, or no draw of a run's instance has a
+        flyable open-loop plan (:meth:`Campaign.planned`).
     """
     check_int("workers", workers, least=1)
     folder = Path(folder)
@@ -288,16 +328,24 @@ def run_campaign(
 _PLANS: dict[Any, Any] = {}  # this process's open-loop plan of the last instance flown
 
 
+def _open_loop(campaign: Campaign, instance: Any) -> Any:
+    """``campaign.open_loop_plan(instance)``, solved once per instance and process."""
+    if instance not in _PLANS:
+        plan = campaign.open_loop_plan(instance)  # raises before the cache is touched
+        _PLANS.clear()
+        _PLANS[instance] = plan
+    return _PLANS[instance]
+
+
 def flight(campaign: Campaign, run: int) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Fly run ``run`` of ``campaign`` (in any process): its ``runs.csv`` row and the arrays
-    of its ``run-NNNN.npz``."""
-    instance = campaign.instance(run)
-    if instance not in _PLANS:
-        _PLANS.clear()
-        _PLANS[instance] = campaign.open_loop_plan(instance)
+    of its ``run-NNNN.npz`` (with ``instance_draw``, see :meth:`Campaign.planned`)."""
+    instance, plan, draw = campaign.planned(run)
     seed = campaign.run_seed(run)
-    result = campaign.fly(instance, seed, _PLANS[instance])
-    return {"run": run, "seed": seed, **result.summary()}, result.arrays()
+    result = campaign.fly(instance, seed, plan)
+    return {"run": run, "seed": seed, **result.summary()}, result.arrays() | {
+        "instance_draw": np.array(draw)
+    }
 
 
 def fly_run(campaign: Campaign, folder: Path, run: int) -> dict[str, Any]:
