@@ -50,3 +50,24 @@ def test_no_flyable_draw_or_a_fixed_instance_that_fails_is_an_error_naming_the_r
     with pytest.raises(ValueError, match="run 0: no flyable open-loop plan in 1 draw"):
         fixed.planned(0)
     assert len(plans["asked"]) == 1  # the default instance is never replaced
+
+
+def test_the_wall_time_histogram_counts_every_re_plan_and_marks_the_budget(tmp_path):
+    """The fastest re-plan sits on the first bin's edge: it is counted all the same (with
+    bins from ``np.logspace`` the round-off of 10**log10(x) put that edge above this one)."""
+    import json
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    wall = np.array([0.05056378869683274, 0.07626872, 3.0])
+    np.savez(tmp_path / "run-0000.npz", replan_wall_s=wall)
+    (tmp_path / "settings.json").write_text(json.dumps({"time_budget_s": 0.06}))
+    figure, ax = plt.subplots()
+    campaign_module._plot_wall_times([{"run": "0", "replan_period_s": "710"}], tmp_path, ax, "s")
+    assert sum(patch.get_height() for patch in ax.patches) == wall.size
+    assert [line.get_xdata()[0] for line in ax.lines] == [710.0, 0.06]  # period, budget
+    plt.close(figure)

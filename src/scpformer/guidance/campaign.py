@@ -611,15 +611,28 @@ def _flown_runs(
                 yield row, {key: np.asarray(data[key]) for key in data.files}
 
 
+def _time_budget(folder: Path) -> float | None:
+    """The re-plan time budget the campaign in ``folder`` flew with (its settings), if any."""
+    path = folder / "settings.json"
+    if not path.exists():
+        return None
+    budget = json.loads(path.read_text()).get("time_budget_s")
+    return None if budget is None else float(budget)
+
+
 def _plot_wall_times(rows: list[dict[str, str]], folder: Path, ax_h: Any, unit: str) -> None:
     tables = _replan_tables(rows, folder)
     wall = tables["replan_wall_s"]
     if wall.size:
         period = float(np.median([float(r["replan_period_s"]) for r in rows]))
-        bins = np.logspace(np.log10(max(wall.min(), 1e-3)), np.log10(max(period, wall.max())), 40)
+        # geomspace keeps the end points exact: logspace's round-off can drop the fastest
+        bins = np.geomspace(max(wall.min(), 1e-3), max(period, wall.max()), 40)
         ax_h.hist(wall, bins=bins, color="C0")
         label = f"{period:.0f} s" if unit == "s" else f"{period:.3f} {unit}"
         ax_h.axvline(period, color="C3", label=f"re-planning period {label}")
+        budget = _time_budget(folder)
+        if budget is not None:
+            ax_h.axvline(budget, color="C1", ls="--", label=f"time budget {budget:.3g} s")
         ax_h.set_xscale("log")
         ax_h.legend(loc="best", fontsize=8)
     ax_h.set_xlabel("re-plan wall time [s]")
