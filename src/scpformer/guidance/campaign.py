@@ -621,14 +621,20 @@ def _time_budget(folder: Path) -> float | None:
 
 
 def _plot_wall_times(rows: list[dict[str, str]], folder: Path, ax_h: Any, unit: str) -> None:
+    """The histogram of the re-plan wall times against the median re-planning period (in
+    seconds: a period in ``U_T`` is converted with the landing's ``TIME_UNIT_S``) and the
+    time budget, if the campaign had one."""
     tables = _replan_tables(rows, folder)
     wall = tables["replan_wall_s"]
     if wall.size:
         period = float(np.median([float(r["replan_period_s"]) for r in rows]))
+        label = f"{period:.0f} s"
+        if unit == "U_T":
+            label = f"{period:.3f} U_T = {period * pdg.TIME_UNIT_S:.2f} s"
+            period *= pdg.TIME_UNIT_S
         # geomspace keeps the end points exact: logspace's round-off can drop the fastest
         bins = np.geomspace(max(wall.min(), 1e-3), max(period, wall.max()), 40)
         ax_h.hist(wall, bins=bins, color="C0")
-        label = f"{period:.0f} s" if unit == "s" else f"{period:.3f} {unit}"
         ax_h.axvline(period, color="C3", label=f"re-planning period {label}")
         budget = _time_budget(folder)
         if budget is not None:

@@ -78,6 +78,13 @@ METHOD = {"cold": "scvx", "previous": "scvx", "tscvx": "tscvx"}
 #: Cost difference below which two re-plans tie [U_M]: SCvx's stationarity test, ``Delta L <=
 #: eps_opt max(1, |J|)`` (eps_opt = 1e-4, |J| = m_f <= m0 = 3 U_M).
 TIE_U_M = 3e-4
+#: Seconds in one U_T for a Mars lander, where Table 1 fixes none. Two of its values tie the
+#: units to physics: g = 1 U_L/U_T^2 is Mars's 3.711 m/s^2, and the exhaust velocity
+#: I_sp g0 = 30 U_L/U_T is that of a 225 s engine (the Mars landing engines of MSL and Mars
+#: 2020 are of this class), 2206.5 m/s. So U_L/U_T = 73.55 m/s, U_T = 73.55 / 3.711 = 19.8 s
+#: and U_L = 1.46 km: the default descent starts 5.8 km up at 104 m/s and lasts 93 s.
+#: Used to set a re-plan's wall time against the re-planning period.
+TIME_UNIT_S = 19.8
 #: Dense truth samples per interval of the constraint check: the verification's
 #: ``PDGVerificationTolerances.samples_per_interval``.
 SAMPLES_PER_INTERVAL = 5
