@@ -43,3 +43,23 @@ def test_both_warm_starts_fly_the_same_run_and_previous_is_compared_with_cold(on
     for section in ("## Summary", "## Previous vs cold on the same re-plans"):
         assert section in report
     assert "win / tie / loss" in report and "convex solves per re-plan" in report
+    assert "## Failures" in report
+
+
+def test_failures_name_what_failed_and_count_drift_entries_against_the_designed_risk(tmp_path):
+    from scpformer.experiments.closed_loop import Flights
+
+    fields = {"drift_entries": "0", "passive_safety_nodes": "0", "keep_out_violation": "0.0",
+              "terminal_position_error": "2.5", "terminal_velocity_error": "0.001",
+              "replans_failed": "0", "replans": "9"}  # fmt: skip
+    rows = {"cold": [{"run": "0", "success": "True", **fields},
+                     {"run": "1", "success": "False", **fields, "drift_entries": "2"}]}  # fmt: skip
+    (tmp_path / "cold").mkdir()
+    distances = {0: np.full(100, 3.0), 1: np.r_[np.full(98, 3.0), 0.5, 0.9]}
+    for run, distance in distances.items():
+        np.savez(tmp_path / "cold" / f"run-{run:04d}.npz", drift_distance=distance)
+    text = mpc_robust_rendezvous.failures_text(Flights(rows, {}, tmp_path, ("cold",)))
+    assert "| cold | 1 | 2 drift entries" in text and "| cold | 0 |" not in text
+    designed = 1.0 - (1.0 - 1e-3) ** 100  # a 100-node flight at Delta = 1e-3
+    assert "2 drift entries in 200 flown nodes (1.0e-02 per node" in text
+    assert f"probability up to {designed:.1%}" in text
