@@ -107,7 +107,6 @@ from scpformer.guidance.rendezvous_mpc import (
     shifted_plan,
     terminal_tolerance,
 )
-from scpformer.guidance.rendezvous_mpc import check_warmstart as rendezvous_check_warmstart
 from scpformer.problems.rendezvous.linear_model import linear_model
 from scpformer.problems.rendezvous.scenario import TargetOrbit
 from scpformer.problems.robust_rendezvous.montecarlo import (
@@ -134,12 +133,6 @@ FAMILY = "robust-rendezvous"
 UNSUPPORTED: dict[str, str] = {}
 #: Smallest number of impulses of a remaining problem (the scenario's ``n_nodes >= 2``).
 MIN_REMAINING = 2
-
-
-def check_warmstart(name: Any) -> str:
-    """``name`` when it is a warm start of :data:`WARMSTARTS`; ``ValueError`` otherwise
-    (naming why an unimplemented one is missing)."""
-    return rendezvous_check_warmstart(name, WARMSTARTS, UNSUPPORTED)
 
 
 @dataclass(frozen=True, kw_only=True)
