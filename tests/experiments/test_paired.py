@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scpformer.experiments.paired import Outcomes, paired_rows, paired_table
+from scpformer.experiments.paired import Outcomes, exact_sign_test, paired_rows, paired_table
 
 
 def _outcomes(time, iterations, solved, cost) -> Outcomes:
@@ -45,3 +45,18 @@ def test_mismatched_draws_are_refused():
         paired_rows(OURS, _outcomes([1.0], [1], [True], [1.0]), cost_tie=1.0)
     with pytest.raises(ValueError, match="1-D of one length"):
         _outcomes([1.0, 2.0], [1], [True], [1.0])
+
+
+def test_the_exact_sign_test_matches_the_binomial_tail():
+    from scipy.stats import binomtest
+
+    for a, b in ((0, 0), (0, 1), (3, 9), (12, 4), (20, 20)):
+        expected = binomtest(a, a + b, 0.5).pvalue if a + b else 1.0
+        assert exact_sign_test(a, b) == pytest.approx(expected, rel=1e-12)
+    assert exact_sign_test(0, 10) == pytest.approx(2.0 / 2**10, rel=1e-12)  # 2 P(X = 0)
+    assert exact_sign_test(5, 3) == exact_sign_test(3, 5)  # symmetric
+
+
+def test_the_exact_sign_test_refuses_negative_counts():
+    with pytest.raises(ValueError, match="discordant"):
+        exact_sign_test(-1, 2)

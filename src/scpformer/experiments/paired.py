@@ -9,6 +9,7 @@ higher. :func:`paired_table` writes that as one Markdown table.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,6 +55,18 @@ class Outcomes:
     @property
     def n(self) -> int:
         return int(self.time.size)
+
+
+def exact_sign_test(a: int, b: int) -> float:
+    """Two-sided exact sign test of a split ``a`` / ``b`` of discordant pairs (McNemar's
+    exact test on paired binary outcomes): ``p = min(1, 2 P(X <= min(a, b)))`` for
+    ``X ~ Binomial(a + b, 1/2)``, the chance of a split at least this uneven if neither method
+    were better; ``p = 1`` without discordant pairs."""
+    if a < 0 or b < 0:
+        raise ValueError(f"counts of discordant pairs must be >= 0, got {a} and {b}")
+    n = a + b
+    tail = sum(math.comb(n, k) for k in range(min(a, b) + 1)) / 2.0**n
+    return min(1.0, 2.0 * tail)
 
 
 def _counts(delta: np.ndarray, tie: np.ndarray | float) -> tuple[int, int, int]:

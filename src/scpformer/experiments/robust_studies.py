@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from scpformer.experiments import report as rep
-from scpformer.experiments.paired import Outcomes, paired_table
+from scpformer.experiments.paired import Outcomes, exact_sign_test, paired_table
 from scpformer.experiments.runner import (
     KEY,
     InstanceTask,
@@ -338,19 +338,14 @@ def discordant_outcomes(
     rows: list[dict[str, str]], mode: str, source: str
 ) -> tuple[int, int, float]:
     """Instances whose SCvx* run converged only from ART, only from CVX, and the two-sided
-    exact sign-test p-value of that split (McNemar's exact test on the paired outcomes).
-
-    The two infeasibility rates compare the same instances, so they differ only through the
-    discordant pairs; with ``a`` and ``b`` of them, ``p = min(1, 2 P(X <= min(a, b)))`` for
-    ``X ~ Binomial(a + b, 1/2)``: the chance of a split at least this uneven if neither start
-    were better. ``p = 1`` without discordant pairs.
+    exact sign-test p-value of that split (:func:`~scpformer.experiments.paired.exact_sign_test`,
+    McNemar's exact test: the two infeasibility rates compare the same instances, so they
+    differ only through the discordant pairs).
     """
     art = column(rows, f"{mode}_{source}_converged") == 1.0
     cvx = column(rows, f"{mode}_cvx_converged") == 1.0
     only_art, only_cvx = int(np.sum(art & ~cvx)), int(np.sum(cvx & ~art))
-    n = only_art + only_cvx
-    tail = sum(math.comb(n, k) for k in range(min(only_art, only_cvx) + 1)) / 2.0**n
-    return only_art, only_cvx, min(1.0, 2.0 * tail)
+    return only_art, only_cvx, exact_sign_test(only_art, only_cvx)
 
 
 def _discordant_note(rows: list[dict[str, str]], mode: str, source: str) -> str:
