@@ -44,6 +44,17 @@ def test_settings_may_grow_n_but_not_change_the_seed(tmp_path):
         check_settings(tmp_path, {"seed": 1, "n": 20})
 
 
+def test_a_growable_list_may_be_appended_to_but_not_reordered_or_shortened(tmp_path):
+    check_settings(tmp_path, {"seed": 0, "warmstarts": ["cold", "previous"]}, grows=("warmstarts",))
+    check_settings(tmp_path, {"seed": 0, "warmstarts": ["cold", "previous", "art"]},
+                   grows=("warmstarts",))  # fmt: skip
+    for other in (["previous", "cold", "art"], ["cold"], "cold"):
+        with pytest.raises(ValueError, match=r"other settings \(warmstarts\)"):
+            check_settings(tmp_path, {"seed": 0, "warmstarts": other}, grows=("warmstarts",))
+    with pytest.raises(ValueError, match=r"other settings \(warmstarts\)"):  # not growable
+        check_settings(tmp_path, {"seed": 0, "warmstarts": ["cold", "previous", "art", "best"]})
+
+
 def test_a_moved_results_folder_resumes_and_records_where_it_is_now(tmp_path):
     check_settings(tmp_path / "a", {"seed": 0, "n": 10, "out": str(tmp_path / "a")})
     (tmp_path / "a").rename(tmp_path / "b")

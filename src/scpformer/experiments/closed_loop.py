@@ -154,7 +154,8 @@ def run_experiment(
     returns the report's path.
 
     Records the experiment's settings (with its name, run count, seed, folder and warm
-    starts) in ``OUT/config.json`` and refuses a folder of other settings; flies
+    starts) in ``OUT/config.json`` and refuses a folder of other settings (warm starts may be
+    appended to those a folder holds: they fly beside the runs already there); flies
     ``experiment.campaign(n, seed, w)`` for every warm start ``w`` (:func:`fly_warmstarts`,
     resumed run by run); writes ``OUT/results.csv`` (:func:`results_csv`) and the report:
     its "Runs" section, then, when every warm start flew, what ``experiment.analyse`` adds.
@@ -162,7 +163,7 @@ def run_experiment(
     n, out, warmstarts = require_n(options), Path(options.out), experiment.WARMSTARTS
     record = {"experiment": experiment.NAME, "n": n, "seed": options.seed, "out": str(out),
               **experiment.SETTINGS, "warmstarts": list(warmstarts)}  # fmt: skip
-    check_settings(out, record)
+    check_settings(out, record, grows=("warmstarts",))
     rows, summaries = fly_warmstarts(
         experiment.NAME, out, warmstarts, lambda w: experiment.campaign(n, options.seed, w),
         family=experiment.FAMILY, workers=options.workers or 1, ray=options.ray,

@@ -193,11 +193,16 @@ def check_out_folder(out: Path) -> None:
             )
 
 
-def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
+def check_settings(
+    out: Path, settings: Mapping[str, Any], *, grows: tuple[str, ...] = ()
+) -> None:
     """Record ``settings`` in ``OUT/config.json``; refuse a folder made with other settings.
 
     ``n`` may differ (a larger run extends a smaller one), and so may where the folder is
-    (``out``: a moved or renamed results folder resumes); everything else must match.
+    (``out``: a moved or renamed results folder resumes); so may the lists named in
+    ``grows`` when the new list starts with the old one (e.g. a closed-loop experiment's
+    warm starts: a start added to a folder flies beside the runs already there, each start
+    in its own sub-folder). Everything else must match.
     """
     path = out / CONFIG_NAME
     plain = json.loads(json.dumps(settings, default=str))
@@ -210,8 +215,10 @@ def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
             raise ValueError(f"--out {out}: {CONFIG_NAME} is unreadable; use a new --out")
         ignore = {"n", "out", "workers", "ray", "time_limit"}
         changed = sorted(
-            k for k in set(old) | set(plain) if k not in ignore and old.get(k) != plain.get(k)
-        )
+            k for k in set(old) | set(plain)
+            if k not in ignore and old.get(k) != plain.get(k)
+            and not (k in grows and _extends(plain.get(k), old.get(k)))
+        )  # fmt: skip
         if changed:
             raise ValueError(
                 f"--out {out} holds a run with other settings ({', '.join(changed)}); "
@@ -219,6 +226,11 @@ def check_settings(out: Path, settings: Mapping[str, Any]) -> None:
             )
     out.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, json.dumps(plain, indent=1) + "\n")
+
+
+def _extends(new: Any, old: Any) -> bool:
+    """Whether the list ``new`` starts with the list ``old``."""
+    return isinstance(new, list) and isinstance(old, list) and new[: len(old)] == old
 
 
 class ResultsCSV:
