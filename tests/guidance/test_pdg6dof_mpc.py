@@ -126,7 +126,7 @@ def test_best_keeps_the_shifted_optimum_over_the_networks_guess(plan):
     config = PDGSolverConfig()
     x = plan.trajectory.x[10]
     sub = mpc.remaining_instance(INSTANCE, x)
-    used, warm = mpc.best_start(sub, plan, 10, x, config)
+    used, warm = mpc.best_start(sub, plan, 10, x, mpc.MPCConfig(solver=config))
     shifted = mpc.shifted_plan(plan, 10, x).guess(sub).trajectory
     j_shifted = penalized_cost(sub, config, shifted)
     guess = mpc._tscvx_provider(config).guess_for(sub, config)
@@ -137,6 +137,22 @@ def test_best_keeps_the_shifted_optimum_over_the_networks_guess(plan):
                     seed=0, open_loop=plan)  # fmt: skip
     assert flown.replans and all(r.used in ("previous", "tscvx") for r in flown.replans)
     assert all(r.warmstart == "best" and r.accepted for r in flown.replans)
+
+
+@pytest.mark.parametrize("warmstart", ["previous", "tscvx"])
+def test_capped_re_plans_stop_at_the_cap_without_a_cold_fallback(plan, warmstart):
+    """``replan_iter_max``: every re-plan ends within the cap, a T-SCvx re-plan without the
+    cold-SCvx run after it; the first plan is the uncapped one; the cap is a setting."""
+    cfg = mpc.MPCConfig(warmstart=warmstart, replan_every=20, replan_iter_max=2,
+                        errors=mpc.ErrorModels.none(), **UNTRACKED)  # fmt: skip
+    flown = mpc.fly(INSTANCE, cfg, seed=0, open_loop=plan)
+    assert flown.replans
+    assert all(0 < r.iterations <= 2 and not r.fallback for r in flown.replans), flown.replans
+    assert cfg.replan_solver.scvx.iter_max == 2 and cfg.solver.scvx.iter_max > 2
+    assert Campaign(runs=1, config=cfg).settings()["replan_iter_max"] == 2
+    assert "replan_iter_max" not in Campaign(runs=1, config=mpc.MPCConfig()).settings()
+    with pytest.raises(ValueError, match="replan_iter_max"):
+        mpc.MPCConfig(replan_iter_max=0)
 
 
 def test_a_tscvx_run_folder_given_as_model_is_the_networks_of_the_re_plans(plan):

@@ -28,15 +28,21 @@ count = int_at_least(0)  # instance counts that may be zero, seeds
 positive = int_at_least(1)  # instance counts, workers, shard sizes
 
 
-def positive_seconds(text: str) -> float:
-    """An argparse ``type`` accepting a positive, finite number of seconds."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"must be positive and finite, got {text}")
-    return value
+def positive_quantity(unit: str) -> Callable[[str], float]:
+    """An argparse ``type`` accepting a positive, finite number of ``unit``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number of {unit}, got {text!r}") from None
+        if not (math.isfinite(value) and value > 0.0):
+            raise argparse.ArgumentTypeError(f"must be positive and finite, got {text}")
+        return value
+
+    parse.__name__ = f"positive {unit}"
+    return parse
 
 
-positive_seconds.__name__ = "positive seconds"
+positive_seconds = positive_quantity("seconds")  # time budgets, limits
+positive_time_units = positive_quantity("time units")  # nondimensional times (U_T)

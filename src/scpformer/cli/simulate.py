@@ -34,6 +34,8 @@ def run_simulate(args: argparse.Namespace) -> int:
             tracking=pdg.TrackingWeights() if args.tracking == "lqr" else None,
             model=None if args.model is None else str(args.model),
             time_budget_s=args.time_budget,
+            replan_iter_max=args.replan_iter_max,
+            min_remaining_time=args.min_remaining_time,
         )
     else:
         from scpformer.guidance import robust_rendezvous_mpc as robust

@@ -154,6 +154,8 @@ class Campaign:
                 "thrust_margin": cfg.thrust_margin, "gimbal_margin_deg": cfg.gimbal_margin_deg,
                 **({"model": cfg.model} if cfg.model not in (None, "default") else {}),
                 **_budget_setting(cfg),
+                **({"replan_iter_max": cfg.replan_iter_max}
+                   if cfg.replan_iter_max is not None else {}),
                 "errors": {
                     name: getattr(errors, name) for name in (
                         "thrust_magnitude", "pointing_deg", "mass_fraction",

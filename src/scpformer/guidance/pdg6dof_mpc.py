@@ -409,6 +409,14 @@ class MPCConfig:
         (:func:`~scpformer.guidance.records.within_budget`). None (default): no budget. The
         re-planning period is in Table 1's nondimensional time, so what a budget in seconds
         means depends on the time unit U_T of the vehicle flown.
+    replan_iter_max
+        Conic solves a re-plan may take (``scvx.iter_max`` of the re-plans; None, the
+        default: the solver's own, 100). A flight computer re-plans on a fixed budget: a
+        re-plan that reaches the cap ends unconverged (flown when ``accept_unconverged`` and
+        its verification passes, else the last accepted plan flies on) and a capped T-SCvx
+        re-plan has no cold-SCvx fallback (the loop's fallback is the last plan). Unlike
+        ``time_budget_s`` it does not depend on the machine. The first plan is solved
+        uncapped, before the flight.
     """
 
     replan_every: int = 5
@@ -424,9 +432,12 @@ class MPCConfig:
     gimbal_margin_deg: float = 2.0
     model: str | None = None
     time_budget_s: float | None = None
+    replan_iter_max: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "time_budget_s", check_budget(self.time_budget_s))
+        if self.replan_iter_max is not None:
+            check_int("replan_iter_max", self.replan_iter_max, least=1)
         check_finite("thrust_margin", self.thrust_margin, shape=(), nonnegative=True)
         check_finite("gimbal_margin_deg", self.gimbal_margin_deg, shape=(), nonnegative=True)
         c = PDGInstance().constants
@@ -464,6 +475,20 @@ class MPCConfig:
         if self.tolerance is not None and not isinstance(self.tolerance, LandingTolerance):
             raise ValueError(f"tolerance must be a LandingTolerance or None, got "
                              f"{type(self.tolerance).__name__}")  # fmt: skip
+
+    @property
+    def replan_solver(self) -> PDGSolverConfig:
+        """The solver configuration of the re-plans: ``solver`` capped at
+        ``replan_iter_max`` conic solves when set."""
+        if self.replan_iter_max is None:
+            return self.solver
+        scvx = replace(self.solver.scvx, iter_max=self.replan_iter_max)
+        return replace(self.solver, scvx=scvx)
+
+    def tscvx_provider(self) -> Any:
+        """The T-SCvx start of the re-plans (:func:`_tscvx_provider`): without the cold-SCvx
+        fallback when the re-plans are capped (``replan_iter_max``)."""
+        return _tscvx_provider(self.replan_solver, self.model, self.replan_iter_max is None)
 
 
 # ======================================================================================
@@ -700,16 +725,15 @@ def shifted_plan(plan: Solution, node: int, estimate: np.ndarray | None = None) 
 
 
 def best_start(
-    sub: PDGInstance, plan: Solution, node: int, estimate: np.ndarray, config: PDGSolverConfig,
-    model: str | None = None,
-) -> tuple[str, Any]:  # fmt: skip
+    sub: PDGInstance, plan: Solution, node: int, estimate: np.ndarray, cfg: MPCConfig
+) -> tuple[str, Any]:
     """The start of a ``best`` re-plan: ``("tscvx", provider)`` when the networks' predicted
     solution has a lower penalized cost ``J = C + lambda P`` (Eq. 16) on ``sub`` than the
     shifted previous plan, else ``("previous", shifted plan)``. A prediction the provider
     rejects (unusable, or ``J`` above its bound) loses."""
     from scpformer.warmstart.tscvx import penalized_cost
 
-    provider = _tscvx_provider(config, model)
+    config, provider = cfg.replan_solver, cfg.tscvx_provider()
     shifted = shifted_plan(plan, node, estimate)
     guess = provider.guess_for(sub, config)
     j_tscvx = guess.record.details.get("J_prediction", math.inf) if guess.record.accepted else (
@@ -719,13 +743,19 @@ def best_start(
 
 
 @lru_cache(maxsize=4)
-def _tscvx_provider(config: PDGSolverConfig, model: str | None = None) -> Any:
+def _tscvx_provider(
+    config: PDGSolverConfig, model: str | None = None, cold_fallback: bool = True
+) -> Any:
     """The T-SCvx networks of ``model`` (a training run folder; None or ``default``: the
-    shipped ones, checksum verified), loaded once per model and configuration."""
+    shipped ones, checksum verified), loaded once per model and configuration;
+    ``cold_fallback`` as in :class:`~scpformer.problems.pdg6dof.tscvx.TscvxParameters`."""
     from scpformer.pretrained import resolve_model
+    from scpformer.problems.pdg6dof.tscvx import TscvxParameters
     from scpformer.warmstart.tscvx import TscvxWarmStart
 
-    return TscvxWarmStart.from_checkpoint(resolve_model(model, "pdg6dof"), config=config)
+    params = TscvxParameters(cold_fallback=cold_fallback)
+    return TscvxWarmStart.from_checkpoint(resolve_model(model, "pdg6dof"), config=config,
+                                          params=params)  # fmt: skip
 
 
 def _accepted(sol: Solution, unconverged: bool = False) -> bool:
@@ -750,14 +780,14 @@ def _replan(
     start = time.perf_counter()
     used = name
     if name == "best":
-        used, warm = best_start(sub, plan, node, estimate, cfg.solver, cfg.model)
+        used, warm = best_start(sub, plan, node, estimate, cfg)
     elif name == "previous":
         warm: Any = shifted_plan(plan, node, estimate)
     elif name == "tscvx":
-        warm = _tscvx_provider(cfg.solver, cfg.model)
+        warm = cfg.tscvx_provider()
     else:
         warm = None
-    sol = solve(sub, cfg.solver, method=METHOD[used], warmstart=warm)
+    sol = solve(sub, cfg.replan_solver, method=METHOD[used], warmstart=warm)
     wall = time.perf_counter() - start
     fallback = ""
     if used == "tscvx":

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from scpformer.cli.argtypes import count, positive, positive_seconds
+from scpformer.cli.argtypes import count, positive, positive_seconds, positive_time_units
 from scpformer.cli.commands import command_help, lazy_handler
 from scpformer.cli.dataclass_args import with_default
 
@@ -160,6 +160,22 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
             "between re-plans",
             "lqr",
         ),
+    )
+    parser.add_argument(
+        "--replan-iter-max",
+        type=positive,
+        default=None,
+        metavar="N",
+        help="conic solves a re-plan may take; a capped re-plan ends unconverged (flown if "
+        "verified, else the last plan flies on) and a capped T-SCvx re-plan has no cold "
+        "fallback (default: the solver's cap, 100)",
+    )
+    parser.add_argument(
+        "--min-remaining-time",
+        type=positive_time_units,
+        default=1.0,
+        metavar="T",
+        help=with_default("no re-plan when less than T U_T of the plan remain", 1.0),
     )
     parser.add_argument(
         "--model",
