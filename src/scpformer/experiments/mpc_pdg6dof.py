@@ -135,7 +135,7 @@ def summary_table(flights: Flights) -> str:
             / (mpc.TIME_UNIT_S * summaries[w]["replan_period_s"]))),
         ("SCP iterations per re-plan median / mean / p99", flights.replan_iterations),
         ("re-plans (failed)", flights.replans),
-        ("T-SCvx cold fallbacks", lambda w: str(summaries[w]["tscvx_fallbacks"])),
+        ("T-SCvx fallbacks (full subproblem or cold SCvx)", lambda w: str(summaries[w]["tscvx_fallbacks"])),
         ("best: re-plans started from previous / tscvx", best_starts),
         ("path-constraint violations (samples)", lambda w: str(summaries[w]["violations"])),
     ]) + (
