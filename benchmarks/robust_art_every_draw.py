@@ -67,7 +67,12 @@ def _solve(instance, warmstart) -> dict:
     from scpformer.robust_rendezvous import solve
 
     start = time.perf_counter()
-    solution = solve(instance, _STATE["config"], method="passive_safety", warmstart=warmstart)
+    try:
+        solution = solve(instance, _STATE["config"], method="passive_safety", warmstart=warmstart)
+    except (ValueError, RuntimeError) as err:  # a failure is a draw, not a missing row
+        return {"wall_s": time.perf_counter() - start, "status": f"error: {err}",
+                "converged": False, "iterations": 0, "cost": float("nan"), "used": None,
+                "accepted": False}  # fmt: skip
     wall = time.perf_counter() - start
     record = solution.extras.get("warmstart", {})
     return {
