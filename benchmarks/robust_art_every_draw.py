@@ -54,7 +54,9 @@ def _setup(model: str | None) -> None:
     config = RobustSolverConfig(safety_mode="chance")
     _STATE["config"] = config
     _STATE["art"] = ArtWarmStart.from_checkpoint(
-        resolve_model(model, "robust-rendezvous"), family="robust-rendezvous", mode="chance",
+        resolve_model(model, "robust-rendezvous"),
+        family="robust-rendezvous",
+        mode="chance",
         config=config,
     )
     from scpformer.robust_rendezvous import RobustInstance, solve

@@ -36,12 +36,16 @@ from scpformer.problems.robust_rendezvous.plan_dynamics import linearize_dynamic
 from scpformer.problems.robust_rendezvous.problem import replay
 from scpformer.problems.robust_rendezvous.safety import (
     _arc_h,
+    _sampled_arcs,
+    arc_upper_bound,
     covariance_at_tstar,
     drift_geometry,
     evaluate_safety,
     linear_model,
+    node_violation_flags,
     plan_safety,
     sample_peaks,
+    violation_flags,
 )
 from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig
 from scpformer.problems.robust_rendezvous.subproblem import ConicResult, SafetySubproblem
@@ -459,6 +463,52 @@ def test_every_dip_of_an_arc_between_samples_is_refined(tpbvp):
         [_arc_h(geo, ev.y, np.full(ev.y.shape[0], t), ev.X, INSTANCE.uncertainty.q) for t in tau]
     ).max(axis=0)
     np.testing.assert_allclose(ev.h, dense, atol=1e-5)
+
+
+def _perturbed(tpbvp, scale: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The TPBVP's states and impulses with Gaussian noise of ``scale`` m/s on the impulses."""
+    u = tpbvp.trajectory.u + np.random.default_rng(seed).normal(
+        0.0, scale, tpbvp.trajectory.u.shape
+    )
+    return tpbvp.trajectory.x, u
+
+
+@pytest.mark.parametrize("scale", [0.0, 0.02])
+def test_the_sampled_bound_of_an_arc_is_above_its_dense_maximum(tpbvp, scale):
+    """``arc_upper_bound`` of the design samples is at least the arc's maximum on a 2 s grid,
+    margin included, at every node (the TPBVP and a noisy copy of it)."""
+    x, u = _perturbed(tpbvp, scale, 3)
+    model, geo = linear_model(INSTANCE), drift_geometry(INSTANCE)
+    arcs = _sampled_arcs(geo, model, x, u, INSTANCE, "chance", None)
+    bound = arc_upper_bound(arcs.h(INSTANCE.uncertainty.q))
+    tau = np.arange(0.0, INSTANCE.t_safety_s, 2.0)
+    dense = np.stack([_arc_h(geo, arcs.y, np.full(arcs.y.shape[0], t), arcs.X,
+                             INSTANCE.uncertainty.q) for t in tau]).max(axis=0)  # fmt: skip
+    assert np.all(bound >= dense)
+    assert np.all(np.isinf(arc_upper_bound(np.zeros((4, 2)))))  # two samples bound nothing
+
+
+@pytest.mark.parametrize("mode", ["chance", "deterministic"])
+def test_node_violation_flags_equal_those_of_the_full_evaluation(tpbvp, mode):
+    """The flags decided from the samples where they can be are those of ``evaluate_safety``,
+    for whole trajectories and node by node (as the ART rollout asks), on the TPBVP and on
+    noisy copies of it with violations."""
+    from scpformer.warmstart.families import _node
+
+    model, geo = linear_model(INSTANCE), drift_geometry(INSTANCE)
+    for scale, seed in ((0.0, 0), (0.01, 1), (0.05, 2)):
+        x, u = _perturbed(tpbvp, scale, seed)
+        full = violation_flags(
+            evaluate_safety(geo, model, x, u, INSTANCE, mode, margin_gradient=False).h
+        )
+        np.testing.assert_array_equal(node_violation_flags(geo, model, x, u, INSTANCE, mode), full)
+        for k in range(0, u.shape[0], 7):
+            node = dataclasses.replace(model, Phi=model.Phi[k : k + 1], B=model.B[k : k + 1],
+                                       Psi=model.Psi[k : k + 1])  # fmt: skip
+            flag = node_violation_flags(_node(geo, k), node, x[k : k + 1], u[k : k + 1],
+                                        INSTANCE, mode)  # fmt: skip
+            assert flag.tolist() == [full[k]]
+    assert 0 < full.sum() < full.size  # the noisiest copy violates some nodes, not all
 
 
 @pytest.mark.parametrize("expand", [True, False])

@@ -193,9 +193,7 @@ def check_out_folder(out: Path) -> None:
             )
 
 
-def check_settings(
-    out: Path, settings: Mapping[str, Any], *, grows: tuple[str, ...] = ()
-) -> None:
+def check_settings(out: Path, settings: Mapping[str, Any], *, grows: tuple[str, ...] = ()) -> None:
     """Record ``settings`` in ``OUT/config.json``; refuse a folder made with other settings.
 
     ``n`` may differ (a larger run extends a smaller one), and so may where the folder is

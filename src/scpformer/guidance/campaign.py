@@ -546,8 +546,9 @@ def _pdg_summary_text(s: dict[str, Any]) -> str:
         f"{s['terminal_tilt_deg_median']:.2f} deg, rate {s['terminal_rate_deg_median']:.2f} "
         "deg/U_T",
         f"{s['replans']} re-plans ({s['replans_failed']} failed, {s['tscvx_fallbacks']} T-SCvx "
-        f"fallbacks to its full subproblem or cold SCvx): iterations median {s['replan_iterations_median']:g}, p99 "
-        f"{s['replan_iterations_p99']:g}; wall time median {s['replan_time_median_s']:.3f} s, "
+        "fallbacks to its full subproblem or cold SCvx): iterations median "
+        f"{s['replan_iterations_median']:g}, p99 {s['replan_iterations_p99']:g}; wall time "
+        f"median {s['replan_time_median_s']:.3f} s, "
         f"p99 {s['replan_time_p99_s']:.3f} s (re-planning period {s['replan_period_s']:.3f} "
         "U_T, median over runs)",
         f"constraint violations along the flown trajectories: {s['violations']} samples",

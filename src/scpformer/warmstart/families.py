@@ -186,20 +186,15 @@ class RobustArtFamily:
         local), so the instances of a group are evaluated as the nodes of one stacked
         trajectory by :func:`~scpformer.problems.robust_rendezvous.safety.evaluate_safety`.
         """
-        from scpformer.problems.robust_rendezvous.safety import (
-            VIOLATION_TOL,
-            evaluate_safety,
-            violation_flags,
-        )
+        from scpformer.problems.robust_rendezvous.safety import node_violation_flags
 
         flags = np.zeros(x.shape[0], dtype=int)
         for idx, group in batch.groups:
             for i, geometry in zip(idx, group.geometry, strict=True):
                 model = LinearModel(t=np.zeros(2), oe=np.zeros((2, 6)), Phi=batch.Phi[[i], k],
                                     B=batch.B[[i], k], Psi=batch.Psi[[i], k])  # fmt: skip
-                ev = evaluate_safety(_node(geometry, k), model, x[[i]], u[[i]], group.instance,
-                                     self.mode, margin_gradient=False)  # fmt: skip
-                flags[i] = violation_flags(ev.h, VIOLATION_TOL)[0]
+                flags[i] = node_violation_flags(_node(geometry, k), model, x[[i]], u[[i]],
+                                                group.instance, self.mode)[0]  # fmt: skip
         return flags
 
     def trajectory_ctg(self, instance: RobustInstance, model: LinearModel, x: np.ndarray,

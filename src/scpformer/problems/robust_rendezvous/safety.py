@@ -102,6 +102,7 @@ T_STAR_TOL_S = 0.5  # t* is located to this many seconds: h errs by ~h''/2 dt^2 
 _GOLDEN = 0.5 * (np.sqrt(5.0) - 1.0)
 N_SCAN = 17  # instants (36 s apart at Table 1) scanned around a sampled peak before the search
 N_REFINED = 3  # local maxima of the sampled arc refined per node (one orbit has two dips)
+ARC_BOUND_FACTOR = 1.0  # second differences of the samples bounding the arc (arc_upper_bound)
 
 
 # ======================================================================================
@@ -422,22 +423,14 @@ def evaluate_safety(
         derivative w.r.t. ``u`` (N, 6, 3) [s] (nonlinear impulse map); default
         ``y = x + B u`` with the model's ``B``. The drift arcs start from ``y``.
     """
-    check_mode(mode)
     n = u.shape[0]
-    B = model.B if post_impulse is None else post_impulse[1]
-    y_lin = x[:n] + np.einsum("ikl,il->ik", B, u)  # (N, 6)
-    y = y_lin if post_impulse is None else post_impulse[0]
+    arcs = _sampled_arcs(geometry, model, x, u, instance, mode, post_impulse)
+    B, y_lin, y, X = arcs.B, arcs.y_lin, arcs.y, arcs.X
+    x_t, jac, EDPsi, G = arcs.x_t, arcs.jac, arcs.EDPsi, arcs.G
     unc = instance.uncertainty
-    X = None
-    if mode == "chance":
-        X = covariance_history(x[:n], u, model.Phi, model.B, model.Psi[:n], unc).X
-    x_t, jac, EDPsi = geometry.drift(y)  # (N, S, 6), (N, S, 6, 6), (N, S, 3, 6)
-    G = np.einsum("ijrk,ijkl->ijrl", EDPsi, jac)
     Psi, taus = geometry.Psi, np.broadcast_to(geometry.tau, (n, geometry.tau.size))
     if geometry.tau.size > 1:
-        d, _, _, _, beta = _distance_and_margin(G, np.einsum("ijrk,ijk->ijr", EDPsi, x_t), X,
-                                                unc.q)  # fmt: skip
-        peaks = sample_peaks(1.0 + beta - d, N_REFINED)
+        peaks = sample_peaks(arcs.h(unc.q), N_REFINED)
         tau_star = refine_worst_instant(geometry, y, X, unc.q, peaks)  # (N, N_REFINED)
         xs, js, EDPsi_s = geometry.drift(y, tau_star)
         Psi_s = geometry.rtn_map(geometry.t[:, None] + tau_star)
@@ -482,6 +475,83 @@ def evaluate_safety(
         Phi_star=jac[idx, j_star],
         Psi_star=Psi[idx, j_star],
     )
+
+
+@dataclass(frozen=True)
+class _SampledArcs:
+    """The drift arcs of every node at its design samples (the first step of
+    :func:`evaluate_safety`)."""
+
+    B: np.ndarray  # (N, 6, 3) derivative of the post-impulse state w.r.t. u [s]
+    y_lin: np.ndarray  # (N, 6) x_i + B_i u_i [m]
+    y: np.ndarray  # (N, 6) post-impulse states the arcs start from [m]
+    X: np.ndarray | None  # (N, 6, 6) covariance of Eq. 14 (None: deterministic)
+    x_t: np.ndarray  # (N, S, 6) mean ROE at the samples [m]
+    jac: np.ndarray | None  # (N, S, 6, 6) their Jacobian w.r.t. y_i
+    EDPsi: np.ndarray  # (N, S, 3, 6) E_i D Psi(t_i + tau_j) [1/m]
+    G: np.ndarray  # (N, S, 3, 6) E_i D Psi Phi [1/m]
+
+    def h(self, q: float) -> np.ndarray:
+        """``1 + beta_ij - d_ij`` at the samples, (N, S)."""
+        r = np.einsum("ijrk,ijk->ijr", self.EDPsi, self.x_t)
+        d, _, _, _, beta = _distance_and_margin(self.G, r, self.X, q)
+        return 1.0 + beta - d
+
+
+def _sampled_arcs(
+    geometry: DriftGeometry, model: LinearModel, x: np.ndarray, u: np.ndarray,
+    instance: RobustInstance, mode: str, post_impulse: tuple[np.ndarray, np.ndarray] | None,
+) -> _SampledArcs:  # fmt: skip
+    """Post-impulse states, covariances (Eq. 14) and drift samples of every node."""
+    check_mode(mode)
+    n = u.shape[0]
+    B = model.B if post_impulse is None else post_impulse[1]
+    y_lin = x[:n] + np.einsum("ikl,il->ik", B, u)  # (N, 6)
+    y = y_lin if post_impulse is None else post_impulse[0]
+    X = None
+    if mode == "chance":
+        X = covariance_history(x[:n], u, model.Phi, model.B, model.Psi[:n],
+                               instance.uncertainty).X  # fmt: skip
+    x_t, jac, EDPsi = geometry.drift(y)  # (N, S, 6), (N, S, 6, 6), (N, S, 3, 6)
+    G = np.einsum("ijrk,ijkl->ijrl", EDPsi, jac)
+    return _SampledArcs(B, y_lin, y, X, x_t, jac, EDPsi, G)
+
+
+def arc_upper_bound(h: np.ndarray) -> np.ndarray:
+    """Upper bound on ``1 + beta - d`` over each continuous drift arc from its design samples
+    ``h`` (N, S): the highest sample plus ``ARC_BOUND_FACTOR`` times the largest second
+    difference ``|h_{j-1} - 2 h_j + h_{j+1}|``, (N,).
+
+    Between two samples ``tau`` apart a smooth arc rises above the higher one by at most
+    ``tau^2 max|h''| / 8``; the second difference estimates ``tau^2 h''``, so the bound holds
+    wherever the arc's curvature is at most eight times the largest one its samples show.
+    Measured on 6,000 nodes (the passively safe and the TPBVP solutions of 30 chance-mode
+    instances of the robust dataset, seed 0): the refined worst instant rose above the best
+    sample by up to 0.29 with second differences up to 3.3, never above the bound, and 62% of
+    the nodes were decided by the samples alone.
+    """
+    if h.shape[1] < 3:
+        return np.full(h.shape[0], np.inf)
+    return h.max(axis=1) + ARC_BOUND_FACTOR * np.abs(np.diff(h, 2, axis=1)).max(axis=1)
+
+
+def node_violation_flags(
+    geometry: DriftGeometry, model: LinearModel, x: np.ndarray, u: np.ndarray,
+    instance: RobustInstance, mode: str, tol: float = VIOLATION_TOL,
+) -> np.ndarray:  # fmt: skip
+    """``C_i`` of Eq. 7 of every node, ``violation_flags(evaluate_safety(...).h, tol)``, with
+    the worst instant located only when the design samples leave the answer open: a sample
+    above ``tol`` is a violation, an arc whose :func:`arc_upper_bound` is below ``tol`` is
+    none. The ART rollout asks this at every node it generates (the constraint-to-go token);
+    the search of :func:`refine_worst_instant` is most of its cost."""
+    arcs = _sampled_arcs(geometry, model, x, u, instance, mode, None)
+    h = arcs.h(instance.uncertainty.q)
+    flags = h.max(axis=1) > tol
+    open_ = ~flags & (arc_upper_bound(h) > tol) & (geometry.tau.size > 1)
+    if open_.any():
+        ev = evaluate_safety(geometry, model, x, u, instance, mode, margin_gradient=False)
+        flags = np.where(open_, ev.h > tol, flags)
+    return flags.astype(int)
 
 
 def _direction_gradient(
