@@ -92,6 +92,12 @@ PDG6DOF_FLAGS: tuple[FlagSpec, ...] = (
         "constraints (feasible), Table 2 as an independent box (table2), or the nominal "
         "sub-range (default: feasible)",
     }),
+    ("--midflight-nodes", {
+        "type": positive, "nargs": 2, "metavar": ("A", "B"), "default": None,
+        "help": "sample states along optimal descents instead: solve each drawn instance "
+        "with cold SCvx and start the sample from its state at a node drawn from A..B "
+        "(the states a re-planning guidance meets; default: the drawn initial states)",
+    }),
 )  # fmt: skip
 RENDEZVOUS_FLAGS: tuple[FlagSpec, ...] = (
     ("--warmstart", {
@@ -130,9 +136,11 @@ def _build_pdg6dof(args: argparse.Namespace) -> DatasetFamily:
     from scpformer.problems.pdg6dof.constants import VehicleConstants
 
     constants = VehicleConstants(**overrides(args, VehicleConstants, "const"))
+    nodes = getattr(args, "midflight_nodes", None)
     config = PDG6DoFDataConfig(
-        ranges=RANGE_PRESETS[args.ranges](), constants=constants, solver=config_from_args(args)
-    )
+        ranges=RANGE_PRESETS[args.ranges](), constants=constants, solver=config_from_args(args),
+        midflight_nodes=None if nodes is None else tuple(nodes),
+    )  # fmt: skip
     return PDG6DoFFamily(config)
 
 

@@ -67,13 +67,44 @@ RANGE_PRESETS = {
 }
 
 
+#: Draws of the sampler tried for a mid-flight sample before its base instance counts as
+#: failed (a base draw whose cold SCvx does not converge has no trajectory to start from).
+MIDFLIGHT_DRAWS = 10
+
+
 @dataclass(frozen=True, kw_only=True)
 class PDG6DoFDataConfig:
-    """What a 6-DoF dataset samples and how it solves; defaults: Table 1, Table 2 made feasible."""
+    """What a 6-DoF dataset samples and how it solves; defaults: Table 1, Table 2 made feasible.
+
+    ``midflight_nodes = (a, b)`` makes every sample a state along an optimal descent, as a
+    re-planning guidance meets them (:mod:`scpformer.guidance.pdg6dof_mpc`): a base instance
+    is drawn from ``ranges`` and solved with cold SCvx, a node ``k`` is drawn uniformly from
+    ``a .. b``, and the sample is the same descent from the state at node ``k``
+    (:meth:`PDGInstance.with_initial_state`), solved cold like any sample. The T-SCvx paper's
+    networks see initial states of the sampler only; the states a closed loop re-plans from
+    lie elsewhere (lower, slower, lighter). The T-SCvx issue of the guidance layer: "if
+    needed, add states sampled along optimal trajectories". ``None`` (default): the sampler's
+    own initial states.
+    """
 
     ranges: PDGSampleRanges = field(default_factory=PDGSampleRanges.feasible)  # consistent Table 2
     constants: VehicleConstants = field(default_factory=VehicleConstants)  # model (Table 1)
     solver: PDGSolverConfig = field(default_factory=PDGSolverConfig)  # SCvx settings (Table 1)
+    midflight_nodes: tuple[int, int] | None = None  # node range of mid-flight states (above)
+
+    def __post_init__(self) -> None:
+        if self.midflight_nodes is None:
+            return
+        nodes = tuple(self.midflight_nodes)
+        last = self.solver.n_nodes - 2  # the state at node N - 1 is the landing
+        if len(nodes) != 2 or not all(isinstance(k, int | np.integer) for k in nodes) or not (
+            1 <= nodes[0] <= nodes[1] <= last
+        ):  # fmt: skip
+            raise ValueError(
+                f"midflight_nodes must be two integers 1 <= a <= b <= N - 2 = {last}, got "
+                f"{self.midflight_nodes!r}"
+            )
+        object.__setattr__(self, "midflight_nodes", (int(nodes[0]), int(nodes[1])))
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> PDG6DoFDataConfig:
@@ -129,7 +160,27 @@ class PDG6DoFFamily(ConfiguredFamily):
         compiled_subproblem(cfg.n_nodes, cfg.fix_roll, cfg.prox_weight, cfg.scvx.solver)
 
     def sample(self, rng: np.random.Generator) -> PDGInstance:
+        if self.config.midflight_nodes is None:
+            return self._base(rng)
+        return self._midflight(rng)
+
+    def _base(self, rng: np.random.Generator) -> PDGInstance:
         return sample_instances(rng, 1, self.config.ranges, self.config.constants)[0]
+
+    def _midflight(self, rng: np.random.Generator) -> PDGInstance:
+        """A state along the cold SCvx optimum of a base draw (:class:`PDG6DoFDataConfig`);
+        ``ValueError`` (the sample then fails) when no base draw of ``MIDFLIGHT_DRAWS``
+        converges."""
+        low, high = self.config.midflight_nodes or (0, 0)
+        for _ in range(MIDFLIGHT_DRAWS):
+            base = self._base(rng)
+            solution = solve(base, self.config.solver)
+            if solution.converged:
+                k = int(rng.integers(low, high + 1))
+                return base.with_initial_state(solution.trajectory.x[k])
+        raise ValueError(
+            f"no converged descent in {MIDFLIGHT_DRAWS} base draws to take a mid-flight state from"
+        )
 
     def encode_instance(self, instance: PDGInstance) -> dict[str, Any]:
         return {"theta": theta_vector(instance)}

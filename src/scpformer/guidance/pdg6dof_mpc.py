@@ -683,10 +683,7 @@ def remaining_instance(instance: PDGInstance, estimate: np.ndarray) -> PDGInstan
 
     Raises ``ValueError`` when the estimate poses no instance (e.g. a mass at the dry mass).
     """
-    x = np.asarray(estimate, dtype=float)
-    return replace(instance, r0=tuple(x[0:3]), v0=tuple(x[3:6]),
-                   q0=tuple(quat.normalize(x[6:10])), omega0_deg=tuple(np.degrees(x[10:13])),
-                   m0=float(x[13]))  # fmt: skip
+    return instance.with_initial_state(estimate)
 
 
 def planning_instance(instance: PDGInstance, cfg: MPCConfig) -> PDGInstance:

@@ -114,6 +114,18 @@ class PDGInstance:
         out["constants"] = asdict(self.constants)
         return out
 
+    def with_initial_state(self, x: np.ndarray) -> PDGInstance:
+        """The same descent from the state ``x`` (14,) (the order of :attr:`x0`, rate in
+        rad/U_T, quaternion normalized): the remaining problem from a point of a flight, with
+        this instance's constraints, vehicle and terminal conditions. ``ValueError`` when
+        ``x`` poses no instance (e.g. a mass at the dry mass)."""
+        x = np.asarray(x, dtype=float)
+        if x.shape != (14,) or not np.all(np.isfinite(x)):
+            raise ValueError(f"x must be a finite state of shape (14,), got shape {x.shape}")
+        return replace(self, r0=tuple(x[0:3]), v0=tuple(x[3:6]),
+                       q0=tuple(quat.normalize(x[6:10])), omega0_deg=tuple(np.degrees(x[10:13])),
+                       m0=float(x[13]))  # fmt: skip
+
     def rotated_about_up(self, angle_rad: float) -> PDGInstance:
         """The same instance seen in an inertial frame rotated by ``angle_rad`` about Up (e1).
 
