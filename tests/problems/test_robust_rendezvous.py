@@ -480,7 +480,7 @@ def test_the_sampled_bound_of_an_arc_is_above_its_dense_maximum(tpbvp, scale):
     x, u = _perturbed(tpbvp, scale, 3)
     model, geo = linear_model(INSTANCE), drift_geometry(INSTANCE)
     arcs = _sampled_arcs(geo, model, x, u, INSTANCE, "chance", None)
-    bound = arc_upper_bound(arcs.h(INSTANCE.uncertainty.q))
+    bound = arc_upper_bound(arcs.h)
     tau = np.arange(0.0, INSTANCE.t_safety_s, 2.0)
     dense = np.stack([_arc_h(geo, arcs.y, np.full(arcs.y.shape[0], t), arcs.X,
                              INSTANCE.uncertainty.q) for t in tau]).max(axis=0)  # fmt: skip

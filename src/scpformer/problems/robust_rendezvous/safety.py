@@ -75,6 +75,7 @@ constraint with margin is VIOLATED, ``h_i > tol``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -423,14 +424,23 @@ def evaluate_safety(
         derivative w.r.t. ``u`` (N, 6, 3) [s] (nonlinear impulse map); default
         ``y = x + B u`` with the model's ``B``. The drift arcs start from ``y``.
     """
-    n = u.shape[0]
     arcs = _sampled_arcs(geometry, model, x, u, instance, mode, post_impulse)
+    return _evaluate(geometry, model, x, u, instance, arcs, n_rows, margin_gradient)
+
+
+def _evaluate(
+    geometry: DriftGeometry, model: LinearModel, x: np.ndarray, u: np.ndarray,
+    instance: RobustInstance, arcs: _SampledArcs, n_rows: int, margin_gradient: bool,
+) -> SafetyEvaluation:  # fmt: skip
+    """:func:`evaluate_safety` from the arcs' design samples ``arcs``: the refined worst
+    instants, the margins and the rows."""
+    n = u.shape[0]
     B, y_lin, y, X = arcs.B, arcs.y_lin, arcs.y, arcs.X
     x_t, jac, EDPsi, G = arcs.x_t, arcs.jac, arcs.EDPsi, arcs.G
     unc = instance.uncertainty
     Psi, taus = geometry.Psi, np.broadcast_to(geometry.tau, (n, geometry.tau.size))
     if geometry.tau.size > 1:
-        peaks = sample_peaks(arcs.h(unc.q), N_REFINED)
+        peaks = sample_peaks(arcs.h, N_REFINED)
         tau_star = refine_worst_instant(geometry, y, X, unc.q, peaks)  # (N, N_REFINED)
         xs, js, EDPsi_s = geometry.drift(y, tau_star)
         Psi_s = geometry.rtn_map(geometry.t[:, None] + tau_star)
@@ -490,11 +500,13 @@ class _SampledArcs:
     jac: np.ndarray | None  # (N, S, 6, 6) their Jacobian w.r.t. y_i
     EDPsi: np.ndarray  # (N, S, 3, 6) E_i D Psi(t_i + tau_j) [1/m]
     G: np.ndarray  # (N, S, 3, 6) E_i D Psi Phi [1/m]
+    q: float  # quantile of the chance margin, q(Delta)
 
-    def h(self, q: float) -> np.ndarray:
+    @cached_property
+    def h(self) -> np.ndarray:
         """``1 + beta_ij - d_ij`` at the samples, (N, S)."""
         r = np.einsum("ijrk,ijk->ijr", self.EDPsi, self.x_t)
-        d, _, _, _, beta = _distance_and_margin(self.G, r, self.X, q)
+        d, _, _, _, beta = _distance_and_margin(self.G, r, self.X, self.q)
         return 1.0 + beta - d
 
 
@@ -514,7 +526,7 @@ def _sampled_arcs(
                                instance.uncertainty).X  # fmt: skip
     x_t, jac, EDPsi = geometry.drift(y)  # (N, S, 6), (N, S, 6, 6), (N, S, 3, 6)
     G = np.einsum("ijrk,ijkl->ijrl", EDPsi, jac)
-    return _SampledArcs(B, y_lin, y, X, x_t, jac, EDPsi, G)
+    return _SampledArcs(B, y_lin, y, X, x_t, jac, EDPsi, G, instance.uncertainty.q)
 
 
 def arc_upper_bound(h: np.ndarray) -> np.ndarray:
@@ -545,11 +557,10 @@ def node_violation_flags(
     none. The ART rollout asks this at every node it generates (the constraint-to-go token);
     the search of :func:`refine_worst_instant` is most of its cost."""
     arcs = _sampled_arcs(geometry, model, x, u, instance, mode, None)
-    h = arcs.h(instance.uncertainty.q)
-    flags = h.max(axis=1) > tol
-    open_ = ~flags & (arc_upper_bound(h) > tol) & (geometry.tau.size > 1)
-    if open_.any():
-        ev = evaluate_safety(geometry, model, x, u, instance, mode, margin_gradient=False)
+    flags = arcs.h.max(axis=1) > tol
+    open_ = ~flags & (arc_upper_bound(arcs.h) > tol) & (geometry.tau.size > 1)
+    if open_.any():  # the samples already evaluated serve the full evaluation
+        ev = _evaluate(geometry, model, x, u, instance, arcs, 1, margin_gradient=False)
         flags = np.where(open_, ev.h > tol, flags)
     return flags.astype(int)
 
