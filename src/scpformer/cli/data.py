@@ -136,7 +136,7 @@ def _build_pdg6dof(args: argparse.Namespace) -> DatasetFamily:
     from scpformer.problems.pdg6dof.constants import VehicleConstants
 
     constants = VehicleConstants(**overrides(args, VehicleConstants, "const"))
-    nodes = getattr(args, "midflight_nodes", None)
+    nodes = args.midflight_nodes
     config = PDG6DoFDataConfig(
         ranges=RANGE_PRESETS[args.ranges](), constants=constants, solver=config_from_args(args),
         midflight_nodes=None if nodes is None else tuple(nodes),

@@ -160,18 +160,17 @@ class PDG6DoFFamily(ConfiguredFamily):
         compiled_subproblem(cfg.n_nodes, cfg.fix_roll, cfg.prox_weight, cfg.scvx.solver)
 
     def sample(self, rng: np.random.Generator) -> PDGInstance:
-        if self.config.midflight_nodes is None:
-            return self._base(rng)
-        return self._midflight(rng)
+        nodes = self.config.midflight_nodes
+        return self._base(rng) if nodes is None else self._midflight(rng, nodes)
 
     def _base(self, rng: np.random.Generator) -> PDGInstance:
         return sample_instances(rng, 1, self.config.ranges, self.config.constants)[0]
 
-    def _midflight(self, rng: np.random.Generator) -> PDGInstance:
-        """A state along the cold SCvx optimum of a base draw (:class:`PDG6DoFDataConfig`);
-        ``ValueError`` (the sample then fails) when no base draw of ``MIDFLIGHT_DRAWS``
-        converges."""
-        low, high = self.config.midflight_nodes or (0, 0)
+    def _midflight(self, rng: np.random.Generator, nodes: tuple[int, int]) -> PDGInstance:
+        """A state at a node of ``nodes`` along the cold SCvx optimum of a base draw
+        (:class:`PDG6DoFDataConfig`); ``ValueError`` (the sample then fails) when no base draw
+        of ``MIDFLIGHT_DRAWS`` converges."""
+        low, high = nodes
         for _ in range(MIDFLIGHT_DRAWS):
             base = self._base(rng)
             solution = solve(base, self.config.solver)
