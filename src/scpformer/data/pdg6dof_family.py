@@ -82,9 +82,8 @@ class PDG6DoFDataConfig:
     ``a .. b``, and the sample is the same descent from the state at node ``k``
     (:meth:`PDGInstance.with_initial_state`), solved cold like any sample. The T-SCvx paper's
     networks see initial states of the sampler only; the states a closed loop re-plans from
-    lie elsewhere (lower, slower, lighter). The T-SCvx issue of the guidance layer: "if
-    needed, add states sampled along optimal trajectories". ``None`` (default): the sampler's
-    own initial states.
+    lie elsewhere (lower, slower, lighter); these samples cover them. ``None`` (default): the
+    sampler's own initial states.
     """
 
     ranges: PDGSampleRanges = field(default_factory=PDGSampleRanges.feasible)  # consistent Table 2
