@@ -165,8 +165,12 @@ def test_a_tscvx_run_folder_given_as_model_is_the_networks_of_the_re_plans(plan)
     by_path = mpc._tscvx_provider(cfg.solver, cfg.model).guess_for(sub, cfg.solver)
     shipped = mpc._tscvx_provider(cfg.solver).guess_for(sub, cfg.solver)
     np.testing.assert_array_equal(by_path.trajectory.x, shipped.trajectory.x)
-    assert Campaign(runs=1, config=cfg).settings()["model"] == cfg.model
-    assert "model" not in Campaign(runs=1, config=mpc.MPCConfig(warmstart="tscvx")).settings()
+    by_path_settings = Campaign(runs=1, config=cfg).settings()
+    default_settings = Campaign(runs=1, config=mpc.MPCConfig(warmstart="tscvx")).settings()
+    assert (by_path_settings["model"], default_settings["model"]) == (cfg.model, "default")
+    # the same weights are the same model, however they were named
+    assert by_path_settings["model_sha256"] == default_settings["model_sha256"]
+    assert "model" not in Campaign(runs=1, config=mpc.MPCConfig(warmstart="previous")).settings()
 
 
 def test_the_shifted_plan_is_the_rest_of_the_plan_retimed(plan):

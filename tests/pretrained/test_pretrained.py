@@ -14,6 +14,7 @@ from scpformer.pretrained import (
     FAMILY_MODELS,
     PretrainedError,
     default_model,
+    model_fingerprint,
     read_manifest,
     verify_model,
 )
@@ -79,6 +80,23 @@ def test_a_missing_file_is_named(tampered):
     tampered.unlink()
     with pytest.raises(PretrainedError, match="is missing"):
         default_model("rendezvous")
+
+
+def test_a_models_fingerprint_follows_its_weights_not_its_name(tmp_path):
+    """``default``, the shipped folder by path and a copy of it are one model; changing one
+    byte of the weights makes another (what keeps a results folder to the model it flew)."""
+    shipped = default_model("robust-rendezvous")
+    copy = tmp_path / "copy"
+    shutil.copytree(shipped, copy)
+    digest = model_fingerprint("default", "robust-rendezvous")
+    assert model_fingerprint(str(shipped), "robust-rendezvous") == digest
+    assert model_fingerprint(str(copy), "robust-rendezvous") == digest
+    assert model_fingerprint(str(copy / "checkpoint.pt"), "robust-rendezvous") == digest
+    data = bytearray((copy / "checkpoint.pt").read_bytes())
+    data[-1] ^= 0xFF
+    (copy / "checkpoint.pt").write_bytes(bytes(data))
+    assert model_fingerprint(str(copy), "robust-rendezvous") != digest
+    assert model_fingerprint(None, "rendezvous") != digest
 
 
 def test_an_unknown_family_has_no_default():

@@ -83,6 +83,22 @@ def _budget_setting(config: Any) -> dict[str, float]:
     return {} if budget is None else {"time_budget_s": budget}
 
 
+def _model_setting(config: Any, family: str) -> dict[str, str]:
+    """The learned model as settings, when the loop flies or compares one: what ``--model``
+    says and the digest of its weights (:func:`~scpformer.pretrained.model_fingerprint`), so
+    that a folder flown with one shipped model refuses to resume with its successor."""
+    if family == "pdg6dof":
+        learned = bool({config.warmstart, *config.compare} & {"tscvx", "best"})
+    else:
+        learned = uses_art(config)
+    if not learned:
+        return {}
+    from scpformer.pretrained import model_fingerprint
+
+    return {"model": config.model or "default",
+            "model_sha256": model_fingerprint(config.model, family)}  # fmt: skip
+
+
 def family_of(config: Any) -> str:
     """The family whose ``MPCConfig`` ``config`` is; ``ValueError`` for anything else."""
     if isinstance(config, MPCConfig):
@@ -152,7 +168,7 @@ class Campaign:
                 "min_remaining_time": cfg.min_remaining_time, "compare": list(cfg.compare),
                 "tracking": asdict(cfg.tracking) if cfg.tracking is not None else None,
                 "thrust_margin": cfg.thrust_margin, "gimbal_margin_deg": cfg.gimbal_margin_deg,
-                **({"model": cfg.model} if cfg.model not in (None, "default") else {}),
+                **_model_setting(cfg, "pdg6dof"),
                 **_budget_setting(cfg),
                 **({"replan_iter_max": cfg.replan_iter_max}
                    if cfg.replan_iter_max is not None else {}),
@@ -164,8 +180,6 @@ class Campaign:
                      "dispersion": errors.dispersion is not None},
             }  # fmt: skip
         robust_only = {"safety_samples": cfg.safety_samples} if self.family != "rendezvous" else {}
-        if uses_art(cfg):  # the ART model of art and best
-            robust_only = robust_only | {"model": cfg.model or "default"}
         return {
             "family": self.family, "seed": self.seed, "instances": self.instances,
             "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,
@@ -174,7 +188,7 @@ class Campaign:
                 name: getattr(cfg.errors, name) is not None
                 for name in ("navigation", "actuation", "process_noise")
             },
-        } | robust_only | _budget_setting(cfg)  # fmt: skip
+        } | robust_only | _model_setting(cfg, self.family) | _budget_setting(cfg)  # fmt: skip
 
     def run_seed(self, run: int) -> int:
         return int(np.random.SeedSequence([self.seed, run]).generate_state(1)[0])

@@ -103,3 +103,26 @@ def default_model(family: str, root: Path | None = None) -> Path:
 def resolve_model(model: Path | str | None, family: str) -> Path:
     """``--model``: the shipped, verified model of ``family`` when default, else ``model``."""
     return default_model(family) if is_default(model) else require_model_path(model)
+
+
+def model_fingerprint(model: Path | str | None, family: str) -> str:
+    """SHA-256 over the weights files (``*.pt``) of the model ``--model`` selects.
+
+    What a results folder records about its model: ``default`` names whichever model is
+    shipped today, so a folder flown before the shipped model is replaced would otherwise
+    resume with the new one. The digest covers each file's path relative to the model (a
+    run folder or one checkpoint file) and its SHA-256, in sorted order.
+    """
+    import hashlib
+
+    from scpformer.data.storage import file_sha256
+
+    path = resolve_model(model, family)
+    files = [path] if path.is_file() else sorted(path.rglob("*.pt"))
+    if not files:
+        raise ValueError(f"--model {path}: no weights file (*.pt) in it")
+    digest = hashlib.sha256()
+    for file in files:
+        relative = file.name if file == path else file.relative_to(path).as_posix()
+        digest.update(f"{relative} {file_sha256(file)}\n".encode())
+    return digest.hexdigest()
