@@ -18,9 +18,11 @@ violating passive safety at the cap).
 Prints the paired table of :mod:`scpformer.experiments.paired` (solved by both / one /
 neither, wall time and iterations per draw faster / tie / slower, cost where both solved),
 McNemar's exact test on the failures, the acceptance rate of ART's guess and the outcome of
-the accepted draws alone. Rows are appended to ``--out`` (JSON lines) as they finish; a rerun
-with the same file skips the draws already in it. ``--workers`` runs draws in parallel
-processes (each single-threaded; both methods of a draw run in the same process).
+the accepted draws alone. Rows are appended to ``--out`` (JSON lines) as they finish, each with
+the digest of the model's weights; a rerun with the same file and model skips the draws
+already in it (another model's rows in the file are kept and left out of the summary).
+``--workers`` runs draws in parallel processes (each single-threaded; both methods of a draw
+run in the same process).
 
 Usage: python benchmarks/robust_art_every_draw.py --seed 8675309 --n 400 [--model RUN]
        [--workers 2] [--out robust-art-every-draw.jsonl]
@@ -88,26 +90,27 @@ def _solve(instance, warmstart) -> dict:
     }
 
 
-def measure_draw(seed: int, n: int, index: int) -> dict:
-    """Both methods on draw ``index`` of ``seed`` (the instances are redrawn in the worker)."""
+def measure_draw(seed: int, n: int, index: int, key: dict) -> dict:
+    """Both methods on draw ``index`` of ``seed`` (the instances are redrawn in the worker);
+    ``key`` (the model's digest, the process count) goes into the row."""
     from scpformer.robust_rendezvous import sample_instances
 
     instance = sample_instances(seed, n)[index]
     methods = {"cvx": "tpbvp", "art": _STATE["art"]}
     order = ("cvx", "art") if index % 2 == 0 else ("art", "cvx")
-    row = {"seed": seed, "draw": index}
+    row = {"seed": seed, "draw": index, **key}
     for name in order:
         row[name] = _solve(instance, methods[name])
     return row
 
 
-def measure(args: argparse.Namespace, done: set[int]) -> None:
+def measure(args: argparse.Namespace, key: dict, done: set[int]) -> None:
     todo = [i for i in range(args.n) if i not in done]
     with (
         ProcessPoolExecutor(args.workers, initializer=_setup, initargs=(args.model,)) as pool,
         args.out.open("a") as fh,
     ):
-        futures = [pool.submit(measure_draw, args.seed, args.n, i) for i in todo]
+        futures = [pool.submit(measure_draw, args.seed, args.n, i, key) for i in todo]
         for count, future in enumerate(futures, 1):
             row = future.result()
             fh.write(json.dumps(row) + "\n")
@@ -162,11 +165,13 @@ def summarize(rows: list[dict]) -> None:
     print("status pairs (PS-ART-C, PS-CVX-C):", {f"{k[0]}, {k[1]}": v for k, v in statuses.items()})
 
 
-def read_rows(path: Path, seed: int) -> list[dict]:
+def read_rows(path: Path, seed: int, model_sha256: str) -> list[dict]:
+    """The rows of ``path`` measured on ``seed`` with the model of that digest."""
     if not path.exists():
         return []
     rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    return sorted((r for r in rows if r["seed"] == seed), key=lambda r: r["draw"])
+    mine = (r for r in rows if r["seed"] == seed and r.get("model_sha256") == model_sha256)
+    return sorted(mine, key=lambda r: r["draw"])
 
 
 def main() -> None:
@@ -180,13 +185,21 @@ def main() -> None:
     args = parser.parse_args()
     if args.workers < 1 or args.n < 1:
         parser.error("--workers and --n must be at least 1")
+    from scpformer.pretrained import model_fingerprint
+
+    digest = model_fingerprint(args.model, "robust-rendezvous")
     if not args.summary_only:
-        measure(args, {r["draw"] for r in read_rows(args.out, args.seed)})
-    rows = [r for r in read_rows(args.out, args.seed) if r["draw"] < args.n]
+        key = {"model_sha256": digest, "processes": args.workers}
+        measure(args, key, {r["draw"] for r in read_rows(args.out, args.seed, digest)})
+    rows = [r for r in read_rows(args.out, args.seed, digest) if r["draw"] < args.n]
     if not rows:
-        raise SystemExit(f"{args.out}: no draw of seed {args.seed}")
+        raise SystemExit(f"{args.out}: no draw of seed {args.seed} with this --model")
     summarize(rows)
-    print(f"torch threads per process: 1; processes: {args.workers}")
+    processes = sorted({r.get("processes") for r in rows}, key=str)
+    print(
+        f"model sha256 {digest[:16]}...; torch threads per process: 1; processes: "
+        f"{', '.join(map(str, processes))}"
+    )
 
 
 if __name__ == "__main__":
