@@ -87,11 +87,7 @@ def _model_setting(config: Any, family: str) -> dict[str, str]:
     """The learned model as settings, when the loop flies or compares one: what ``--model``
     says and the digest of its weights (:func:`~scpformer.pretrained.model_fingerprint`), so
     that a folder flown with one shipped model refuses to resume with its successor."""
-    if family == "pdg6dof":
-        learned = bool({config.warmstart, *config.compare} & {"tscvx", "best"})
-    else:
-        learned = uses_art(config)
-    if not learned:
+    if not (pdg.uses_tscvx(config) if family == "pdg6dof" else uses_art(config)):
         return {}
     from scpformer.pretrained import model_fingerprint
 

@@ -740,6 +740,11 @@ def best_start(
 
 
 @lru_cache(maxsize=4)
+def uses_tscvx(config: MPCConfig) -> bool:
+    """Whether a loop's configuration flies or compares a start from the T-SCvx networks."""
+    return bool({config.warmstart, *config.compare} & {"tscvx", "best"})
+
+
 def _tscvx_provider(
     config: PDGSolverConfig, model: str | None = None, cold_fallback: bool = True
 ) -> Any:
@@ -909,7 +914,7 @@ def fly(
 
     planner = planning_instance(instance, cfg)
     first = open_loop if planner is instance else open_loop_plan(planner, cfg)
-    if {cfg.warmstart, *cfg.compare} & {"tscvx", "best"}:
+    if uses_tscvx(cfg):
         # the networks load and run once before the re-plans are timed (a flight computer's
         # start-up, as the rendezvous loops load ART's model)
         cfg.tscvx_provider().guess_for(planner, cfg.replan_solver)

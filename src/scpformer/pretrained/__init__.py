@@ -20,6 +20,7 @@ scpformer.pretrained.package`` packages trained runs into this layout.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -113,8 +114,6 @@ def model_fingerprint(model: Path | str | None, family: str) -> str:
     resume with the new one. The digest covers each file's path relative to the model (a
     run folder or one checkpoint file) and its SHA-256, in sorted order.
     """
-    import hashlib
-
     from scpformer.data.storage import file_sha256
 
     path = resolve_model(model, family)
