@@ -17,10 +17,12 @@ violating passive safety at the cap).
 
 Prints the paired table of :mod:`scpformer.experiments.paired` (solved by both / one /
 neither, wall time and iterations per draw faster / tie / slower, cost where both solved),
-McNemar's exact test on the failures, the acceptance rate of ART's guess and the outcome of
-the accepted draws alone. Rows are appended to ``--out`` (JSON lines) as they finish, each with
-the digest of the model's weights; a rerun with the same file and model skips the draws
-already in it (another model's rows in the file are kept and left out of the summary).
+McNemar's exact test on the failures, the acceptance rate of ART's guess, where its guesses
+fall against the check's window (``E_R`` and ``E_C`` of each guess, in the rows) and the
+outcome of the accepted draws alone. Rows are appended to ``--out`` (JSON lines) as they
+finish, each with the digest of the model's weights; a rerun with the same file and model
+skips the draws already in it (another model's rows in the file are kept and left out of the
+summary).
 ``--workers`` runs draws in parallel processes (each single-threaded; both methods of a draw
 run in the same process).
 
@@ -39,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from scpformer.experiments.paired import Outcomes, exact_sign_test, paired_table
+from scpformer.warmstart.art import AcceptanceCheck
 
 COST_TIE = 1e-3  # [m/s] two delta-v totals closer than this tie (SCvx* tolerance scale)
 _STATE: dict = {}  # per worker process: the ART provider and the solver configuration
@@ -79,6 +82,11 @@ def _solve(instance, warmstart) -> dict:
                 "accepted": False}  # fmt: skip
     wall = time.perf_counter() - start
     record = solution.extras.get("warmstart", {})
+    check = {
+        name: float(value)
+        for name, value in record.get("details", {}).items()
+        if name in ("E_R", "E_C")
+    }  # Eq. 8 errors of ART's guess; the TPBVP has none
     return {
         "wall_s": wall,
         "status": solution.status.value,
@@ -87,6 +95,7 @@ def _solve(instance, warmstart) -> dict:
         "cost": float(solution.cost),
         "used": record.get("used"),
         "accepted": record.get("accepted"),
+        **check,
     }
 
 
@@ -158,11 +167,31 @@ def summarize(rows: list[dict]) -> None:
             f"{cvx.solved[c].sum()} from the TPBVP; iterations median "
             f"{np.median(art.iterations[a]):g} vs {np.median(cvx.iterations[c]):g}"
         )
+    check_errors(rows)
     statuses = {}
     for r in rows:
         key = (r["art"]["status"], r["cvx"]["status"])
         statuses[key] = statuses.get(key, 0) + 1
     print("status pairs (PS-ART-C, PS-CVX-C):", {f"{k[0]}, {k[1]}": v for k, v in statuses.items()})
+
+
+def check_errors(rows: list[dict]) -> None:
+    """Where ART's guesses fall against the Eq. 8 window (rows that record E_R and E_C)."""
+    rows = [r["art"] for r in rows if "E_R" in r["art"] and "E_C" in r["art"]]
+    if not rows:
+        return
+    lo, hi = AcceptanceCheck().e_r_percent
+    c_lo, c_hi = AcceptanceCheck().e_c
+    e_r = np.round(100.0 * np.array([r["E_R"] for r in rows]), 9)  # the check's 100 E_R
+    e_c = np.array([r["E_C"] for r in rows])
+    ok_r, ok_c = (e_r >= lo) & (e_r <= hi), (e_c >= c_lo) & (e_c <= c_hi)
+    p10, p50, p90 = np.percentile(e_r, [10, 50, 90])
+    print(
+        f"Eq. 8 on {len(rows)} guesses: 100 E_R median {p50:.2f} (10-90%: {p10:.2f} to "
+        f"{p90:.2f}), within [{lo:g}, {hi:g}] on {ok_r.sum()}; E_C median {np.median(e_c):g} "
+        f"(90%: {np.percentile(e_c, 90):g}), within [{c_lo:g}, {c_hi:g}] on {ok_c.sum()}; "
+        f"both on {(ok_r & ok_c).sum()}"
+    )
 
 
 def read_rows(path: Path, seed: int, model_sha256: str) -> list[dict]:
