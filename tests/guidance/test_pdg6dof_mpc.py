@@ -173,6 +173,14 @@ def test_a_tscvx_run_folder_given_as_model_is_the_networks_of_the_re_plans(plan)
     assert "model" not in Campaign(runs=1, config=mpc.MPCConfig(warmstart="previous")).settings()
 
 
+def test_the_networks_load_once_per_model_and_configuration():
+    """Re-plans reuse the loaded networks: the provider is built once, not per re-plan."""
+    cfg = mpc.MPCConfig(warmstart="tscvx")
+    assert cfg.tscvx_provider() is cfg.tscvx_provider()
+    other = mpc.MPCConfig(warmstart="tscvx", replan_iter_max=12)  # no cold fallback
+    assert other.tscvx_provider() is not cfg.tscvx_provider()
+
+
 def test_the_shifted_plan_is_the_rest_of_the_plan_retimed(plan):
     z = plan.trajectory
     n = z.x.shape[0]

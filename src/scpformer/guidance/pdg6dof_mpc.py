@@ -739,12 +739,12 @@ def best_start(
     return ("tscvx", provider) if j_tscvx < j_shifted else ("previous", shifted)
 
 
-@lru_cache(maxsize=4)
 def uses_tscvx(config: MPCConfig) -> bool:
     """Whether a loop's configuration flies or compares a start from the T-SCvx networks."""
     return bool({config.warmstart, *config.compare} & {"tscvx", "best"})
 
 
+@lru_cache(maxsize=4)
 def _tscvx_provider(
     config: PDGSolverConfig, model: str | None = None, cold_fallback: bool = True
 ) -> Any:
