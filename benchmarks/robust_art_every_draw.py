@@ -180,8 +180,8 @@ def check_errors(rows: list[dict]) -> None:
     rows = [r["art"] for r in rows if "E_R" in r["art"] and "E_C" in r["art"]]
     if not rows:
         return
-    lo, hi = AcceptanceCheck().e_r_percent
-    c_lo, c_hi = AcceptanceCheck().e_c
+    window = AcceptanceCheck()
+    (lo, hi), (c_lo, c_hi) = window.e_r_percent, window.e_c
     e_r = np.round(100.0 * np.array([r["E_R"] for r in rows]), 9)  # the check's 100 E_R
     e_c = np.array([r["E_C"] for r in rows])
     ok_r, ok_c = (e_r >= lo) & (e_r <= hi), (e_c >= c_lo) & (e_c <= c_hi)
