@@ -1,5 +1,5 @@
 """``scpformer experiment run mpc-robust-rendezvous``: closed-loop Monte Carlo of the
-chance-constrained rendezvous, cold against previous-plan re-plans."""
+chance-constrained rendezvous: the re-plan warm starts cold, previous, art and best."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def test_the_experiment_is_registered_without_models_or_data():
     assert entry.default_n == 100 and "src/scpformer/guidance" in entry.depends_on
 
 
-def test_both_warm_starts_fly_the_same_run_and_previous_is_compared_with_cold(one_run):
+def test_every_warm_start_flies_the_same_run_and_is_compared_on_its_re_plans(one_run):
     with (one_run / "results.csv").open(newline="") as fh:
         (row,) = list(csv.DictReader(fh))
     for warmstart in mpc_robust_rendezvous.WARMSTARTS:
@@ -39,11 +39,19 @@ def test_both_warm_starts_fly_the_same_run_and_previous_is_compared_with_cold(on
     with np.load(one_run / "previous" / "run-0000.npz") as data:
         assert data["replan_node"].tolist() == [45, 90]
         assert data["compare_warmstart"].tolist() == ["cold", "cold"]
+    for learned in ("art", "best"):
+        with np.load(one_run / learned / "run-0000.npz") as data:
+            assert data["compare_warmstart"].tolist() == ["cold", "previous"] * 2
+            assert set(data["replan_used"].tolist()) <= {"art", "previous", "tpbvp"}
     report = (one_run / "report.md").read_text()
-    for section in ("## Summary", "## Previous vs cold on the same re-plans"):
+    for section in ("## Summary", "## Who wins", "## Previous vs cold on the same re-plans",
+                    "## ART vs cold and previous on the same re-plans",
+                    "## Best (ART or previous by Eq. 8) vs cold and previous on the same "
+                    "re-plans", "## Failures"):  # fmt: skip
         assert section in report
     assert "win / tie / loss" in report and "convex solves per re-plan" in report
-    assert "## Failures" in report
+    assert "solved by both / only this / only the baseline / neither | 2 / 0 / 0 / 0" in report
+    assert "The start each of the 2 flown re-plans began from: art " in report
 
 
 def test_failures_name_what_failed_and_count_drift_entries_against_the_designed_risk(tmp_path):

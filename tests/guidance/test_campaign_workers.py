@@ -7,6 +7,9 @@ times of the re-plans may differ.
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -45,3 +48,14 @@ def test_two_workers_fly_the_same_runs_as_one(one_by_one, tmp_path, pool):
 def test_workers_must_be_a_positive_count(tmp_path):
     with pytest.raises(ValueError, match="workers"):
         run_campaign(Campaign(runs=1, config=MPCConfig()), tmp_path, workers=0)
+
+
+def test_a_pool_worker_is_limited_to_one_torch_thread():
+    """The pool's processes share the cores; without the limit each would start one torch
+    thread per core (the machine's count)."""
+    pytest.importorskip("torch")
+    code = ("import torch; torch.set_num_threads(4); "
+            "from scpformer.guidance.campaign import one_torch_thread; one_torch_thread(); "
+            "print(torch.get_num_threads())")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "1"

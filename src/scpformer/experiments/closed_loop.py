@@ -28,6 +28,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from scpformer.experiments import report as rep
+from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import RunOptions, check_settings, require_n
 from scpformer.files import write_text_atomic
 from scpformer.guidance.campaign import Campaign, plot_campaign, run_campaign, summarize
@@ -286,6 +287,56 @@ def compared(arrays: dict[str, np.ndarray], other: str) -> dict[str, np.ndarray]
     sel = arrays["compare_warmstart"].astype(str) == other
     return {k.removeprefix("compare_"): v[sel] for k, v in arrays.items()
             if k.startswith("compare_")}  # fmt: skip
+
+
+def paired_replans(
+    arrays: dict[str, np.ndarray], flown: str, other: str, *, cost_tie: float
+) -> str | None:
+    """The flown re-plans of ``flown`` against ``other`` solved on the same re-plan problems,
+    re-plan by re-plan (:func:`~scpformer.experiments.paired.paired_table`: a draw is a
+    re-plan, solved means accepted, a tie a cost difference within ``cost_tie``), then both
+    p99 wall times; ``None`` when the flights recorded no solve of ``other`` per re-plan."""
+    side, wall = compared(arrays, other), arrays["replan_wall_s"]
+    if not wall.size or side["wall_s"].size != wall.size:
+        return None
+    ours = Outcomes(time=wall, iterations=arrays["replan_iterations"],
+                    solved=arrays["replan_accepted"], cost=arrays["replan_cost"])  # fmt: skip
+    base = Outcomes(time=side["wall_s"], iterations=side["iterations"],
+                    solved=side["accepted"], cost=side["cost"])  # fmt: skip
+    table = paired_table(f"{flown} (flown)", ours, f"{other} (same problems)", base,
+                         cost_tie=cost_tie)  # fmt: skip
+    return (f"{table}\n\nWall time p99: {flown} {percentile(ours.time, 99):.3f} s, {other} "
+            f"{percentile(base.time, 99):.3f} s.")  # fmt: skip
+
+
+def verdict_lines(
+    arrays: dict[str, dict[str, np.ndarray]], compared_with: dict[str, tuple[str, ...]],
+    flowns: Sequence[str], *, unit: str = "SCP iterations",
+) -> list[str]:  # fmt: skip
+    """Plainly, for each flight of ``flowns`` whose re-plans were also solved from every
+    start of ``compared_with[flown]``: which start needs the fewest ``unit`` per re-plan
+    (mean) and the least wall time (median) on those identical problems."""
+    lines = []
+    for flown in flowns:
+        a = arrays[flown]
+        sides = {flown: {"iterations": a["replan_iterations"], "wall_s": a["replan_wall_s"]},
+                 **{o: compared(a, o) for o in compared_with[flown]}}  # fmt: skip
+        if not a["replan_iterations"].size or any(
+            v["iterations"].size != a["replan_iterations"].size for v in sides.values()
+        ):
+            continue
+        it = {w: float(np.mean(v["iterations"])) for w, v in sides.items()}
+        wall = {w: float(np.median(v["wall_s"])) for w, v in sides.items()}
+        fewest, fastest = min(it, key=it.__getitem__), min(wall, key=wall.__getitem__)
+        lines.append(
+            f"- On the {a['replan_iterations'].size} re-plans of the `{flown}` flights: fewest "
+            f"{unit} per re-plan: **{fewest}** (mean "
+            + ", ".join(f"{w} {v:.2f}" for w, v in it.items())
+            + f"); shortest median wall time: **{fastest}** ("
+            + ", ".join(f"{w} {v:.3f} s" for w, v in wall.items())
+            + ")."
+        )
+    return lines
 
 
 def add_figures(report: rep.Report, out: Path, warmstarts: tuple[str, ...], flown: str) -> None:

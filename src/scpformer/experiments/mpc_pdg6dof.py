@@ -33,10 +33,10 @@ from scpformer.experiments.closed_loop import (
     add_figures,
     compared,
     fuel_ratio,
+    paired_replans,
     percentile,
     run_experiment,
 )
-from scpformer.experiments.paired import Outcomes, paired_table
 from scpformer.experiments.runner import RunOptions
 from scpformer.guidance import pdg6dof_mpc as mpc
 from scpformer.guidance.campaign import Campaign
@@ -167,21 +167,13 @@ def _used(arrays: dict[str, np.ndarray]) -> np.ndarray:
 
 def paired_text(arrays: dict[str, np.ndarray], other: str) -> str:
     """The flown ``tscvx`` re-plans against ``other`` solved on the same re-plan problems,
-    re-plan by re-plan (:mod:`..paired`: accepted by both / one / neither, wall time,
-    iterations, propellant where both were accepted)."""
-    side = compared(arrays, other)
-    if not arrays["replan_wall_s"].size or side["wall_s"].size != arrays["replan_wall_s"].size:
+    re-plan by re-plan (:func:`~..closed_loop.paired_replans`: accepted by both / one /
+    neither, wall time, iterations, propellant where both were accepted)."""
+    table = paired_replans(arrays, "tscvx", other, cost_tie=TIE_U_M)
+    if table is None:
         return "No comparison solves recorded."
-    ours = Outcomes(time=arrays["replan_wall_s"], iterations=arrays["replan_iterations"],
-                    solved=arrays["replan_accepted"], cost=arrays["replan_cost"])  # fmt: skip
-    base = Outcomes(time=side["wall_s"], iterations=side["iterations"],
-                    solved=side["accepted"], cost=side["cost"])  # fmt: skip
-    p99 = (f"Wall time p99: tscvx {np.percentile(ours.time, 99):.3f} s, {other} "
-           f"{np.percentile(base.time, 99):.3f} s.")  # fmt: skip
-    table = paired_table("tscvx (flown)", ours, f"{other} (same problems)", base,
-                         cost_tie=TIE_U_M)  # fmt: skip
     return table + (
-        f"\n\n{p99} The {other} solves are made on the re-plan problems of the flights of "
+        f" The {other} solves are made on the re-plan problems of the flights of "
         "`tscvx` (same estimate, same plan to shift), so the starts are compared on identical "
         f"problems; a draw is a re-plan, solved means accepted (converged or verified "
         f"unconverged, `MPCConfig.accept_unconverged`), and a tie is a propellant difference "

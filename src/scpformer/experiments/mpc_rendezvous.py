@@ -44,6 +44,7 @@ from scpformer.experiments.closed_loop import (
     run_experiment,
     speedup,
     succeeded,
+    verdict_lines,
 )
 from scpformer.experiments.runner import RunOptions
 from scpformer.guidance.campaign import Campaign
@@ -235,29 +236,10 @@ def verdict_text(summaries: dict[str, dict[str, Any]], arrays: dict[str, dict[st
     """Plainly: which start needs the fewest SCP iterations and the least wall time per
     re-plan on the same problems (the flights of ``art`` and ``best``, where all of cold,
     previous and the learned start are solved), and whether any changes the flown outcome."""
-    lines = []
-    for flown in ("art", "best"):
-        a = arrays[flown]
-        sides = {flown: {"iterations": a["replan_iterations"], "wall_s": a["replan_wall_s"]},
-                 **{o: compared(a, o) for o in COMPARED[flown]}}  # fmt: skip
-        if not a["replan_iterations"].size or any(
-            v["iterations"].size != a["replan_iterations"].size for v in sides.values()
-        ):
-            continue
-        it = {w: float(np.mean(v["iterations"])) for w, v in sides.items()}
-        wall = {w: float(np.median(v["wall_s"])) for w, v in sides.items()}
-        fewest, fastest = min(it, key=it.get), min(wall, key=wall.get)
-        lines.append(
-            f"- On the {a['replan_iterations'].size} re-plans of the `{flown}` flights: fewest "
-            f"SCP iterations per re-plan: **{fewest}** (mean "
-            + ", ".join(f"{w} {v:.2f}" for w, v in it.items())
-            + f"); shortest median wall time: **{fastest}** ("
-            + ", ".join(f"{w} {v:.3f} s" for w, v in wall.items())
-            + ")."
-        )
+    lines = verdict_lines(arrays, COMPARED, ("art", "best"))
     ok = {w: f"{100 * summaries[w].get('success_rate', math.nan):.0f}%" for w in WARMSTARTS}
     lines.append("- Success: " + ", ".join(f"{w} {v}" for w, v in ok.items()) + ".")
-    return "\n".join(lines) if lines else "No re-plan recorded."
+    return "\n".join(lines)
 
 
 def failures_text(rows: dict[str, list[dict[str, str]]], tol: DockingTolerance) -> str:

@@ -7,14 +7,16 @@ two-body + J2 truth with the Table 2 navigation, actuation and process errors
 (nodes 10, 20, ..., 90). Every warm start of :data:`WARMSTARTS` flies the same runs: the same
 instance and the same error draws run by run (common random numbers,
 :mod:`scpformer.guidance.campaign` seeds run ``r`` of seed ``S`` with ``SeedSequence([S,
-r])``). The flights of ``previous`` also solve every re-plan from ``cold`` (compared, not
-flown): the per-re-plan win/tie/loss, iterations and wall times of the two starts on
-identical problems.
+r])``). The flights of ``previous`` also solve every re-plan from ``cold``, those of ``art``
+and ``best`` (the shipped robust ART model started mid-horizon from the flown prefix, its
+guess kept or not by the Eq. 8 check) from ``cold`` and from ``previous`` (compared, not
+flown): the per-re-plan win/tie/loss, iterations and wall times of the starts on identical
+problems.
 
 Instances never used in training: a sampled campaign's runs and a dataset's instances are
 drawn from streams that never coincide (:mod:`scpformer.experiments.closed_loop`).
 
-Output: ``OUT/cold`` and ``OUT/previous`` beside the closed-loop experiments' files.
+Output: one campaign folder per warm start in ``OUT`` (:mod:`scpformer.experiments.closed_loop`).
 """
 
 from __future__ import annotations
@@ -30,21 +32,29 @@ from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
     Flights,
     add_figures,
+    compared,
     fuel_ratio,
+    paired_replans,
     percentile,
     relative,
     run_experiment,
     speedup,
+    verdict_lines,
 )
 from scpformer.experiments.runner import RunOptions
-from scpformer.guidance.campaign import Campaign
+from scpformer.guidance.campaign import TIE_M_S, Campaign
 from scpformer.guidance.robust_rendezvous_mpc import MPCConfig
 from scpformer.robust_rendezvous import RobustInstance
 
 NAME = "mpc-robust-rendezvous"
 REPRODUCES = "closed-loop MPC of the chance-constrained, passively safe rendezvous"
-#: Warm starts flown, in order; the last is flown with the others compared on its re-plans.
-WARMSTARTS = ("cold", "previous")
+#: Warm starts flown, in order (each compared on its re-plans with those of :data:`COMPARED`).
+WARMSTARTS = ("cold", "previous", "art", "best")
+#: The starts each flown one is compared with on its own re-plans (solved, not flown).
+COMPARED = {"cold": (), "previous": ("cold",), "art": ("cold", "previous"),
+            "best": ("cold", "previous")}  # fmt: skip
+#: The learned starts, flown with every classical one compared on their re-plans.
+LEARNED = ("art", "best")
 REPLAN_EVERY = 10  # K: 9 re-plans over N = 100 impulses, every 710 s
 SAFETY_SAMPLES = 200  # Monte Carlo draws per flown node (MPCConfig.safety_samples)
 FAMILY = "robust-rendezvous"
@@ -65,15 +75,17 @@ RUN_COLUMNS = (
 
 def campaign(n: int, seed: int, warmstart: str) -> Campaign:
     """The campaign of ``warmstart``: ``n`` sampled instances, Table 2 errors, ``K = 10``;
-    ``previous`` also solves each re-plan cold (compared, not flown)."""
-    compare = tuple(w for w in WARMSTARTS if w != warmstart) if warmstart == "previous" else ()
-    config = MPCConfig(replan_every=REPLAN_EVERY, warmstart=warmstart, compare=compare,
-                       safety_samples=SAFETY_SAMPLES)  # fmt: skip
+    each re-plan also solved from the starts of :data:`COMPARED` (compared, not flown)."""
+    config = MPCConfig(replan_every=REPLAN_EVERY, warmstart=warmstart,
+                       compare=COMPARED[warmstart], safety_samples=SAFETY_SAMPLES)  # fmt: skip
     return Campaign(runs=n, seed=seed, instances="sampled", config=config)
 
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``mpc-robust-rendezvous`` into ``options.out``; returns the report's path."""
+    import torch
+
+    torch.set_num_threads(1)  # batch-1 ART rollouts: a second thread only synchronizes
     return run_experiment(options, sys.modules[__name__], command=command, name=name)
 
 
@@ -101,14 +113,44 @@ def runs_text(n_runs: int) -> str:
 
 
 def analyse(flights: Flights, report: rep.Report) -> None:
-    """The summary table per warm start and the paired comparison of previous vs cold."""
+    """The summary table per warm start, who wins per re-plan, the paired comparisons of
+    previous vs cold and of the learned starts vs cold and previous, and the failures."""
     previous = flights.arrays["previous"]
     report.sections.append(("Summary", summary_table(flights)))
+    verdict = verdict_lines(flights.arrays, COMPARED, LEARNED, unit="convex solves")
+    report.sections.append(("Who wins", "\n".join(verdict) or "No re-plan recorded."))
     report.sections.append(("Previous vs cold on the same re-plans",
                             paired_text(flights.summaries["previous"], previous)))  # fmt: skip
+    for flown, title in (("art", "ART"), ("best", "Best (ART or previous by Eq. 8)")):
+        report.sections.append((f"{title} vs cold and previous on the same re-plans",
+                                learned_text(flown, flights.arrays[flown])))  # fmt: skip
     report.comparisons += comparisons(flights, previous)
     report.sections.append(("Failures", failures_text(flights)))
     add_figures(report, flights.out, WARMSTARTS, "trajectories")
+
+
+def learned_text(flown: str, arrays: dict[str, np.ndarray]) -> str:
+    """The flown re-plans of the learned start ``flown`` against each start of
+    :data:`COMPARED` on the same re-plan problems (:func:`paired_replans`), and the start
+    each flown SCvx* began from: ART's guess, the shifted plan or, when the Eq. 8 check kept
+    neither, the remaining TPBVP."""
+    tables = [(o, paired_replans(arrays, flown, o, cost_tie=TIE_M_S)) for o in COMPARED[flown]]
+    parts = [f"Against `{o}`:\n\n{t}" for o, t in tables if t is not None]
+    if not parts:
+        return "No comparison solves recorded."
+    used = arrays["replan_used"].astype(str)
+    counts = ", ".join(f"{u} {int((used == u).sum())}" for u in ("art", "previous", "tpbvp")
+                       if flown == "best" or u != "previous")  # fmt: skip
+    parts.append(
+        f"The start each of the {used.size} flown re-plans began from: {counts}. The comparison "
+        f"solves are made on the re-plan problems of the flights of `{flown}` (same estimate, "
+        "same remaining horizon); a tie is a cost difference within the SCP's J_tol "
+        f"({TIE_M_S:g} m/s). Wall times cover the whole re-plan: for `{flown}` the remaining "
+        "TPBVP (ART's R(t_k) and the fallback), ART's generation from the flown prefix, the "
+        "Eq. 8 check, every SCvx* solve and the verification; for cold the three stages; for "
+        "previous passive safety from the shifted plan. Convex solves count every stage."
+    )
+    return "\n\n".join(parts)
 
 
 def failures_text(flights: Flights) -> str:
@@ -177,17 +219,24 @@ def summary_table(flights: Flights) -> str:
 
 def comparisons(flights: Flights, arrays: dict[str, np.ndarray]) -> list[rep.Comparison]:
     """The rows of ``results.json``: the robust ART paper plans open loop only, so nothing is
-    rated; the rows keep the closed loop's outcome and the shifted plan's convex solves
-    against the three-stage cold start on the same re-plans."""
+    rated; the rows keep the closed loop's outcome, the shifted plan's convex solves against
+    the three-stage cold start and the learned start's against both, on the same re-plans."""
     n = "n/a: the robust ART paper plans open loop only"
     safe = ", ".join(f"{w} {flights.successes(w)}" for w in WARMSTARTS)
     flown, cold = arrays["replan_iterations"], arrays["compare_iterations"]
     solves = (f"{np.median(flown):g} vs {np.median(cold):g} (median over {flown.size} re-plans)"
               if flown.size and cold.size == flown.size else "no comparison solves")  # fmt: skip
-    rows_out = (
+    rows_out = [
         ("closed-loop runs that reach the pre-docking state safely", safe),
         ("convex solves per re-plan, previous vs cold (same re-plans)", solves),
-    )
+    ]
+    art = flights.arrays["art"]
+    for other in COMPARED["art"]:
+        it_a, it_o = art["replan_iterations"], compared(art, other)["iterations"]
+        if it_a.size and it_o.size == it_a.size:
+            rows_out.append((f"convex solves per re-plan, ART vs {other} (same re-plans)",
+                             f"{np.median(it_a):g} vs {np.median(it_o):g} (median over "
+                             f"{it_a.size} re-plans)"))  # fmt: skip
     return [rep.Comparison(quantity=q, paper=n, ours=ours, status=rep.NOT_RATED)
             for q, ours in rows_out]  # fmt: skip
 
@@ -230,8 +279,10 @@ DIFFERENCES: tuple[str, ...] = (
     "here it is re-solved every 10 impulses on a shrinking horizon from a navigation "
     "estimate (mean ROE of the two-body + J2 truth plus the Table 2 navigation error), "
     "each remaining problem with the chance constraint of Eq. 14-16 on its nodes.",
-    "Warm starts: this experiment flies the classical starts; the learned robust ART start "
-    "(`simulate robust-rendezvous --warmstart art`) is measured in the closed-loop guide.",
+    "Warm starts: the learned start is the shipped robust ART model (trained on whole "
+    "100-impulse trajectories from t_0), started mid-horizon from the flown prefix and "
+    "conditioned on R(t_k) = -J of the remaining TPBVP and C(t_k) = 0; the paper's Eq. 8 "
+    "check keeps its guess or falls back to that TPBVP.",
     "Passive safety of the flown plans is checked by the family's Monte Carlo with 200 draws "
     "per node instead of the 1000 of its verification (time); the flown states' own free "
     "drift is checked too.",

@@ -391,6 +391,17 @@ def _flown_ray(
             ray.shutdown()
 
 
+def one_torch_thread() -> None:
+    """Limit this worker process to one torch thread when torch is installed: the pool's
+    processes share the cores, and a batch-1 rollout gains nothing from a second thread
+    (it only synchronizes); without it every worker would start one thread per core."""
+    try:
+        import torch
+    except ImportError:  # the classical starts need no torch
+        return
+    torch.set_num_threads(1)
+
+
 def _flown(
     campaign: Campaign, folder: Path, runs: list[int], workers: int
 ) -> Iterator[dict[str, Any]]:
@@ -400,7 +411,8 @@ def _flown(
             yield fly_run(campaign, folder, run)
         return
     context = mp.get_context("forkserver")
-    with ProcessPoolExecutor(min(workers, len(runs)), mp_context=context) as pool:
+    with ProcessPoolExecutor(min(workers, len(runs)), mp_context=context,
+                             initializer=one_torch_thread) as pool:  # fmt: skip
         futures = [pool.submit(fly_run, campaign, folder, run) for run in runs]
         for future in as_completed(futures):
             yield future.result()
