@@ -65,6 +65,26 @@ def test_with_no_error_the_closed_loop_reproduces_the_open_loop_delta_v(plan):
     assert result.replans[0].iterations >= 1 and result.replans[0].wall_s > 0.0
 
 
+def test_a_mission_risk_is_spread_over_the_nodes_of_every_flown_plan(plan):
+    """epsilon = 1% over the N = 100 guarded nodes: Delta = 1e-4 per node in the open-loop
+    plan and in the re-plan (Boole's inequality), the Eq. 16 margins grow by q(1e-4) / q(1e-3)
+    = 3.72 / 3.09, so the plan may only cost more than at the paper's Delta (a local optimum
+    of a problem with the same objective and tighter constraints, from the same TPBVP start;
+    tie within SCvx*'s eps_opt on the cost), and the campaign records the setting."""
+    assert robust.designed_instance(INSTANCE, _config()) is INSTANCE  # the instance's Delta
+    cfg = _config(warmstart="previous", mission_risk=0.01)
+    designed = robust.designed_instance(INSTANCE, cfg)
+    assert designed.uncertainty.delta == pytest.approx(1e-4)
+    assert designed.uncertainty.navigation == INSTANCE.uncertainty.navigation
+    tight = robust.open_loop_plan(INSTANCE, cfg)
+    assert tight.cost >= plan.cost - cfg.solver.scvx.eps_opt
+    result = robust.fly(INSTANCE, cfg, seed=0, open_loop=tight)
+    assert [r.accepted for r in result.replans] == [True]
+    assert [f.instance.uncertainty.delta for f in result.flown] == pytest.approx([1e-4] * 2)
+    assert Campaign(runs=1, config=cfg).settings()["mission_risk"] == 0.01
+    assert "mission_risk" not in Campaign(runs=1, config=_config()).settings()
+
+
 def test_a_re_plan_over_the_time_budget_is_not_flown(plan):
     """A budget no solve meets: the re-plan at node 50 is late and the open-loop plan's
     impulses are flown to the end (the shared truth flight draws no error here)."""
@@ -230,6 +250,9 @@ def test_the_art_model_goes_with_best():
         ({"compare": ("hot",)}, "warmstart must be one of"),
         ({"solver": RobustSolverConfig(safety_mode="deterministic")}, "safety_mode must be"),
         ({"safety_samples": 0}, "safety_samples"),
+        ({"mission_risk": 0.0}, "mission_risk must be positive"),
+        ({"mission_risk": 1.0}, "mission_risk must be below 1"),
+        ({"mission_risk": float("nan")}, "mission_risk"),
     ],
 )
 def test_bad_configuration_is_refused_naming_the_field(kwargs, match):
@@ -265,6 +288,7 @@ def test_runs_csv_has_the_columns_and_resumes(tmp_path, plan):
         (["--replan-every", "0"], "--replan-every: must be at least 1"),
         (["--runs", "0"], "--runs: must be at least 1"),
         (["--warmstart", "tscvx"], "invalid choice: 'tscvx'"),
+        (["--mission-risk", "2"], "mission_risk must be below 1"),
     ],
 )
 def test_the_simulate_command_refuses_bad_input_in_one_line(argv, match, tmp_path, capsys):

@@ -201,7 +201,7 @@ def run_demo(args: argparse.Namespace) -> int:
         except OSError as err:
             raise ValueError(f"--out {out}: cannot create the folder ({err.strerror})") from None
     start = time.perf_counter()
-    from scpformer.cli.warmstart import single_thread_inference
+    from scpformer.models.capabilities import single_thread_inference
 
     single_thread_inference()
     providers = _load()

@@ -46,7 +46,7 @@ def warmstart_from_args(args: argparse.Namespace) -> object:
         if args.model is not None:
             raise ValueError("--model: used with --warmstart tscvx, kdtree or interp only")
         return args.warmstart
-    from scpformer.cli.warmstart import single_thread_inference
+    from scpformer.models.capabilities import single_thread_inference
     from scpformer.models.predictors import load_predictor
     from scpformer.pretrained import resolve_model
     from scpformer.warmstart.tscvx import TscvxWarmStart

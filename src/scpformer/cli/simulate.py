@@ -42,16 +42,18 @@ def run_simulate(args: argparse.Namespace) -> int:
 
         make = robust.MPCConfig if family == "robust-rendezvous" else MPCConfig
         model = getattr(args, "model", None)  # the ART model of art and best (rendezvous)
+        risk = getattr(args, "mission_risk", None)  # robust-rendezvous only
         config = make(
             replan_every=args.replan_every,
             warmstart=args.warmstart,
             compare=(args.compare,) if args.compare else (),
             errors=ErrorModels() if args.errors == "table2" else ErrorModels.none(),
             **({"model": str(model)} if model is not None else {}),
+            **({"mission_risk": risk} if risk is not None else {}),
             time_budget_s=args.time_budget,
         )
         if {args.warmstart, args.compare} & {"art", "best"}:
-            from scpformer.cli.warmstart import single_thread_inference
+            from scpformer.models.capabilities import single_thread_inference
 
             single_thread_inference()
     campaign = Campaign(runs=args.runs, seed=args.seed, instances=args.instances, config=config)

@@ -7,20 +7,9 @@ import argparse
 import math
 from typing import Any
 
+from scpformer.models.capabilities import single_thread_inference
 from scpformer.scp.solution import Solution
 from scpformer.warmstart import ArtWarmStart, WarmStart, WarmStartRecord
-
-
-def single_thread_inference() -> None:
-    """One torch thread for the batch-1 inference of a warm start.
-
-    A batch-1 step is dozens of tiny products, where a second thread only adds
-    synchronization: on the loaded 2-core development machine one ART rollout took 13-37 s
-    with two threads and 0.1 s with one.
-    """
-    import torch
-
-    torch.set_num_threads(1)
 
 
 def art_provider(args: argparse.Namespace, family: str, **kwargs: Any) -> WarmStart | None:

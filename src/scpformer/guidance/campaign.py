@@ -39,6 +39,7 @@ from scpformer.guidance import pdg6dof_mpc as pdg
 from scpformer.guidance import robust_rendezvous_mpc as robust
 from scpformer.guidance.rendezvous_art import uses_art
 from scpformer.guidance.rendezvous_mpc import MPCConfig, fly, open_loop_plan
+from scpformer.models.capabilities import single_thread_inference
 from scpformer.pdg6dof import PDGInstance
 from scpformer.rendezvous import RendezvousInstance, sample_instances
 from scpformer.robust_rendezvous import RobustInstance
@@ -176,6 +177,8 @@ class Campaign:
                      "dispersion": errors.dispersion is not None},
             }  # fmt: skip
         robust_only = {"safety_samples": cfg.safety_samples} if self.family != "rendezvous" else {}
+        if getattr(cfg, "mission_risk", None) is not None:  # absent from older folders
+            robust_only["mission_risk"] = cfg.mission_risk
         return {
             "family": self.family, "seed": self.seed, "instances": self.instances,
             "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,
@@ -392,14 +395,13 @@ def _flown_ray(
 
 
 def one_torch_thread() -> None:
-    """Limit this worker process to one torch thread when torch is installed: the pool's
-    processes share the cores, and a batch-1 rollout gains nothing from a second thread
-    (it only synchronizes); without it every worker would start one thread per core."""
+    """Limit a pool's worker process to one torch thread (:func:`single_thread_inference`):
+    the pool's processes share the cores, and without it each would start one thread per
+    core. Nothing to do without torch (the classical starts need none)."""
     try:
-        import torch
-    except ImportError:  # the classical starts need no torch
+        single_thread_inference()
+    except ImportError:
         return
-    torch.set_num_threads(1)
 
 
 def _flown(

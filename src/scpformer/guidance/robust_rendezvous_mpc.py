@@ -155,6 +155,16 @@ class MPCConfig(LoopConfig):
         more of its 200 drifts enter the ellipsoid; ~8 s a run of 100 nodes on one core).
     safety_confidence
         One-sided confidence of that binomial test (``MonteCarloResult.passes``).
+    mission_risk
+        The chance ``epsilon`` the loop designs for that ANY guarded node of the flight sees
+        its drift enter its ellipsoid, or ``None`` (default) for the instance's own per-node
+        ``Delta`` (Table 2: 1e-3). When set, every node's chance constraint, in the open-loop
+        plan and in every re-plan, uses ``Delta = epsilon / N`` over the ``N`` guarded nodes:
+        the uniform risk allocation of Boole's inequality, ``P(any entry) <= sum_i Delta_i =
+        epsilon`` (Ono & Williams, "Iterative risk allocation", AAAI 2008, start from it).
+        The paper's ``Delta = 1e-3`` per node allows up to ``1 - (1 - 1e-3)^100 = 9.5%`` per
+        100-node flight; a mission that must fail at most 1 run in 100 needs ``epsilon =
+        0.01``, i.e. ``Delta = 1e-4``. The Monte Carlo verification tests that ``Delta``.
     """
 
     warmstarts: ClassVar[tuple[str, ...]] = WARMSTARTS
@@ -164,6 +174,7 @@ class MPCConfig(LoopConfig):
     solver: RobustSolverConfig = field(default_factory=RobustSolverConfig)
     safety_samples: int = 200
     safety_confidence: float = 1e-4
+    mission_risk: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -174,6 +185,19 @@ class MPCConfig(LoopConfig):
         confidence = check_positive("safety_confidence", self.safety_confidence)
         if confidence >= 1.0:
             raise ValueError(f"safety_confidence must be below 1, got {confidence}")
+        if self.mission_risk is not None:
+            risk = check_positive("mission_risk", self.mission_risk)
+            if risk >= 1.0:
+                raise ValueError(f"mission_risk must be below 1, got {risk}")
+
+
+def designed_instance(instance: RobustInstance, config: MPCConfig) -> RobustInstance:
+    """``instance`` with the per-node risk the loop designs for: its own ``Delta``, or
+    ``config.mission_risk / N`` over its ``N`` guarded nodes (:class:`MPCConfig`)."""
+    if config.mission_risk is None:
+        return instance
+    delta = config.mission_risk / instance.n_nodes
+    return replace(instance, uncertainty=replace(instance.uncertainty, delta=delta))
 
 
 # ======================================================================================
@@ -235,7 +259,8 @@ def accepted(sol: Solution) -> bool:
 
 
 def open_loop_plan(instance: RobustInstance, config: MPCConfig | None = None) -> Solution:
-    """The open-loop plan: the family's three-stage solve of the nominal instance.
+    """The open-loop plan: the family's three-stage solve of the nominal instance, at the
+    per-node risk the loop designs for (:func:`designed_instance`).
 
     Raises
     ------
@@ -243,7 +268,7 @@ def open_loop_plan(instance: RobustInstance, config: MPCConfig | None = None) ->
         When it fails (no converged, verified plan): there is nothing to fly.
     """
     cfg = config or MPCConfig()
-    return flyable_plan(solve(instance, cfg.solver), accepted)
+    return flyable_plan(solve(designed_instance(instance, cfg), cfg.solver), accepted)
 
 
 # ======================================================================================
@@ -591,6 +616,7 @@ def fly(
     if not isinstance(instance, RobustInstance):
         raise ValueError(f"instance must be a RobustInstance, got {type(instance).__name__}")
     open_loop = open_loop or open_loop_plan(instance, cfg)
+    instance = designed_instance(instance, cfg)  # every re-plan keeps its Delta
 
     starts: list[tuple[int, RobustInstance, Solution]] = [(0, instance, open_loop)]
     log = FlownLog(instance, open_loop) if uses_art(cfg) else None

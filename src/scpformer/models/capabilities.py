@@ -87,3 +87,15 @@ def _probe(weights: str) -> str | None:
     if not error < 0.1:  # bf16: ~1e-3, int8: ~1e-2 on a 4x4 product
         return f"its product of a 4x4 test layer is off by {error:.2g} (relative)"
     return None
+
+
+def single_thread_inference() -> None:
+    """One torch thread for this process's batch-1 inference of a warm start.
+
+    A batch-1 step is dozens of tiny products, where a second thread only adds
+    synchronization: on the loaded 2-core development machine one ART rollout took 13-37 s
+    with two threads and 0.1 s with one.
+    """
+    import torch
+
+    torch.set_num_threads(1)

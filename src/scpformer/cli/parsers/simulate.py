@@ -98,6 +98,18 @@ def _add_rendezvous(
         default="table2",
         help=with_default("navigation, actuation and process errors: table2 or none", "table2"),
     )
+    if name == "robust-rendezvous":
+        parser.add_argument(
+            "--mission-risk",
+            type=float,
+            metavar="EPSILON",
+            help=with_default(
+                "design every flight for a chance EPSILON that any node's drift enters its "
+                "ellipsoid: each of the N nodes' chance constraints then uses Delta = "
+                "EPSILON / N (Boole's inequality); without it, the instance's Delta per node",
+                "1e-3 per node",
+            ),
+        )
     if "art" in warmstarts:
         parser.add_argument(
             "--model",
