@@ -83,6 +83,10 @@ def test_a_mission_risk_is_spread_over_the_nodes_of_every_flown_plan(plan):
     assert [f.instance.uncertainty.delta for f in result.flown] == pytest.approx([1e-4] * 2)
     assert Campaign(runs=1, config=cfg).settings()["mission_risk"] == 0.01
     assert "mission_risk" not in Campaign(runs=1, config=_config()).settings()
+    # one process flying both: the open-loop plan of one is not reused for the other
+    _, paper_plan, _ = Campaign(runs=1, config=_config()).planned(0)
+    _, risk_plan, _ = Campaign(runs=1, config=cfg).planned(0)
+    assert risk_plan.cost == pytest.approx(tight.cost) and risk_plan.cost != paper_plan.cost
 
 
 def test_a_re_plan_over_the_time_budget_is_not_flown(plan):

@@ -344,12 +344,15 @@ _PLANS: dict[Any, Any] = {}  # this process's open-loop plan of the last instanc
 
 
 def _open_loop(campaign: Campaign, instance: Any) -> Any:
-    """``campaign.open_loop_plan(instance)``, solved once per instance and process."""
-    if instance not in _PLANS:
+    """``campaign.open_loop_plan(instance)``, solved once per instance, configuration and
+    process (the plan depends on the loop's configuration too: its solver, the landing's
+    planning margins, the rendezvous' mission risk)."""
+    key = (instance, campaign.config)
+    if key not in _PLANS:
         plan = campaign.open_loop_plan(instance)  # raises before the cache is touched
         _PLANS.clear()
-        _PLANS[instance] = plan
-    return _PLANS[instance]
+        _PLANS[key] = plan
+    return _PLANS[key]
 
 
 def flight(campaign: Campaign, run: int) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
