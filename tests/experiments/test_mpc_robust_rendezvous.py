@@ -71,3 +71,4 @@ def test_failures_name_what_failed_and_count_drift_entries_against_the_designed_
     designed = 1.0 - (1.0 - 1e-3) ** 100  # a 100-node flight at Delta = 1e-3
     assert "2 drift entries in 200 flown nodes (1.0e-02 per node" in text
     assert f"probability up to {designed:.1%}" in text
+    assert "(0 to 9): 0: 0, 1: 0, 2: 0, 3: 0, 4: 0, 5: 0, 6: 0, 7: 0, 8: 1, 9: 1." in text
