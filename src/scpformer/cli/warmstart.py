@@ -7,7 +7,6 @@ import argparse
 import math
 from typing import Any
 
-from scpformer.models.capabilities import single_thread_inference
 from scpformer.scp.solution import Solution
 from scpformer.warmstart import ArtWarmStart, WarmStart, WarmStartRecord
 
@@ -25,6 +24,7 @@ def art_provider(args: argparse.Namespace, family: str, **kwargs: Any) -> WarmSt
         if given:
             raise ValueError(f"{', '.join(given)}: used with --warmstart art only")
         return None
+    from scpformer.models.capabilities import single_thread_inference
     from scpformer.pretrained import resolve_model
 
     single_thread_inference()

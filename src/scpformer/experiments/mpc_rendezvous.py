@@ -49,7 +49,6 @@ from scpformer.experiments.closed_loop import (
 from scpformer.experiments.runner import RunOptions
 from scpformer.guidance.campaign import Campaign
 from scpformer.guidance.rendezvous_mpc import DockingTolerance, MPCConfig
-from scpformer.models.capabilities import single_thread_inference
 from scpformer.rendezvous import RendezvousInstance
 
 NAME = "mpc-rendezvous"
@@ -88,6 +87,8 @@ def campaign(n: int, seed: int, warmstart: str) -> Campaign:
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``mpc-rendezvous`` into ``options.out``; returns the report's path."""
+    from scpformer.models.capabilities import single_thread_inference  # imports torch
+
     single_thread_inference()  # batch-1 ART rollouts: a second thread only synchronizes
     return run_experiment(options, sys.modules[__name__], command=command, name=name)
 

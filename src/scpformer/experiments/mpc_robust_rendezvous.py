@@ -44,7 +44,6 @@ from scpformer.experiments.closed_loop import (
 from scpformer.experiments.runner import RunOptions
 from scpformer.guidance.campaign import TIE_M_S, Campaign
 from scpformer.guidance.robust_rendezvous_mpc import MPCConfig
-from scpformer.models.capabilities import single_thread_inference
 from scpformer.robust_rendezvous import RobustInstance
 
 NAME = "mpc-robust-rendezvous"
@@ -84,6 +83,8 @@ def campaign(n: int, seed: int, warmstart: str) -> Campaign:
 
 def run(options: RunOptions, *, command: str = "", name: str = NAME) -> Path:
     """Run ``mpc-robust-rendezvous`` into ``options.out``; returns the report's path."""
+    from scpformer.models.capabilities import single_thread_inference  # imports torch
+
     single_thread_inference()  # batch-1 ART rollouts: a second thread only synchronizes
     return run_experiment(options, sys.modules[__name__], command=command, name=name)
 

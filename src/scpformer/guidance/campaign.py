@@ -39,7 +39,6 @@ from scpformer.guidance import pdg6dof_mpc as pdg
 from scpformer.guidance import robust_rendezvous_mpc as robust
 from scpformer.guidance.rendezvous_art import uses_art
 from scpformer.guidance.rendezvous_mpc import MPCConfig, fly, open_loop_plan
-from scpformer.models.capabilities import single_thread_inference
 from scpformer.pdg6dof import PDGInstance
 from scpformer.rendezvous import RendezvousInstance, sample_instances
 from scpformer.robust_rendezvous import RobustInstance
@@ -401,7 +400,9 @@ def one_torch_thread() -> None:
     """Limit a pool's worker process to one torch thread (:func:`single_thread_inference`):
     the pool's processes share the cores, and without it each would start one thread per
     core. Nothing to do without torch (the classical starts need none)."""
-    try:
+    try:  # imported here: scpformer.models imports torch
+        from scpformer.models.capabilities import single_thread_inference
+
         single_thread_inference()
     except ImportError:
         return
