@@ -289,6 +289,16 @@ def compared(arrays: dict[str, np.ndarray], other: str) -> dict[str, np.ndarray]
             if k.startswith("compare_")}  # fmt: skip
 
 
+def median_iterations(arrays: dict[str, np.ndarray], other: str) -> str | None:
+    """``"a vs b (median over n re-plans)"``: the median iterations of a flight's re-plans
+    and of ``other`` solved on the same problems, or ``None`` when the flight recorded no
+    solve of ``other`` per re-plan."""
+    flown, base = arrays["replan_iterations"], compared(arrays, other)["iterations"]
+    if not flown.size or base.size != flown.size:
+        return None
+    return f"{np.median(flown):g} vs {np.median(base):g} (median over {flown.size} re-plans)"
+
+
 def paired_replans(
     arrays: dict[str, np.ndarray], flown: str, other: str, *, cost_tie: float
 ) -> str | None:

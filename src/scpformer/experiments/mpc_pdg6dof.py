@@ -31,8 +31,8 @@ from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
     Flights,
     add_figures,
-    compared,
     fuel_ratio,
+    median_iterations,
     paired_replans,
     percentile,
     run_experiment,
@@ -191,11 +191,7 @@ def comparisons(flights: Flights) -> list[rep.Comparison]:
     n = "n/a: the T-SCvx paper solves open loop only"
 
     def iterations(other: str) -> str:
-        it_t, it_o = flown["replan_iterations"], compared(flown, other)["iterations"]
-        if not it_t.size or it_o.size != it_t.size:
-            return "no comparison solves"
-        return (f"{np.median(it_t):g} vs {np.median(it_o):g} (median over {it_t.size} "
-                "re-plans)")  # fmt: skip
+        return median_iterations(flown, other) or "no comparison solves"
 
     landed = ", ".join(f"{w} {flights.successes(w)}" for w in WARMSTARTS)
     rows_out = (

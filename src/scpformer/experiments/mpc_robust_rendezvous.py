@@ -32,8 +32,8 @@ from scpformer.experiments import report as rep
 from scpformer.experiments.closed_loop import (
     Flights,
     add_figures,
-    compared,
     fuel_ratio,
+    median_iterations,
     paired_replans,
     percentile,
     relative,
@@ -236,20 +236,15 @@ def comparisons(flights: Flights, arrays: dict[str, np.ndarray]) -> list[rep.Com
     the three-stage cold start and the learned start's against both, on the same re-plans."""
     n = "n/a: the robust ART paper plans open loop only"
     safe = ", ".join(f"{w} {flights.successes(w)}" for w in WARMSTARTS)
-    flown, cold = arrays["replan_iterations"], arrays["compare_iterations"]
-    solves = (f"{np.median(flown):g} vs {np.median(cold):g} (median over {flown.size} re-plans)"
-              if flown.size and cold.size == flown.size else "no comparison solves")  # fmt: skip
     rows_out = [
         ("closed-loop runs that reach the pre-docking state safely", safe),
-        ("convex solves per re-plan, previous vs cold (same re-plans)", solves),
-    ]
-    art = flights.arrays["art"]
+        ("convex solves per re-plan, previous vs cold (same re-plans)",
+         median_iterations(arrays, "cold") or "no comparison solves"),
+    ]  # fmt: skip
     for other in COMPARED["art"]:
-        it_a, it_o = art["replan_iterations"], compared(art, other)["iterations"]
-        if it_a.size and it_o.size == it_a.size:
-            rows_out.append((f"convex solves per re-plan, ART vs {other} (same re-plans)",
-                             f"{np.median(it_a):g} vs {np.median(it_o):g} (median over "
-                             f"{it_a.size} re-plans)"))  # fmt: skip
+        solves = median_iterations(flights.arrays["art"], other)
+        if solves is not None:
+            rows_out.append((f"convex solves per re-plan, ART vs {other} (same re-plans)", solves))
     return [rep.Comparison(quantity=q, paper=n, ours=ours, status=rep.NOT_RATED)
             for q, ours in rows_out]  # fmt: skip
 
