@@ -93,6 +93,29 @@ def test_covariance_history_matches_monte_carlo_on_the_linear_model(horizon):
         assert _whitened_error(e @ drift[i].T, X_drift) < MC_TOL
 
 
+def test_covariance_between_navigation_fixes_matches_the_chained_monte_carlo(horizon):
+    """Fixes at nodes 0 and 3 and 6 of 8: at a fix the error is drawn as in Eq. 14; between
+    fixes the plan flies open loop and the post-maneuver error is the previous one carried by
+    the STM plus the node's Gates and process errors, sampled here source by source."""
+    h, model = horizon, UncertaintyModel(fix_every=3)
+    hist = covariance_history(h["x"], h["u"], h["stm"], h["B"], h["psi"], model)
+    rng = np.random.default_rng(2025)
+    chol_q = np.linalg.cholesky(MODEL.process_noise.matrix)
+    e = None
+    for i in range(len(h["x"])):
+        if i % 3 == 0:
+            e = _sample_node_errors(h, i, rng)
+        else:
+            act = MODEL.actuation.sample(h["u"][i], rng, N_MC) @ h["B"][i].T
+            e = e @ h["stm"][i - 1].T + act + rng.standard_normal((N_MC, 6)) @ chol_q.T
+        assert _whitened_error(e, hist.X[i]) < MC_TOL, i
+    fixes = np.arange(len(h["x"])) % 3 == 0
+    assert not np.any(hist.X_carry[fixes]) and not np.any(hist.X_nav[~fixes])
+    eq14 = covariance_history(h["x"], h["u"], h["stm"], h["B"], h["psi"], MODEL)
+    np.testing.assert_array_equal(hist.X[fixes], eq14.X[fixes])
+    assert not np.any(eq14.X_carry)
+
+
 def test_covariance_history_is_positive_definite_and_symmetric(horizon):
     h = horizon
     hist = covariance_history(h["x"], h["u"], h["stm"], h["B"], h["psi"])
@@ -218,6 +241,8 @@ NOT_SYMMETRIC = np.eye(6) + np.triu(np.ones((6, 6)), 1)
         (lambda: UncertaintyModel(delta=1.0), "delta"),
         (lambda: UncertaintyModel(delta=-0.1), "delta"),
         (lambda: UncertaintyModel(delta=float("nan")), "delta"),
+        (lambda: UncertaintyModel(fix_every=0), "fix_every"),
+        (lambda: UncertaintyModel(fix_every=2.0), "fix_every"),
         (lambda: confidence_quantile(1.5), "delta"),
         (lambda: chance_margin(np.diag([1.0, -1.0, 1, 1, 1, 1]), np.ones(6)), "X"),
         (lambda: chance_margin(np.eye(6), np.ones(6), delta=2.0), "delta"),

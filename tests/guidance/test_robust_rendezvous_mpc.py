@@ -243,6 +243,22 @@ def test_the_art_model_goes_with_best():
     assert robust.MPCConfig(compare=("best",), model="run").model == "run"
 
 
+def test_the_loops_covariance_designs_every_flown_plan_for_fixes_at_the_replans_only(plan):
+    """``covariance="loop"``: the open-loop plan and every re-plan design for navigation
+    fixes every K nodes (their first node is a re-plan's fix), the flown plans pass the
+    family's Monte Carlo drawn the same way, and the campaign records the setting."""
+    cfg = _config(warmstart="previous", covariance="loop")
+    designed = robust.designed_instance(INSTANCE, cfg)
+    assert designed.uncertainty.fix_every == K_ONE
+    assert designed.uncertainty.delta == INSTANCE.uncertainty.delta  # the risk is unchanged
+    assert robust.designed_instance(INSTANCE, _config()).uncertainty.fix_every == 1
+    result = robust.fly(INSTANCE, cfg, seed=0, open_loop=robust.open_loop_plan(INSTANCE, cfg))
+    assert [r.accepted for r in result.replans] == [True] and result.success
+    assert [f.instance.uncertainty.fix_every for f in result.flown] == [K_ONE, K_ONE]
+    assert Campaign(runs=1, config=cfg).settings()["covariance"] == "loop"
+    assert "covariance" not in Campaign(runs=1, config=_config()).settings()
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
@@ -257,6 +273,7 @@ def test_the_art_model_goes_with_best():
         ({"mission_risk": 0.0}, "mission_risk must be positive"),
         ({"mission_risk": 1.0}, "mission_risk must be below 1"),
         ({"mission_risk": float("nan")}, "mission_risk"),
+        ({"covariance": "eq15"}, "covariance must be one of eq14, loop"),
     ],
 )
 def test_bad_configuration_is_refused_naming_the_field(kwargs, match):
@@ -293,6 +310,7 @@ def test_runs_csv_has_the_columns_and_resumes(tmp_path, plan):
         (["--runs", "0"], "--runs: must be at least 1"),
         (["--warmstart", "tscvx"], "invalid choice: 'tscvx'"),
         (["--mission-risk", "2"], "mission_risk must be below 1"),
+        (["--covariance", "every"], "invalid choice: 'every'"),
     ],
 )
 def test_the_simulate_command_refuses_bad_input_in_one_line(argv, match, tmp_path, capsys):

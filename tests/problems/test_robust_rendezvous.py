@@ -145,6 +145,30 @@ def test_sampler_is_seeded_and_stays_in_the_table_1_ranges():
 def test_instance_round_trips_through_a_dict():
     inst = sample_instances(3, 1)[0]
     assert RobustInstance.from_dict(inst.to_dict()) == inst
+    assert "fix_every" not in inst.to_dict()["uncertainty"]  # Eq. 14's files stay as they were
+    loop = dataclasses.replace(inst, uncertainty=UncertaintyModel(fix_every=10))
+    assert RobustInstance.from_dict(loop.to_dict()) == loop
+
+
+def test_monte_carlo_errors_between_fixes_have_the_designed_covariance(tpbvp):
+    """With fixes every 10 nodes, the Monte Carlo's post-maneuver errors, drawn source by
+    source and chained by the STM between the fixes, have the covariance X_i the chance
+    constraints design for, at fixes and between them (whitened sample covariance within 5
+    standard deviations of Wishart(n, I) / n: tests/dynamics/test_uncertainty.py)."""
+    from scpformer.problems.robust_rendezvous.montecarlo import _errors
+
+    x, u = np.asarray(tpbvp.trajectory.x), np.asarray(tpbvp.trajectory.u)
+    geo, model = drift_geometry(FIXES_EVERY_10), linear_model(FIXES_EVERY_10)
+    X = evaluate_safety(geo, model, x, u, FIXES_EVERY_10, "chance").X
+    nodes, n = np.array([0, 1, 9, 10, 14, 55, 99]), 40_000
+    e, u_exec = _errors(FIXES_EVERY_10, x, u, nodes, np.random.default_rng(7), n)
+    post = e + np.einsum("kij,kmj->kmi", model.B[nodes], u_exec - u[nodes][:, None, :])
+    for k, i in enumerate(nodes):
+        w = np.linalg.solve(np.linalg.cholesky(X[i]), post[k].T)
+        assert np.max(np.abs(w @ w.T / n - np.eye(6))) < 5 * np.sqrt(2 / n), i
+    # between fixes the dispersion is not Eq. 14's: the carried error is part of it
+    X14 = evaluate_safety(geo, model, x, u, INSTANCE, "chance").X
+    assert np.allclose(X[[0, 10, 50]], X14[[0, 10, 50]]) and not np.allclose(X[9], X14[9])
 
 
 # -- passive safety (Eqs. 14-16) --------------------------------------------------------------
@@ -213,18 +237,28 @@ def test_worst_instant_is_the_worst_of_a_dense_grid_of_the_arc(tpbvp, dynamics):
     assert np.max(h_dense - sampled) > 1e-4  # the samples alone would miss it
 
 
-@pytest.mark.parametrize("mode", ["deterministic", "chance"])
-def test_subproblem_rows_are_the_exact_linearization_of_h(tpbvp, mode):
-    """Finite differences of h_ij (margin included) w.r.t. x_i and u_i, at four nodes."""
+#: The nominal instance with navigation fixes every 10 nodes only (a closed loop's covariance).
+FIXES_EVERY_10 = dataclasses.replace(INSTANCE, uncertainty=UncertaintyModel(fix_every=10))
+
+
+@pytest.mark.parametrize(
+    ("mode", "instance"),
+    [("deterministic", INSTANCE), ("chance", INSTANCE), ("chance", FIXES_EVERY_10)],
+    ids=["deterministic", "chance", "chance-fixes-every-10"],
+)
+def test_subproblem_rows_are_the_exact_linearization_of_h(tpbvp, mode, instance):
+    """Finite differences of h_ij (margin included) w.r.t. x_i and u_i, at four nodes (with
+    fixes every 10 nodes: two at a fix, two between fixes, whose covariance carries that of
+    the earlier nodes and depends on the node's own (x_i, u_i) through its maneuver only)."""
     x, u = tpbvp.trajectory.x, tpbvp.trajectory.u
-    geo, model = drift_geometry(INSTANCE), linear_model(INSTANCE)
-    ev = evaluate_safety(geo, model, x, u, INSTANCE, mode, n_rows=3)
+    geo, model = drift_geometry(instance), linear_model(instance)
+    ev = evaluate_safety(geo, model, x, u, instance, mode, n_rows=3)
     a_x, a_u, c = ev.subproblem_rows(x, u)
-    for i in (5, 30, 60, 90):
+    for i in (5, 30, 45, 90):
         j = ev.rows[i, 0]
 
         def h(xx, uu, i=i, j=j):
-            e = evaluate_safety(geo, model, xx, uu, INSTANCE, mode, n_rows=20)
+            e = evaluate_safety(geo, model, xx, uu, instance, mode, n_rows=20)
             return 1.0 + e.beta_rows[i, list(e.rows[i]).index(j)] - e.d[i, j]
 
         for k, step in [(k, 1e-2) for k in range(6)]:

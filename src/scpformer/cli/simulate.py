@@ -50,6 +50,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             errors=ErrorModels() if args.errors == "table2" else ErrorModels.none(),
             **({"model": str(model)} if model is not None else {}),
             **({"mission_risk": risk} if risk is not None else {}),
+            **({"covariance": args.covariance} if hasattr(args, "covariance") else {}),
             time_budget_s=args.time_budget,
         )
         if {args.warmstart, args.compare} & {"art", "best"}:

@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import norm
 
-from scpformer.validation import check_finite, check_positive
+from scpformer.validation import check_finite, check_int, check_positive
 
 __all__ = [
     "CovarianceHistory",
@@ -73,6 +73,7 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 S1_TABLE2 = (4e-5, 4e-3, 4e-5, 2e-5, 2e-5, 4e-5)
 S2_TABLE2 = (1e-4, 4e-3, 4e-5, 2e-3, 2e-3, 2e-3)
@@ -335,15 +336,28 @@ def confidence_quantile(delta: float) -> float:
 
 @dataclass(frozen=True, kw_only=True)
 class UncertaintyModel:
-    """All uncertainty of the chance-constrained problem: Table 2 by default."""
+    """All uncertainty of the chance-constrained problem: Table 2 by default.
+
+    ``fix_every`` is the interval ``K`` of the navigation fixes, in nodes of the problem: a fix
+    at the nodes ``0, K, 2K, ...`` (the first node is always one). The paper's Eq. 14 assumes
+    a fix before every maneuver (``K = 1``, the default); a closed loop that navigates and
+    re-plans every ``K`` nodes flies the plan open loop in between, and its dispersion grows
+    from the last fix (:func:`covariance_history`).
+    """
 
     navigation: NavigationModel = field(default_factory=NavigationModel)
     actuation: GatesModel = field(default_factory=GatesModel)
     process_noise: ProcessNoise = field(default_factory=ProcessNoise)
     delta: float = 1e-3  # Delta_i: allowed probability of violating a safety constraint
+    fix_every: int = 1  # K: navigation fixes at nodes 0, K, 2K, ... (1: Eq. 14, every node)
 
     def __post_init__(self) -> None:
         confidence_quantile(self.delta)
+        object.__setattr__(self, "fix_every", check_int("fix_every", self.fix_every, least=1))
+
+    def fixes(self, n_nodes: int) -> BoolArray:
+        """Whether node ``i = 0 .. n_nodes-1`` has a navigation fix, (n_nodes,) bool."""
+        return np.arange(n_nodes) % self.fix_every == 0
 
     @property
     def q(self) -> float:
@@ -360,9 +374,10 @@ class CovarianceHistory:
 
     X: FloatArray  # (N, 6, 6) [m^2]: X(t_i) after the impulse and navigation update
     X_next: FloatArray  # (K, 6, 6) [m^2]: Phi(t_{i+1}, t_i) X(t_i) Phi^T, before t_{i+1}
-    X_nav: FloatArray  # (N, 6, 6): navigation part of X
+    X_nav: FloatArray  # (N, 6, 6): navigation part of X (zero between the fixes)
     X_act: FloatArray  # (N, 6, 6): actuation part B U B^T of X
     rho: FloatArray  # (N,) [m]: relative range used by the navigation model
+    X_carry: FloatArray  # (N, 6, 6): Phi X(t_{i-1}) Phi^T carried between fixes (zero at them)
 
 
 def _check_history_inputs(
@@ -391,6 +406,19 @@ def covariance_history(
 
     ``X(t_i) = X_nav(x_i) + B_i U(u_i) B_i^T + Q`` and ``X(t_{i+1}^-) = Phi_i X(t_i) Phi_i^T``.
 
+    With navigation fixes only every ``K = model.fix_every`` nodes, the plan is flown open
+    loop between them and the error of the state after the maneuver at a node ``i`` without
+    a fix is the previous one carried by the dynamics, plus the maneuver's execution error and
+    the process noise of the node:
+
+        X(t_i) = Phi_{i-1} X(t_{i-1}) Phi_{i-1}^T + B_i U(u_i) B_i^T + Q,    i mod K != 0,
+
+    and Eq. 14 at the fixes (``CovarianceHistory.X_carry`` holds the carried part, zero at
+    the fixes, ``X_nav`` is zero between them). This is the first-order covariance of the
+    truth flight of :func:`scpformer.guidance.rendezvous_mpc.fly_truth` (process noise, then
+    the fix, then the burn, at each node). The recursion runs over the nodes (``K - 1`` steps
+    of a ``(6, 6)`` product per fix interval).
+
     Parameters
     ----------
     x
@@ -414,11 +442,17 @@ def covariance_history(
     model = model or UncertaintyModel()
     x, u, stm, B, psi = _check_history_inputs(x, u, stm, B, psi)
     rho = relative_range(x, psi)  # (N,)
-    X_nav = model.navigation.covariance(rho)  # (N, 6, 6)
+    fixes = model.fixes(x.shape[0])
+    X_nav = model.navigation.covariance(rho) * fixes[:, None, None]  # (N, 6, 6)
     X_act = _symmetrize(B @ model.actuation.covariance(u) @ np.swapaxes(B, -1, -2))
     X = X_nav + X_act + model.process_noise.matrix
+    X_carry = np.zeros_like(X)
+    for i in np.flatnonzero(~fixes):  # ascending: node i - 1 is final when node i is reached
+        X_carry[i] = propagate_covariance(X[i - 1], stm[i - 1])
+        X[i] = X[i] + X_carry[i]
     X_next = propagate_covariance(X[: stm.shape[0]], stm)
-    return CovarianceHistory(X=X, X_next=X_next, X_nav=X_nav, X_act=X_act, rho=rho)
+    return CovarianceHistory(X=X, X_next=X_next, X_nav=X_nav, X_act=X_act, rho=rho,
+                             X_carry=X_carry)  # fmt: skip
 
 
 def chance_margin(X: ArrayLike, a: ArrayLike, delta: float = 1e-3) -> FloatArray:

@@ -178,6 +178,8 @@ class Campaign:
         robust_only = {"safety_samples": cfg.safety_samples} if self.family != "rendezvous" else {}
         if getattr(cfg, "mission_risk", None) is not None:  # absent from older folders
             robust_only["mission_risk"] = cfg.mission_risk
+        if getattr(cfg, "covariance", "eq14") != "eq14":  # absent from older folders
+            robust_only["covariance"] = cfg.covariance
         return {
             "family": self.family, "seed": self.seed, "instances": self.instances,
             "warmstart": cfg.warmstart, "replan_every": cfg.replan_every,

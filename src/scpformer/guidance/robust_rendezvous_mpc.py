@@ -131,6 +131,8 @@ WARMSTARTS = ("cold", "previous", "art", "best")
 FAMILY = "robust-rendezvous"
 #: Warm starts a user may ask for that the loop does not implement, and why.
 UNSUPPORTED: dict[str, str] = {}
+#: Covariances a plan's chance constraints may design for (:class:`MPCConfig`).
+COVARIANCES = ("eq14", "loop")
 #: Smallest number of impulses of a remaining problem (the scenario's ``n_nodes >= 2``).
 MIN_REMAINING = 2
 
@@ -165,6 +167,14 @@ class MPCConfig(LoopConfig):
         The paper's ``Delta = 1e-3`` per node allows up to ``1 - (1 - 1e-3)^100 = 9.5%`` per
         100-node flight; a mission that must fail at most 1 run in 100 needs ``epsilon =
         0.01``, i.e. ``Delta = 1e-4``. The Monte Carlo verification tests that ``Delta``.
+    covariance
+        The covariance ``X_i`` every node's chance constraint designs for
+        (:data:`COVARIANCES`): ``"eq14"`` (default) the paper's Eq. 14, a navigation fix before
+        every maneuver; ``"loop"`` the loop's own navigation, a fix at each re-plan only
+        (``UncertaintyModel.fix_every = replan_every``): between the fixes the plan is flown
+        open loop and the covariance grows from the last fix by the dynamics, the Gates errors
+        and the process noise (:func:`scpformer.dynamics.uncertainty.covariance_history`). The
+        family's Monte Carlo verification of every plan then draws its errors the same way.
     """
 
     warmstarts: ClassVar[tuple[str, ...]] = WARMSTARTS
@@ -175,9 +185,13 @@ class MPCConfig(LoopConfig):
     safety_samples: int = 200
     safety_confidence: float = 1e-4
     mission_risk: float | None = None
+    covariance: str = "eq14"
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.covariance not in COVARIANCES:
+            raise ValueError(f"covariance must be one of {', '.join(COVARIANCES)}, "
+                             f"got {self.covariance!r}")  # fmt: skip
         if self.solver.safety_mode != "chance":
             raise ValueError(f"solver.safety_mode must be 'chance' (the chance-constrained "
                              f"rendezvous), got {self.solver.safety_mode!r}")  # fmt: skip
@@ -192,12 +206,17 @@ class MPCConfig(LoopConfig):
 
 
 def designed_instance(instance: RobustInstance, config: MPCConfig) -> RobustInstance:
-    """``instance`` with the per-node risk the loop designs for: its own ``Delta``, or
-    ``config.mission_risk / N`` over its ``N`` guarded nodes (:class:`MPCConfig`)."""
-    if config.mission_risk is None:
+    """``instance`` with the uncertainty the loop designs for (:class:`MPCConfig`): the
+    per-node risk, its own ``Delta`` or ``config.mission_risk / N`` over its ``N`` guarded
+    nodes, and the navigation fixes, before every maneuver (Eq. 14) or at the re-plans."""
+    changes: dict[str, Any] = {}
+    if config.mission_risk is not None:
+        changes["delta"] = config.mission_risk / instance.n_nodes
+    if config.covariance == "loop":
+        changes["fix_every"] = config.replan_every
+    if not changes:
         return instance
-    delta = config.mission_risk / instance.n_nodes
-    return replace(instance, uncertainty=replace(instance.uncertainty, delta=delta))
+    return replace(instance, uncertainty=replace(instance.uncertainty, **changes))
 
 
 # ======================================================================================

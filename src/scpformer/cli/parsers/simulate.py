@@ -110,6 +110,17 @@ def _add_rendezvous(
                 "1e-3 per node",
             ),
         )
+        parser.add_argument(
+            "--covariance",
+            choices=("eq14", "loop"),
+            default="eq14",
+            help=with_default(
+                "covariance the chance constraints design for: eq14, a navigation fix before "
+                "every maneuver (the paper); loop, a fix at each re-plan only, the dispersion "
+                "growing in between as the loop flies",
+                "eq14",
+            ),
+        )
     if "art" in warmstarts:
         parser.add_argument(
             "--model",

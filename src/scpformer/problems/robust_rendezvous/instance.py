@@ -52,8 +52,11 @@ def _uncertainty_from_dict(data: Any) -> UncertaintyModel:
 
 
 def _uncertainty_to_dict(model: UncertaintyModel) -> dict[str, Any]:
+    """The model as JSON; ``fix_every`` only when it is not Eq. 14's 1 (files and cache keys
+    of the paper's model stay what they were)."""
     nav, act = model.navigation, model.actuation
-    return {
+    fixes = {} if model.fix_every == 1 else {"fix_every": model.fix_every}
+    return fixes | {
         "navigation": {"s1": list(nav.s1), "s2": list(nav.s2), "rho1": nav.rho1,
                        "rho2": nav.rho2},
         "actuation": {k: getattr(act, k) for k in ("sigma_s", "sigma_p", "sigma_r", "sigma_a")},

@@ -4,7 +4,10 @@ For each node ``i`` of a solved trajectory and each of ``n_samples`` draws:
 
 1. the true state right before the maneuver is the nominal one plus a navigation error
    ``~ N(0, X_nav(x_i))`` and a process-noise error ``~ N(0, Q)`` (Eqs. 10-11, Table 2, in
-   scaled ROE, mapped to RTN with ``Psi(t_i)`` for the nonlinear propagator);
+   scaled ROE, mapped to RTN with ``Psi(t_i)`` for the nonlinear propagator); with
+   navigation fixes only every ``fix_every`` nodes (``UncertaintyModel.fix_every``), the
+   error between the fixes is the previous node's, after its maneuver, carried by the STM
+   plus the node's process noise (the plan is flown open loop in between);
 2. the maneuver ``u_i`` is executed with a Gates error drawn in its burn frame (Eq. 12,
    :meth:`GatesModel.sample`);
 3. control is lost: the state drifts for ``T_safety`` and every entry into the node's active
@@ -49,6 +52,7 @@ from scpformer.dynamics.orbits import (
     rtn_dcm,
     rtn_to_eci,
 )
+from scpformer.problems.rendezvous.linear_model import LinearModel
 from scpformer.problems.robust_rendezvous.instance import RobustInstance
 from scpformer.problems.robust_rendezvous.plan_dynamics import linearize_dynamics
 from scpformer.problems.robust_rendezvous.problem import replay
@@ -128,15 +132,39 @@ def _errors(
     instance: RobustInstance, x: np.ndarray, u: np.ndarray, nodes: np.ndarray,
     rng: np.random.Generator, n: int,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """ROE errors (nav + process) (K, M, 6) [m] and executed impulses (K, M, 3) [m/s]."""
+    """ROE errors (nav + process) (K, M, 6) [m] and executed impulses (K, M, 3) [m/s].
+
+    With navigation fixes every ``K = fix_every > 1`` nodes, the errors are drawn for every
+    node and chained between the fixes (:func:`_carry_errors`), then the ``nodes`` taken."""
     unc, model = instance.uncertainty, linear_model(instance)
-    rho = np.linalg.norm(np.einsum("kij,kj->ki", model.Psi[nodes, :3, :], x[nodes]), axis=1)
+    drawn = nodes if unc.fix_every == 1 else np.arange(u.shape[0])
+    rho = np.linalg.norm(np.einsum("kij,kj->ki", model.Psi[drawn, :3, :], x[drawn]), axis=1)
     sigma_nav = rho[:, None] * unc.navigation.scale(rho)  # (K, 6)
-    nav = rng.standard_normal((nodes.size, n, 6)) * sigma_nav[:, None, :]
+    nav = rng.standard_normal((drawn.size, n, 6)) * sigma_nav[:, None, :]
     chol = np.linalg.cholesky(unc.process_noise.matrix)
-    proc = rng.standard_normal((nodes.size, n, 6)) @ chol.T
-    du = np.swapaxes(unc.actuation.sample(u[nodes], rng, n), 0, 1)  # (K, M, 3)
-    return nav + proc, u[nodes][:, None, :] + du
+    proc = rng.standard_normal((drawn.size, n, 6)) @ chol.T
+    du = np.swapaxes(unc.actuation.sample(u[drawn], rng, n), 0, 1)  # (K, M, 3)
+    e = nav + proc
+    if unc.fix_every > 1:
+        e = _carry_errors(e, proc, du, model, unc.fixes(u.shape[0]))[nodes]
+        du = du[nodes]
+    return e, u[nodes][:, None, :] + du
+
+
+def _carry_errors(
+    e: np.ndarray, proc: np.ndarray, du: np.ndarray, model: LinearModel, fixes: np.ndarray
+) -> np.ndarray:
+    """Pre-maneuver errors of a plan flown open loop between navigation fixes, (N, M, 6) [m].
+
+    At a fix the error is the drawn navigation + process error ``e_i``; at a node without
+    one it is the previous node's error after its maneuver, carried by the STM, plus the
+    node's process noise: ``Phi_{i-1} (e_{i-1} + B_{i-1} du_{i-1}) + w_i`` (first order, as
+    the covariance of :func:`scpformer.dynamics.uncertainty.covariance_history`)."""
+    out = e.copy()
+    for i in np.flatnonzero(~fixes):
+        post = out[i - 1] + du[i - 1] @ model.B[i - 1].T  # (M, 6)
+        out[i] = post @ model.Phi[i - 1].T + proc[i]
+    return out
 
 
 def _linear_min_distance(

@@ -598,7 +598,12 @@ def _margin_gradient(
     ``X_i = X_nav(rho(x_i)) + B U(u_i) B^T + Q`` (Eq. 14). With ``w = B^T a``, the Gates part
     (Eqs. 12-13) is ``w^T U w = sa^2 |w|^2 + sp^2 |u|^2 |w|^2 + (ss^2 - sp^2) (u.w)^2
     + (sr^2 - sa^2) (u.w)^2 / |u|^2``; the navigation part (Eqs. 10-11) is
-    ``rho^2 sum_k a_k^2 s_k(rho)^2`` with ``rho = |D Psi_i x_i|``. Returns (N, S, 6), (N, S, 3).
+    ``rho^2 sum_k a_k^2 s_k(rho)^2`` with ``rho = |D Psi_i x_i|``, at the navigation fixes.
+    Between fixes (``UncertaintyModel.fix_every > 1``) ``X_i`` holds no navigation part of its
+    own, and its carried part depends on the EARLIER nodes only: the gradients with respect to
+    the node's own ``(x_i, u_i)`` are still exact, and the subproblem holds the carried part at
+    its reference value, as the paper holds all of ``beta`` (Eq. 17). Returns (N, S, 6),
+    (N, S, 3).
     """
     unc = instance.uncertainty
     act, nav = unc.actuation, unc.navigation
@@ -627,6 +632,7 @@ def _margin_gradient(
     d_var_rho = np.einsum("ijk,ik->ij", a**2, 2.0 * rho[:, None] * s**2
                           + 2.0 * rho[:, None] ** 2 * s * ds)  # fmt: skip
     d_rho_x = np.einsum("irl,ir->il", P, pos) / np.maximum(rho, 1e-12)[:, None]  # (N, 6)
+    d_rho_x *= unc.fixes(x.shape[0])[:, None]  # no navigation term between the fixes
     g_x = (scale * d_var_rho)[..., None] * d_rho_x[:, None, :]
     return g_x, scale[..., None] * d_var_u
 
