@@ -4,14 +4,15 @@ safe rendezvous (shrinking-horizon MPC of the robust ART paper's problem).
 Each of the ``--n`` runs flies one instance of the robust Table 1 sampler through the
 two-body + J2 truth with the Table 2 navigation, actuation and process errors
 (:mod:`scpformer.guidance.robust_rendezvous_mpc`), re-planning every ``K = 10`` impulses
-(nodes 10, 20, ..., 90). Every warm start of :data:`WARMSTARTS` flies the same runs: the same
-instance and the same error draws run by run (common random numbers,
-:mod:`scpformer.guidance.campaign` seeds run ``r`` of seed ``S`` with ``SeedSequence([S,
-r])``). The flights of ``previous`` also solve every re-plan from ``cold``, those of ``art``
-and ``best`` (the shipped robust ART model started mid-horizon from the flown prefix, its
-guess kept or not by the Eq. 8 check) from ``cold`` and from ``previous`` (compared, not
-flown): the per-re-plan win/tie/loss, iterations and wall times of the starts on identical
-problems.
+(nodes 10, 20, ..., 90), every plan's chance constraints designed for navigation fixes at
+the re-plans only (``MPCConfig.covariance = "loop"``). Every warm start of
+:data:`WARMSTARTS` flies the same runs: the same instance and the same error draws run by
+run (common random numbers, :mod:`scpformer.guidance.campaign` seeds run ``r`` of seed
+``S`` with ``SeedSequence([S, r])``). The flights of ``previous`` also solve every re-plan
+from ``cold``, those of ``art`` and ``best`` (the shipped robust ART model started
+mid-horizon from the flown prefix, its guess kept or not by the Eq. 8 check) from ``cold``
+and from ``previous`` (compared, not flown): the per-re-plan win/tie/loss, iterations and
+wall times of the starts on identical problems.
 
 Instances never used in training: a sampled campaign's runs and a dataset's instances are
 drawn from streams that never coincide (:mod:`scpformer.experiments.closed_loop`).
@@ -63,6 +64,7 @@ SETTINGS = {
     "instances": "sampled (robust Table 1 sampler, SeedSequence([seed, run]))",
     "errors": "Table 2 (navigation, actuation, process)", "replan_every": REPLAN_EVERY,
     "safety_samples": SAFETY_SAMPLES,
+    "covariance": "loop (navigation fixes at the re-plans, MPCConfig.covariance)",
 }  # fmt: skip
 #: Columns of ``OUT/results.csv`` (per warm start ``W``: ``W_<column>``).
 RUN_COLUMNS = (

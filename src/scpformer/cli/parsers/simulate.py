@@ -112,13 +112,13 @@ def _add_rendezvous(
         )
         parser.add_argument(
             "--covariance",
-            choices=("eq14", "loop"),
-            default="eq14",
+            choices=("loop", "eq14"),
+            default="loop",
             help=with_default(
-                "covariance the chance constraints design for: eq14, a navigation fix before "
-                "every maneuver (the paper); loop, a fix at each re-plan only, the dispersion "
-                "growing in between as the loop flies",
-                "eq14",
+                "covariance the chance constraints design for: loop, a navigation fix at each "
+                "re-plan only, the dispersion growing in between as the loop flies; eq14, a "
+                "fix before every maneuver (the paper's Eq. 14)",
+                "loop",
             ),
         )
     if "art" in warmstarts:
