@@ -189,10 +189,11 @@ def failures_text(flights: Flights) -> str:
     where = ", ".join(f"{j}: {n}" for j, n in enumerate(since_replan.tolist()))
     return (f"{table}\n\nDrift entries against the designed risk: {'; '.join(rates)}.\n\n"
             f"Drift entries of all starts by nodes flown since the last re-plan or the start "
-            f"(0 to {REPLAN_EVERY - 1}): {where}. Eq. 14 assumes a navigation fix at every "
-            f"node, while the loop corrects only at its re-plans, so the dispersion of the "
-            f"later nodes of an interval exceeds the covariance the constraint was designed "
-            f"with.")  # fmt: skip
+            f"(0 to {REPLAN_EVERY - 1}): {where}. The plans are designed for the loop's "
+            f"navigation, a fix at each re-plan and a covariance growing from it "
+            f"(`MPCConfig.covariance = \"loop\"`); designed with Eq. 14's fix at every node "
+            f"instead, the entries of the same runs came late in the intervals, where the "
+            f"flown dispersion exceeds that covariance (guide: closed-loop guidance).")  # fmt: skip
 
 
 def _drift_entries(folder: Path, rows: list[dict[str, str]]) -> tuple[int, int, np.ndarray]:

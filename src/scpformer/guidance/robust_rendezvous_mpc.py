@@ -38,12 +38,19 @@ with the chance constraint transcribed as in the open loop (Eqs. 14-16):
 
     X_i = X_nav(x_i) + B_i U(u_i) B_i^T + Q                                      (Eq. 14)
 
-Eq. 14 assumes a navigation fix at every node, so the covariance of node ``i`` is a function
-of ``(x_i, u_i)`` alone: at the first node of the remaining problem ``X_k`` holds
+Eq. 14 assumes a navigation fix at every node: the covariance of node ``i`` is then a
+function of ``(x_i, u_i)`` alone, and at the first node of the remaining problem ``X_k`` holds
 ``X_nav(x_hat_k)``, the covariance of the very estimate the problem starts from (the loop
-draws its navigation error from the same ``X_nav``), and at the later nodes the covariance of
-the fixes to come, propagated by ``Phi`` to the worst drift instant ``t*`` (Eq. 14, second
-line; :mod:`scpformer.problems.robust_rendezvous.safety`). The passive-safety constraints
+draws its navigation error from the same ``X_nav``). This loop takes a fix only at its
+re-plans and flies the plan open loop in between, so by default (``MPCConfig.covariance =
+"loop"``) every plan designs for that: fixes at the nodes ``k, k + K, ...`` and, between
+them, the covariance of the last fix carried by the dynamics, plus the Gates and process
+errors of every node since (``UncertaintyModel.fix_every = K``,
+:func:`scpformer.dynamics.uncertainty.covariance_history`). ``covariance="eq14"`` designs
+for a fix at every node; flown so, the drift entries fall late in the re-planning intervals,
+where the flown dispersion exceeds Eq. 14's (measured: the closed-loop guide). Either way the
+covariance is propagated by ``Phi`` to the worst drift instant ``t*`` (Eq. 14, second line;
+:mod:`scpformer.problems.robust_rendezvous.safety`). The passive-safety constraints
 hold on every remaining node ``k .. N-1`` with the same ``T_safety`` and ``N_safety``, and each
 node keeps its domain: the approach ellipsoid before the absolute node ``N_ae-to-koz``, the
 keep-out zone from it on (``n_ae_to_koz - k`` in the remaining problem, 0 once passed).
