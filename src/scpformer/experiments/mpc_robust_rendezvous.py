@@ -290,6 +290,11 @@ DIFFERENCES: tuple[str, ...] = (
     "here it is re-solved every 10 impulses on a shrinking horizon from a navigation "
     "estimate (mean ROE of the two-body + J2 truth plus the Table 2 navigation error), "
     "each remaining problem with the chance constraint of Eq. 14-16 on its nodes.",
+    "Covariance: Eq. 14 assumes a navigation fix before every maneuver; the loop takes one "
+    "at each re-plan only, so every plan designs for that: between fixes the covariance of "
+    "the last fix is carried by the dynamics and grows by the Gates and process errors of "
+    "each node (`MPCConfig.covariance = 'loop'`; `simulate --covariance eq14` flies the "
+    "paper's). The ART model was trained on plans designed with Eq. 14.",
     "Warm starts: the learned start is the shipped robust ART model (trained on whole "
     "100-impulse trajectories from t_0), started mid-horizon from the flown prefix and "
     "conditioned on R(t_k) = -J of the remaining TPBVP and C(t_k) = 0; the paper's Eq. 8 "
