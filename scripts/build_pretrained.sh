@@ -3,15 +3,16 @@
 # project's own commands: generate, split, train, then package (weights-only copy, model card,
 # SHA-256 in manifest.json). Each model's card lists the commands below that made it.
 #
-#   scripts/build_pretrained.sh                       # all three models
+#   scripts/build_pretrained.sh                       # all four models
 #   WORK=../pt scripts/build_pretrained.sh tscvx      # one model (art-rendezvous,
-#                                                     # art-robust, tscvx)
+#                                                     # art-robust, tscvx, tscvx-midflight)
 #
 # Time on the 2-core development machine, from the logs of the shipped models: rendezvous
 # data 23 min + ART 21 min (idle machine); made while other jobs ran beside them:
 # robust data 60 min + ART 26 min; 6-DoF data: the first 4736 instances of a --n 6000 run stored after 1 h 32 min
 # of generation with other jobs beside it, then 7 min of augmentation with two workers
-# + T-SCvx networks 20.6 min (the two side by side, one thread each). The whole script has
+# + T-SCvx networks 20.6 min (the two side by side, one thread each); mid-flight 6-DoF data
+# 19 min (one worker, another job beside it) + networks (see tscvx-midflight's card). The whole script has
 # not been timed end to end, nor on an idle machine, where it should be shorter. Each
 # model builds alone (`scripts/build_pretrained.sh tscvx`); a smaller N_PDG shortens the
 # longest stage but makes another T-SCvx model than the shipped one. A rerun resumes the
@@ -27,7 +28,7 @@ OUT=${OUT:-src/scpformer/pretrained}
 WORKERS=${WORKERS:-2}
 N_PDG=${N_PDG:-4736}
 MODELS=("$@")
-[ ${#MODELS[@]} -eq 0 ] && MODELS=(art-rendezvous art-robust tscvx)
+[ ${#MODELS[@]} -eq 0 ] && MODELS=(art-rendezvous art-robust tscvx tscvx-midflight)
 mkdir -p "$WORK"
 cd "$WORK"
 OUT=$(cd "$OLDPWD" && mkdir -p "$OUT" && cd "$OUT" && pwd)
@@ -71,12 +72,32 @@ tscvx() {
     python -m scpformer.pretrained.package tscvx tscvx-small --commands tscvx.commands --out "$OUT"
 }
 
+# T-SCvx for the closed loop's re-plans: states at nodes 5-35 of optimal descents, with the
+# planning margins of the loop (pdg6dof_mpc.planning_instance) as the dataset's bounds
+tscvx_midflight() {
+    : >tscvx-midflight.commands
+    printf '[const]\nt-min = 0.6\nt-max = 4.7\ndelta-max-deg = 18.0\n' >planning.toml
+    echo "printf '[const]\\nt-min = 0.6\\nt-max = 4.7\\ndelta-max-deg = 18.0\\n' > planning.toml" >>tscvx-midflight.commands
+    run tscvx-midflight scpformer generate pdg6dof --n 1024 --seed 11 --midflight-nodes 5 35 \
+        --config planning.toml --out pdgmid --workers "$WORKERS"
+    run tscvx-midflight scpformer dataset augment pdgmid --out pdgmid8 --workers "$WORKERS"
+    run tscvx-midflight scpformer dataset split pdgmid8 --fractions 0.8 0.1 0.1 --seed 0
+    run tscvx-midflight scpformer train tscvx --data pdgmid8 --out tscvx-mid --preset small \
+        --networks tight --threads 1 --report-split test &
+    local tight=$!
+    run tscvx-midflight scpformer train tscvx --data pdgmid8 --out tscvx-mid --preset small \
+        --networks solution --threads 1 --report-split test
+    wait "$tight"
+    python -m scpformer.pretrained.package tscvx-midflight tscvx-mid --commands tscvx-midflight.commands --out "$OUT"
+}
+
 for model in "${MODELS[@]}"; do
     case $model in
         art-rendezvous) art_rendezvous ;;
         art-robust) art_robust ;;
         tscvx) tscvx ;;
-        *) echo "build_pretrained.sh: unknown model '$model' (art-rendezvous, art-robust, tscvx)" >&2; exit 2 ;;
+        tscvx-midflight) tscvx_midflight ;;
+        *) echo "build_pretrained.sh: unknown model '$model' (art-rendezvous, art-robust, tscvx, tscvx-midflight)" >&2; exit 2 ;;
     esac
 done
 echo "packaged ${MODELS[*]} into $OUT; check them with: python -m pytest tests/pretrained"

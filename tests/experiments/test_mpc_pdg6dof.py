@@ -54,6 +54,9 @@ def test_every_start_flies_the_same_run_and_tscvx_is_compared_on_its_re_plans(on
         assert section in report
     assert "solved by both / only this / only the baseline / neither" in report
     assert "cost where both solved: lower / tie" in report
+    # the re-plans fly the mid-flight networks, named with the commands that made them
+    made = report.split("## How the data and models were made", 1)[1].split("##", 1)[0]
+    assert "the shipped model tscvx-midflight" in made and "--midflight-nodes 5 35" in made
 
 
 def test_a_rerun_resumes_and_other_settings_are_refused(one_run, capsys):

@@ -156,11 +156,12 @@ def test_capped_re_plans_stop_at_the_cap_without_a_cold_fallback(plan, warmstart
 
 
 def test_a_tscvx_run_folder_given_as_model_is_the_networks_of_the_re_plans(plan):
-    """``--model RUN`` loads that run's networks (here the shipped folder, by its path) and
-    they predict the same guess as the default ones."""
+    """``--model RUN`` loads that run's networks (here the shipped mid-flight folder, by its
+    path) and they predict the same guess as the default ones; the open-loop networks are
+    another model."""
     from scpformer.pretrained import default_model
 
-    cfg = mpc.MPCConfig(warmstart="tscvx", model=str(default_model("pdg6dof")))
+    cfg = mpc.MPCConfig(warmstart="tscvx", model=str(default_model("pdg6dof", guidance=True)))
     sub = mpc.remaining_instance(INSTANCE, plan.trajectory.x[10])
     by_path = mpc._tscvx_provider(cfg.solver, cfg.model).guess_for(sub, cfg.solver)
     shipped = mpc._tscvx_provider(cfg.solver).guess_for(sub, cfg.solver)
@@ -170,6 +171,11 @@ def test_a_tscvx_run_folder_given_as_model_is_the_networks_of_the_re_plans(plan)
     assert (by_path_settings["model"], default_settings["model"]) == (cfg.model, "default")
     # the same weights are the same model, however they were named
     assert by_path_settings["model_sha256"] == default_settings["model_sha256"]
+    open_loop = mpc.MPCConfig(warmstart="tscvx", model=str(default_model("pdg6dof")))
+    assert (
+        Campaign(runs=1, config=open_loop).settings()["model_sha256"]
+        != by_path_settings["model_sha256"]
+    )
     assert "model" not in Campaign(runs=1, config=mpc.MPCConfig(warmstart="previous")).settings()
 
 

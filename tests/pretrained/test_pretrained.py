@@ -12,6 +12,8 @@ from scpformer.cli.main import main
 from scpformer.models.tscvx import load_tscvx_predictor
 from scpformer.pretrained import (
     FAMILY_MODELS,
+    GUIDANCE_MODELS,
+    MODEL_FAMILIES,
     PretrainedError,
     default_model,
     model_fingerprint,
@@ -24,10 +26,21 @@ from scpformer.train.checkpoint import load_checkpoint
 
 def test_every_family_has_a_shipped_model_listed_in_the_manifest():
     listed = read_manifest()["models"]
-    assert set(listed) == set(FAMILY_MODELS.values())
-    for family, name in FAMILY_MODELS.items():
+    assert set(listed) == set(MODEL_FAMILIES)
+    assert set(MODEL_FAMILIES) == set(FAMILY_MODELS.values()) | set(GUIDANCE_MODELS.values())
+    for name, family in MODEL_FAMILIES.items():
         assert listed[name]["family"] == family
         assert (pretrained.PRETRAINED_DIR / name / "MODEL_CARD.md").is_file()
+
+
+def test_guidance_selects_the_closed_loop_model_where_one_is_shipped():
+    """pdg6dof re-plans load the mid-flight networks; the open-loop default and the families
+    without a closed-loop model are unchanged."""
+    assert default_model("pdg6dof", guidance=True).name == "tscvx-midflight"
+    assert default_model("pdg6dof").name == "tscvx"
+    assert default_model("rendezvous", guidance=True) == default_model("rendezvous")
+    closed_loop = model_fingerprint(None, "pdg6dof", guidance=True)
+    assert closed_loop != model_fingerprint(None, "pdg6dof")
 
 
 @pytest.mark.parametrize("family, frame", [("rendezvous", "rtn"), ("robust-rendezvous", "roe")])
@@ -38,8 +51,9 @@ def test_default_art_models_verify_and_load_without_training_state(family, frame
     assert all(p.dtype == torch.float32 for p in ckpt.model.parameters())
 
 
-def test_default_tscvx_networks_verify_and_load():
-    predictor = load_tscvx_predictor(default_model("pdg6dof"))
+@pytest.mark.parametrize("guidance", [False, True])
+def test_default_tscvx_networks_verify_and_load(guidance):
+    predictor = load_tscvx_predictor(default_model("pdg6dof", guidance=guidance))
     assert predictor.n_rows == 7 * predictor.n_nodes
 
 

@@ -13,9 +13,10 @@ starts on identical problems. ``best`` starts each re-plan from T-SCvx or from t
 plan, whichever guess has the lower penalized cost ``J`` (Eq. 16).
 
 Instances never used in training: the dispersion of run ``r`` is drawn from
-``SeedSequence([S, r])``; the T-SCvx networks were trained on the dataset engine's instances
-``SeedSequence(S', spawn_key=(i,))`` (:mod:`scpformer.data.executors`) of the nominal
-sampler, and no training instance is a dispersed Table 1 state.
+``SeedSequence([S, r])``; the T-SCvx networks the re-plans load (the shipped
+``tscvx-midflight``) were trained on states along optimal descents from the dataset engine's
+instances ``SeedSequence(S', spawn_key=(i,))`` (:mod:`scpformer.data.executors`) of the
+nominal sampler, and no training state comes from a dispersed Table 1 flight.
 
 Output: as every closed-loop experiment's (:mod:`scpformer.experiments.closed_loop`).
 """
@@ -226,6 +227,7 @@ DIFFERENCES: tuple[str, ...] = (
     "Closed loop is not in the T-SCvx paper or in Szmuk & Acikmese (2018): the error models, "
     "the re-planning period, the LQR tracking, the planning margins and the touchdown "
     "tolerance are this project's choices, each justified in `scpformer.guidance.pdg6dof_mpc`.",
-    "The T-SCvx networks are the shipped ones, trained on open-loop instances of the nominal "
-    "sampler; mid-flight states are outside that distribution.",
+    "The T-SCvx networks are the shipped mid-flight ones (`tscvx-midflight`): trained on "
+    "states at nodes 5-35 of optimal descents of the nominal sampler, with the planning "
+    "margins as the bounds, not on the closed loop's own states (no DAgger).",
 )

@@ -92,7 +92,7 @@ def _model_setting(config: Any, family: str) -> dict[str, str]:
     from scpformer.pretrained import model_fingerprint
 
     return {"model": config.model or "default",
-            "model_sha256": model_fingerprint(config.model, family)}  # fmt: skip
+            "model_sha256": model_fingerprint(config.model, family, guidance=True)}  # fmt: skip
 
 
 def family_of(config: Any) -> str:

@@ -402,7 +402,11 @@ class MPCConfig:
         when ``tracking`` is None.
     model
         T-SCvx networks of the ``tscvx`` and ``best`` starts: a training run folder
-        (``scpformer train tscvx``), or None / ``"default"`` for the shipped ones.
+        (``scpformer train tscvx``), or None / ``"default"`` for the shipped ones trained on
+        the states a re-plan starts from (``tscvx-midflight`` of :mod:`scpformer.pretrained`:
+        states at nodes 5-35 of optimal descents, with the planning margins as the dataset's
+        bounds); the open-loop networks (``tscvx``) were trained on the sampler's initial
+        states, outside the distribution of mid-flight states.
     time_budget_s
         Wall seconds a re-plan may take (warm start, solve, verification and the tracking
         gains of its plan); a later one is not flown and recorded as late
@@ -749,15 +753,16 @@ def _tscvx_provider(
     config: PDGSolverConfig, model: str | None = None, cold_fallback: bool = True
 ) -> Any:
     """The T-SCvx networks of ``model`` (a training run folder; None or ``default``: the
-    shipped ones, checksum verified), loaded once per model and configuration;
+    shipped mid-flight ones, ``tscvx-midflight``, checksum verified), loaded once per model
+    and configuration;
     ``cold_fallback`` as in :class:`~scpformer.problems.pdg6dof.tscvx.TscvxParameters`."""
     from scpformer.pretrained import resolve_model
     from scpformer.problems.pdg6dof.tscvx import TscvxParameters
     from scpformer.warmstart.tscvx import TscvxWarmStart
 
     params = TscvxParameters(cold_fallback=cold_fallback)
-    return TscvxWarmStart.from_checkpoint(resolve_model(model, "pdg6dof"), config=config,
-                                          params=params)  # fmt: skip
+    networks = resolve_model(model, "pdg6dof", guidance=True)
+    return TscvxWarmStart.from_checkpoint(networks, config=config, params=params)
 
 
 def _accepted(sol: Solution, unconverged: bool = False) -> bool:

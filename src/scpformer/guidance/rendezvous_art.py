@@ -50,7 +50,7 @@ def art_provider(model: str | None, config: Any, family: str = "rendezvous") -> 
     ``robust-rendezvous`` the TPBVP, its passive-safety mode is the provider's)."""
     from scpformer.pretrained import resolve_model
 
-    path = resolve_model(model, family)
+    path = resolve_model(model, family, guidance=True)
     mode = {"mode": config.safety_mode} if family == "robust-rendezvous" else {}
     return ArtWarmStart.from_checkpoint(path, family=family, config=config, **mode)
 

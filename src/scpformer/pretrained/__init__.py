@@ -6,13 +6,19 @@ the SHA-256 of every weights file. :func:`default_model` returns the folder of a
 family's model after checking every file of it against the manifest, so ``--model default``
 (or no ``--model`` with ``--warmstart art|tscvx``) never loads a modified file.
 
-=================  ====================  ================================================
-folder             family                loaded by
-=================  ====================  ================================================
-``art-rendezvous`` ``rendezvous``        ``--warmstart art`` (ART, RTN frame)
-``art-robust``     ``robust-rendezvous`` ``--warmstart art`` (robust ART, chance, ROE)
-``tscvx``          ``pdg6dof``           ``--warmstart tscvx`` (``tight/``, ``solution/``)
-=================  ====================  ================================================
+====================  ====================  ===============================================
+folder                family                loaded by
+====================  ====================  ===============================================
+``art-rendezvous``    ``rendezvous``        ``--warmstart art`` (ART, RTN frame)
+``art-robust``        ``robust-rendezvous`` ``--warmstart art`` (robust ART, chance, ROE)
+``tscvx``             ``pdg6dof``           ``--warmstart tscvx`` (``tight/``, ``solution/``)
+``tscvx-midflight``   ``pdg6dof``           ``simulate pdg6dof --warmstart tscvx|best``
+====================  ====================  ===============================================
+
+A family's closed-loop guidance re-plans from states along the flight, not from the
+sampler's initial states; where a model trained on such states is shipped
+(:data:`GUIDANCE_MODELS`), ``guidance=True`` selects it (``tscvx-midflight``: T-SCvx trained on
+states drawn along optimal descents, ``generate pdg6dof --midflight-nodes``).
 
 ``scripts/build_pretrained.sh`` rebuilds them from seeds; ``python -m
 scpformer.pretrained.package`` packages trained runs into this layout.
@@ -36,6 +42,13 @@ FAMILY_MODELS = {
     "rendezvous": "art-rendezvous",
     "robust-rendezvous": "art-robust",
     "pdg6dof": "tscvx",
+}
+#: problem family -> folder of the model its closed-loop re-plans load by default, where it
+#: differs from the open-loop one of :data:`FAMILY_MODELS`
+GUIDANCE_MODELS = {"pdg6dof": "tscvx-midflight"}
+#: every shipped folder -> its problem family
+MODEL_FAMILIES = {
+    name: family for models in (FAMILY_MODELS, GUIDANCE_MODELS) for family, name in models.items()
 }
 
 
@@ -92,21 +105,26 @@ def verify_model(name: str, root: Path | None = None) -> Path:
     return folder
 
 
-def default_model(family: str, root: Path | None = None) -> Path:
-    """The verified folder of the shipped model of ``family`` (see the module table)."""
+def default_model(family: str, root: Path | None = None, *, guidance: bool = False) -> Path:
+    """The verified folder of the shipped model of ``family`` (see the module table); with
+    ``guidance``, its closed-loop model (:data:`GUIDANCE_MODELS`) where one is shipped."""
     if family not in FAMILY_MODELS:
         raise PretrainedError(
             f"no pretrained model for family {family!r}; shipped: {sorted(FAMILY_MODELS)}"
         )
-    return verify_model(FAMILY_MODELS[family], root)
+    models = {**FAMILY_MODELS, **GUIDANCE_MODELS} if guidance else FAMILY_MODELS
+    return verify_model(models[family], root)
 
 
-def resolve_model(model: Path | str | None, family: str) -> Path:
-    """``--model``: the shipped, verified model of ``family`` when default, else ``model``."""
-    return default_model(family) if is_default(model) else require_model_path(model)
+def resolve_model(model: Path | str | None, family: str, *, guidance: bool = False) -> Path:
+    """``--model``: the shipped, verified model of ``family`` when default (``guidance`` as in
+    :func:`default_model`), else ``model``."""
+    if is_default(model):
+        return default_model(family, guidance=guidance)
+    return require_model_path(model)
 
 
-def model_fingerprint(model: Path | str | None, family: str) -> str:
+def model_fingerprint(model: Path | str | None, family: str, *, guidance: bool = False) -> str:
     """SHA-256 over the weights files (``*.pt``) of the model ``--model`` selects.
 
     What a results folder records about its model: ``default`` names whichever model is
@@ -116,7 +134,7 @@ def model_fingerprint(model: Path | str | None, family: str) -> str:
     """
     from scpformer.data.storage import file_sha256
 
-    path = resolve_model(model, family)
+    path = resolve_model(model, family, guidance=guidance)
     files = [path] if path.is_file() else sorted(path.rglob("*.pt"))
     if not files:
         raise ValueError(f"--model {path}: no weights file (*.pt) in it")

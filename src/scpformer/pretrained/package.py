@@ -6,8 +6,8 @@ best-validation checkpoint(s) of ``RUN`` into ``DIR/NAME`` without the training 
 start uses, writes ``DIR/NAME/MODEL_CARD.md`` (the commands of ``FILE`` that made the data and
 the run, the dataset's size and seed from its manifest, training time, test metrics,
 parameter count, SHA-256 of each file) and records the checksums in ``DIR/manifest.json``.
-``NAME`` is ``art-rendezvous``, ``art-robust`` or ``tscvx``; ``DIR`` defaults to the
-package's ``scpformer/pretrained``.
+``NAME`` is ``art-rendezvous``, ``art-robust``, ``tscvx`` or ``tscvx-midflight``; ``DIR``
+defaults to the package's ``scpformer/pretrained``.
 """
 
 from __future__ import annotations
@@ -22,17 +22,22 @@ from typing import Any
 
 from scpformer.data.storage import file_sha256
 from scpformer.pretrained import (
-    FAMILY_MODELS,
+    GUIDANCE_MODELS,
     MANIFEST_FORMAT,
     MANIFEST_NAME,
+    MODEL_FAMILIES,
     PRETRAINED_DIR,
 )
 from scpformer.train.checkpoint import CHECKPOINT_NAME, checkpoint_path, slim_checkpoint
 
-MODEL_FAMILIES = {name: family for family, name in FAMILY_MODELS.items()}
 TSCVX_NETWORKS = ("tight", "solution")
 MAX_FILE_BYTES = 5 * 2**20  # "a few MB at most" per shipped file
 CARD_NAME = "MODEL_CARD.md"
+
+
+def is_tscvx(name: str) -> bool:
+    """Whether the shipped model ``name`` is a pair of T-SCvx networks (else one ART)."""
+    return MODEL_FAMILIES[name] == "pdg6dof"
 
 
 def best_checkpoint(folder: Path) -> Path:
@@ -47,7 +52,7 @@ def slim_run(name: str, run: Path, out: Path) -> list[Path]:
     Returns the files written (``checkpoint.pt``, or ``tight/`` and ``solution/`` ones).
     """
     target = out / name
-    if name == "tscvx":
+    if is_tscvx(name):
         files = [
             slim_checkpoint(best_checkpoint(run / net), target / net / CHECKPOINT_NAME)
             for net in TSCVX_NETWORKS
@@ -118,7 +123,7 @@ def tscvx_test_metrics(run: Path) -> dict[str, Any]:
 
 def training_seconds(run: Path, name: str) -> float:
     """Wall time of the training, from ``metrics.csv`` (ART) or ``config.json`` (T-SCvx)."""
-    if name == "tscvx":
+    if is_tscvx(name):
         networks = json.loads((run / "config.json").read_text())["networks"]
         return sum(
             float(net.get("train_seconds_this_launch", math.nan)) for net in networks.values()
@@ -158,6 +163,16 @@ def dataset_facts(data: Path) -> dict[str, Any]:
     return facts
 
 
+def loaded_by(name: str) -> str:
+    """What loads the shipped model ``name`` when no ``--model`` (or ``default``) is given."""
+    start = "tscvx" if is_tscvx(name) else "art"
+    if name in GUIDANCE_MODELS.values():
+        return (f"loaded by the closed-loop re-plans of `scpformer simulate "
+                f"{MODEL_FAMILIES[name]} --warmstart {start}|best` (and the "
+                f"`mpc-{MODEL_FAMILIES[name]}` experiment) by default")  # fmt: skip
+    return f"loaded by `--model default` (or no `--model`) with `--warmstart {start}`"
+
+
 def model_card(
     name: str, run: Path, files: Sequence[Path], out: Path, commands: Sequence[str]
 ) -> str:
@@ -165,8 +180,8 @@ def model_card(
     config = json.loads((run / "config.json").read_text())
     data = Path(config["data"])
     folder = out / name
-    nets = [folder / net for net in TSCVX_NETWORKS] if name == "tscvx" else [folder]
-    if name == "tscvx":
+    nets = [folder / net for net in TSCVX_NETWORKS] if is_tscvx(name) else [folder]
+    if is_tscvx(name):
         metrics = tscvx_test_metrics(run)
         seed = config["networks"]["tight"]["train"]["seed"]
     else:
@@ -175,10 +190,9 @@ def model_card(
     lines = [
         f"# {name}: pretrained model card",
         "",
-        f"Family `{MODEL_FAMILIES[name]}`; loaded by `--model default` (or no `--model`) "
-        f"with `--warmstart {'tscvx' if name == 'tscvx' else 'art'}`. Weights only (fp32, "
-        "no optimizer or RNG state): they load with the loaders of trained runs but cannot "
-        "resume training.",
+        f"Family `{MODEL_FAMILIES[name]}`; {loaded_by(name)}. Weights only (fp32, no optimizer "
+        "or RNG state): they load with the loaders of trained runs but cannot resume "
+        "training.",
         "",
         "## How it was made",
         "",

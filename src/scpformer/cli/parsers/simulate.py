@@ -206,7 +206,8 @@ def _add_pdg6dof(families: argparse._SubParsersAction) -> None:
         metavar="RUN",
         help=with_default(
             "T-SCvx networks of --warmstart/--compare tscvx or best: a training run folder "
-            "(scpformer train tscvx), or 'default': the networks shipped with scpformer",
+            "(scpformer train tscvx), or 'default': the networks shipped with scpformer for "
+            "re-plans (tscvx-midflight, trained on states along optimal descents)",
             "default",
         ),
     )
