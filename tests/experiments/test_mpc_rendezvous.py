@@ -57,6 +57,10 @@ def test_every_warm_start_flies_the_same_run_and_the_report_cites_celestini(one_
         assert section in report
     assert "(ART vs cold, 2 re-plans)" in report and "start the SCP began from" in report
     assert "win / tie / loss" in report and "p99 re-plan time / period" in report
+    # the model the learned starts flew is named with the commands that made it
+    made = report.split("## How the data and models were made", 1)[1].split("##", 1)[0]
+    assert "the shipped model art-rendezvous" in made
+    assert "scpformer generate rendezvous" in made and "scpformer train art" in made
 
 
 def test_a_rerun_resumes_and_other_settings_are_refused(one_run, capsys):

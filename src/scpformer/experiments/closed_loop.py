@@ -148,6 +148,19 @@ class ClosedLoopExperiment(Protocol):
         """The report's further sections, comparisons and figures (runs were flown)."""
 
 
+def shipped_model_commands(family: str) -> list[str]:
+    """The commands that made the shipped model the learned starts of ``family``'s re-plans
+    load (:func:`~scpformer.pretrained.default_model` with ``guidance=True``): the recipe of
+    its ``MODEL_CARD.md``, under a comment naming the model."""
+    from scpformer.pretrained import default_model
+
+    folder = default_model(family, guidance=True)
+    card = (folder / "MODEL_CARD.md").read_text()
+    recipe = card.split("```sh\n", 1)[-1].split("```", 1)[0] if "```sh\n" in card else ""
+    return [f"# the shipped model {folder.name} (scpformer/pretrained/{folder.name}/"
+            "MODEL_CARD.md), made by:", *recipe.splitlines()]  # fmt: skip
+
+
 def run_experiment(
     options: RunOptions, experiment: ClosedLoopExperiment, *, command: str, name: str
 ) -> Path:
@@ -171,7 +184,8 @@ def run_experiment(
     )  # fmt: skip
     write_text_atomic(out / "results.csv", results_csv(rows, warmstarts, experiment.RUN_COLUMNS))
     report = rep.Report(name=name, reproduces=experiment.REPRODUCES, command=command,
-                        settings=record, differences=experiment.DIFFERENCES)  # fmt: skip
+                        settings=record, differences=experiment.DIFFERENCES,
+                        provenance=shipped_model_commands(experiment.FAMILY))  # fmt: skip
     flights = Flights(rows, summaries, out, warmstarts)
     report.sections.append(("Runs", experiment.runs_text(flights.n_runs)))
     if flights.n_runs:
