@@ -45,12 +45,15 @@ def test_every_start_flies_the_same_run_and_tscvx_is_compared_on_its_re_plans(on
     with np.load(one_run / "best" / "run-0000.npz") as data:
         assert set(data["replan_used"].tolist()) <= {"previous", "tscvx"}
         assert set(data["replan_warmstart"].tolist()) == {"best"}
+        assert data["compare_warmstart"].tolist() == ["cold", "previous"] * len(data["replan_node"])
     results = json.loads((one_run / "results.json").read_text())
     assert results["experiment"] == "mpc-pdg6dof"
-    assert len(results["rows"]) == 3 and all(r["status"] == "not rated" for r in results["rows"])
+    assert len(results["rows"]) == 4 and all(r["status"] == "not rated" for r in results["rows"])
     report = (one_run / "report.md").read_text()
     for section in ("## Summary", "## T-SCvx vs cold on the same re-plans",
-                    "## T-SCvx vs previous on the same re-plans", "## Failures"):  # fmt: skip
+                    "## T-SCvx vs previous on the same re-plans",
+                    "## best (T-SCvx from the networks' or the shifted guess) vs previous on "
+                    "the same re-plans", "## Failures"):  # fmt: skip
         assert section in report
     assert "solved by both / only this / only the baseline / neither" in report
     assert "cost where both solved: lower / tie" in report

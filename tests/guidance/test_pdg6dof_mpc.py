@@ -139,6 +139,30 @@ def test_best_keeps_the_shifted_optimum_over_the_networks_guess(plan):
     assert all(r.warmstart == "best" and r.accepted for r in flown.replans)
 
 
+@pytest.mark.parametrize("velocity_error", [0.01, -0.01])
+def test_best_runs_algorithm_2_from_the_shifted_plan_to_the_optimum_scvx_reaches(
+    plan, velocity_error
+):
+    """From the shifted plan ``best`` runs T-SCvx's Algorithm 2 with the networks' predicted
+    tight rows: a smaller subproblem, not another answer. From an estimate off the plan by
+    two sigma of navigation velocity error, it converges to the cost SCvx reaches from the
+    same guess with every constraint, within the stationarity tolerance eps_opt."""
+    from scpformer.pdg6dof import solve
+
+    config = mpc.MPCConfig(solver=PDGSolverConfig())
+    x = plan.trajectory.x[10].copy()
+    x[3:6] += velocity_error
+    sub = mpc.remaining_instance(INSTANCE, x)
+    used, warm = mpc.best_start(sub, plan, 10, x, config)
+    assert used == "previous" and isinstance(warm, mpc.PredictedRowsFrom)
+    reduced = solve(sub, config.replan_solver, method="tscvx", warmstart=warm)
+    full = solve(sub, config.replan_solver, warmstart=mpc.shifted_plan(plan, 10, x))
+    assert reduced.converged and full.converged
+    assert reduced.extras["tscvx"]["fallback"] is None  # it solved the reduced subproblems
+    eps = config.replan_solver.scvx.eps_opt
+    assert abs(reduced.cost - full.cost) <= eps * abs(full.cost)
+
+
 @pytest.mark.parametrize("warmstart", ["previous", "tscvx"])
 def test_capped_re_plans_stop_at_the_cap_without_a_cold_fallback(plan, warmstart):
     """``replan_iter_max``: every re-plan ends within the cap, a T-SCvx re-plan without the

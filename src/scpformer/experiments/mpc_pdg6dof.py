@@ -9,8 +9,9 @@ run by run (common random numbers: :mod:`scpformer.guidance.campaign` seeds run 
 ``S`` with ``SeedSequence([S, r])``). The flights of ``tscvx`` also solve every one of their
 re-plans from ``cold`` and from ``previous`` (compared, not flown), which gives the learned
 start's per-re-plan win / tie / loss, iterations and wall times against both classical
-starts on identical problems. ``best`` starts each re-plan from T-SCvx or from the shifted
-plan, whichever guess has the lower penalized cost ``J`` (Eq. 16).
+starts on identical problems; so do the flights of ``best``, which runs T-SCvx's Algorithm 2
+(the networks' predicted tight rows) from the networks' guess or from the shifted plan,
+whichever has the lower penalized cost ``J`` (Eq. 16).
 
 Instances never used in training: the dispersion of run ``r`` is drawn from
 ``SeedSequence([S, r])``; the T-SCvx networks the re-plans load (the shipped
@@ -45,10 +46,12 @@ from scpformer.guidance.pdg6dof_mpc import TIE_U_M, LandingTolerance, MPCConfig
 
 NAME = "mpc-pdg6dof"
 REPRODUCES = "closed-loop 6-DoF landing: T-SCvx against the classical re-plan starts"
-#: Warm starts flown, in order; ``tscvx`` is flown with the classical ones compared on its
-#: re-plans (:data:`COMPARED`).
+#: Warm starts flown, in order; the learned ones (:data:`LEARNED`) are flown with the
+#: classical ones compared on their re-plans (:data:`COMPARED`).
 WARMSTARTS = ("cold", "previous", "tscvx", "best")
-#: The classical starts solved on the re-plans of the ``tscvx`` flights.
+#: The starts that run the T-SCvx networks.
+LEARNED = ("tscvx", "best")
+#: The classical starts solved on the re-plans of the ``tscvx`` and ``best`` flights.
 COMPARED = ("cold", "previous")
 REPLAN_EVERY = 5  # K: a re-plan every tenth of the remaining descent (N = 50)
 #: Conic solves per re-plan: a fixed budget, as a flight computer's
@@ -78,8 +81,9 @@ RUN_COLUMNS = (
 
 def campaign(n: int, seed: int, warmstart: str) -> Campaign:
     """The campaign of ``warmstart``: ``n`` dispersed Table 1 descents with every error on,
-    ``K = 5``; ``tscvx`` also solves each re-plan cold and from the previous plan."""
-    compare = COMPARED if warmstart == "tscvx" else ()
+    ``K = 5``; ``tscvx`` and ``best`` also solve each re-plan cold and from the previous
+    plan."""
+    compare = COMPARED if warmstart in LEARNED else ()
     config = MPCConfig(replan_every=REPLAN_EVERY, warmstart=warmstart, compare=compare,
                        replan_iter_max=REPLAN_ITER_MAX)  # fmt: skip
     return Campaign(runs=n, seed=seed, instances="default", config=config)
@@ -108,12 +112,13 @@ def runs_text(n_runs: int) -> str:
 
 
 def analyse(flights: Flights, report: rep.Report) -> None:
-    """The summary table, the paired comparisons of ``tscvx`` and the failures."""
+    """The summary table, the paired comparisons of the learned starts and the failures."""
     report.sections.append(("Summary", summary_table(flights)))
-    flown = flights.arrays["tscvx"]
-    for other in COMPARED:
-        report.sections.append((f"T-SCvx vs {other} on the same re-plans",
-                                paired_text(flown, other)))  # fmt: skip
+    for learned in LEARNED:
+        for other in COMPARED:
+            section = f"{LABELS[learned]} vs {other} on the same re-plans"
+            report.sections.append((section, paired_text(flights.arrays[learned], other,
+                                                          learned)))  # fmt: skip
     report.sections.append(("Failures", failures_text(flights.rows)))
     report.comparisons += comparisons(flights)
     add_figures(report, flights.out, WARMSTARTS, "descents")
@@ -166,16 +171,21 @@ def _used(arrays: dict[str, np.ndarray]) -> np.ndarray:
     return arrays.get("replan_used", np.zeros(0)).astype(str)
 
 
-def paired_text(arrays: dict[str, np.ndarray], other: str) -> str:
-    """The flown ``tscvx`` re-plans against ``other`` solved on the same re-plan problems,
+#: Section titles of the learned starts.
+LABELS = {"tscvx": "T-SCvx", "best": "best (T-SCvx from the networks' or the shifted guess)"}
+
+
+def paired_text(arrays: dict[str, np.ndarray], other: str, flown: str = "tscvx") -> str:
+    """The flown ``flown`` re-plans against ``other`` solved on the same re-plan problems,
     re-plan by re-plan (:func:`~..closed_loop.paired_replans`: accepted by both / one /
     neither, wall time, iterations, propellant where both were accepted)."""
-    table = paired_replans(arrays, "tscvx", other, cost_tie=TIE_U_M)
+    table = paired_replans(arrays, flown, other, cost_tie=TIE_U_M)
     if table is None:
         return "No comparison solves recorded."
     return table + (
         f" The {other} solves are made on the re-plan problems of the flights of "
-        "`tscvx` (same estimate, same plan to shift), so the starts are compared on identical "
+        f"`{flown}` (same estimate, same plan to shift), so the starts are compared on "
+        "identical "
         f"problems; a draw is a re-plan, solved means accepted (converged or verified "
         f"unconverged, `MPCConfig.accept_unconverged`), and a tie is a propellant difference "
         f"within {TIE_U_M:g} U_M. Wall times cover the whole re-plan: the warm start (the "
@@ -188,17 +198,21 @@ def comparisons(flights: Flights) -> list[rep.Comparison]:
     """The rows of ``results.json``: the T-SCvx paper solves open loop only, so nothing is
     rated; the rows keep what the closed loop adds to its claim (T-SCvx fewer SCP iterations
     than cold SCvx) beside the shifted plan, the classical MPC start."""
-    flown = flights.arrays["tscvx"]
     n = "n/a: the T-SCvx paper solves open loop only"
 
-    def iterations(other: str) -> str:
-        return median_iterations(flown, other) or "no comparison solves"
+    def iterations(other: str, flown: str = "tscvx") -> str:
+        return median_iterations(flights.arrays[flown], other) or "no comparison solves"
 
     landed = ", ".join(f"{w} {flights.successes(w)}" for w in WARMSTARTS)
     rows_out = (
         ("closed-loop runs that land, per re-plan start", landed),
         ("SCP iterations per re-plan, T-SCvx vs cold SCvx (same re-plans)", iterations("cold")),
         ("SCP iterations per re-plan, T-SCvx vs the shifted previous plan", iterations("previous")),
+        (
+            "SCP iterations per re-plan, best (T-SCvx from the better guess) vs the shifted "
+            "previous plan",
+            iterations("previous", "best"),
+        ),
     )
     return [rep.Comparison(quantity=q, paper=n, ours=ours, status=rep.NOT_RATED)
             for q, ours in rows_out]  # fmt: skip
