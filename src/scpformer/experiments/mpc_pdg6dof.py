@@ -183,9 +183,8 @@ def paired_text(arrays: dict[str, np.ndarray], other: str, flown: str = "tscvx")
     if table is None:
         return "No comparison solves recorded."
     return table + (
-        f" The {other} solves are made on the re-plan problems of the flights of "
-        f"`{flown}` (same estimate, same plan to shift), so the starts are compared on "
-        "identical "
+        f" The {other} solves are made on the re-plan problems of the flights of `{flown}` "
+        "(same estimate, same plan to shift), so the starts are compared on identical "
         f"problems; a draw is a re-plan, solved means accepted (converged or verified "
         f"unconverged, `MPCConfig.accept_unconverged`), and a tie is a propellant difference "
         f"within {TIE_U_M:g} U_M. Wall times cover the whole re-plan: the warm start (the "

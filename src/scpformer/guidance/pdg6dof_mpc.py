@@ -33,7 +33,8 @@ Warm starts of a re-plan (:data:`WARMSTARTS`): ``cold`` is SCvx from the family'
 start (the cubic profile); ``previous`` is SCvx from the last accepted plan shifted in time:
 its nodes from the current one on, re-interpolated onto ``N`` nodes over its remaining time
 (:func:`shifted_plan`, the free final time makes the node spacing change); ``tscvx`` is
-T-SCvx (Algorithm 2) with the shipped networks evaluated at the current estimate as theta;
+T-SCvx (Algorithm 2) with the shipped mid-flight networks (``tscvx-midflight``) evaluated at
+the current estimate as theta;
 ``best`` runs T-SCvx (Algorithm 2, the networks' predicted tight rows) from whichever guess
 has the lower penalized cost ``J = C + lambda P`` (Eq. 16, the T-SCvx paper's acceptance
 measure of a guess) on the re-plan problem: the networks' predicted solution or the shifted
