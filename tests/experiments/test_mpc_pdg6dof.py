@@ -26,7 +26,7 @@ def one_run(tmp_path_factory):
 def test_the_experiment_is_registered_with_the_shipped_networks():
     entry = EXPERIMENTS["mpc-pdg6dof"]
     assert entry.module == "scpformer.experiments.mpc_pdg6dof"
-    assert "src/scpformer/guidance" in entry.depends_on
+    assert "src/scpformer/guidance/pdg6dof_mpc.py" in entry.depends_on
 
 
 def test_every_start_flies_the_same_run_and_tscvx_is_compared_on_its_re_plans(one_run):

@@ -28,7 +28,7 @@ def one_run(tmp_path_factory):
 def test_the_experiment_is_registered_without_models_or_data():
     entry = EXPERIMENTS["mpc-rendezvous"]
     assert entry.module == "scpformer.experiments.mpc_rendezvous"
-    assert "src/scpformer/guidance" in entry.depends_on
+    assert "src/scpformer/guidance/rendezvous_mpc.py" in entry.depends_on
 
 
 def test_every_warm_start_flies_the_same_run_and_the_report_cites_celestini(one_run):

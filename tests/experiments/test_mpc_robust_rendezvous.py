@@ -27,7 +27,10 @@ def one_run(tmp_path_factory):
 def test_the_experiment_is_registered_without_models_or_data():
     entry = EXPERIMENTS["mpc-robust-rendezvous"]
     assert entry.module == "scpformer.experiments.mpc_robust_rendezvous"
-    assert entry.default_n == 100 and "src/scpformer/guidance" in entry.depends_on
+    assert (
+        entry.default_n == 100
+        and "src/scpformer/guidance/robust_rendezvous_mpc.py" in entry.depends_on
+    )
 
 
 def test_every_warm_start_flies_the_same_run_and_is_compared_on_its_re_plans(one_run):

@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import pytest
 
 from scpformer.cli.main import main
@@ -26,6 +28,32 @@ def test_the_registry_has_one_entry_per_paper_table_or_figure():
     assert set(EXPERIMENTS) == set(PAPER_ITEMS)
     for name, item in PAPER_ITEMS.items():
         assert EXPERIMENTS[name].reproduces.endswith(item)
+
+
+def test_every_declared_source_exists_so_staleness_can_see_it():
+    """``depends_on`` decides when a committed result is stale: a path that does not exist
+    (a file renamed or a typo) would hide every later change to the code it meant."""
+    root = Path(__file__).resolve().parents[2]
+    for name, entry in EXPERIMENTS.items():
+        for pattern in entry.depends_on:
+            assert list(root.glob(pattern)), f"{name}: {pattern} matches no file"
+
+
+def test_closed_loop_results_go_stale_with_their_own_loop_only():
+    """A closed-loop result declares the shared campaign and report code and its own
+    family's loop, not another family's: a change to the landing loop leaves the rendezvous
+    results current."""
+    loops = {"mpc-rendezvous": "rendezvous_mpc.py", "mpc-robust-rendezvous":
+             "robust_rendezvous_mpc.py", "mpc-pdg6dof": "pdg6dof_mpc.py"}  # fmt: skip
+    for name, loop in loops.items():
+        declared = EXPERIMENTS[name].depends_on
+        assert f"src/scpformer/guidance/{loop}" in declared
+        assert "src/scpformer/experiments/closed_loop.py" in declared
+        others = {f"src/scpformer/guidance/{o}" for n, o in loops.items() if o != loop}
+        others -= (
+            {"src/scpformer/guidance/rendezvous_mpc.py"} if name.startswith("mpc-robust") else set()
+        )  # the robust loop builds on the rendezvous one
+        assert not others & set(declared), name
 
 
 def test_experiment_list_names_every_experiment_and_what_it_reproduces(capsys):

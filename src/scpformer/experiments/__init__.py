@@ -85,7 +85,28 @@ _TSCVX_SOLVE = (
 )
 _TSCVX_SHIPPED = (*_TSCVX_SOLVE, "src/scpformer/pretrained/tscvx")
 _SCP = "src/scpformer/scp"
-_GUIDANCE = "src/scpformer/guidance"
+#: What every closed-loop experiment runs: the campaign, its records, the shared report
+#: tables; each adds its family's loop (``_GUIDANCE_*``).
+_CLOSED_LOOP = (
+    "src/scpformer/guidance/__init__.py",
+    "src/scpformer/guidance/campaign.py",
+    "src/scpformer/guidance/records.py",
+    "src/scpformer/experiments/closed_loop.py",
+    "src/scpformer/experiments/paired.py",
+)
+_GUIDANCE_RENDEZVOUS = (
+    *_CLOSED_LOOP,
+    "src/scpformer/guidance/rendezvous_mpc.py",
+    "src/scpformer/guidance/rendezvous_art.py",
+    "src/scpformer/warmstart/art.py",
+)
+_GUIDANCE_ROBUST = (*_GUIDANCE_RENDEZVOUS, "src/scpformer/guidance/robust_rendezvous_mpc.py")
+_GUIDANCE_PDG6DOF = (
+    *_CLOSED_LOOP,
+    "src/scpformer/guidance/pdg6dof_mpc.py",
+    "src/scpformer/guidance/pdg6dof_tracking.py",
+    "src/scpformer/warmstart/tscvx.py",
+)
 _ROWS: tuple[tuple[str, str, str, str, int, str, tuple[str, ...]], ...] = (
     # name, reproduces, summary, module (in this package), default_n, models, depends_on
     ("art-forecast-tpbvp", f"{_ART} Table 2",
@@ -121,19 +142,19 @@ _ROWS: tuple[tuple[str, str, str, str, int, str, tuple[str, ...]], ...] = (
      "closed-loop rendezvous Monte Carlo: cold, previous, ART and best re-plans",
      "mpc_rendezvous", 100,  # about 22 min on two busy cores (22:16 measured at load 5-6)
      "the shipped art-rendezvous model, started mid-horizon",
-     ("src/scpformer/experiments/mpc_rendezvous.py", _GUIDANCE, *_RENDEZVOUS_FAMILY,
-      _SCP)),
+     ("src/scpformer/experiments/mpc_rendezvous.py", *_GUIDANCE_RENDEZVOUS,
+      *_RENDEZVOUS_FAMILY, _SCP)),
     ("mpc-robust-rendezvous",
      "closed-loop MPC of the chance-constrained, passively safe rendezvous",
-     "closed-loop robust rendezvous Monte Carlo: cold vs previous-plan re-plans",
+     "closed-loop robust rendezvous Monte Carlo: cold, previous, robust ART and best re-plans",
      "mpc_robust_rendezvous", 100,
-     "none (the classical starts; the learned one flies in simulate)",
-     ("src/scpformer/experiments/mpc_robust_rendezvous.py", _GUIDANCE, *_ROBUST_FAMILY,
-      _SCP)),
+     "the shipped art-robust model, started mid-horizon",
+     ("src/scpformer/experiments/mpc_robust_rendezvous.py", *_GUIDANCE_ROBUST,
+      *_ROBUST_FAMILY, _SCP)),
     ("mpc-pdg6dof", "closed-loop 6-DoF landing: T-SCvx against the classical re-plan starts",
-     "closed-loop landing Monte Carlo: cold, previous-plan and T-SCvx re-plans", "mpc_pdg6dof",
-     100, "the shipped T-SCvx networks",
-     ("src/scpformer/experiments/mpc_pdg6dof.py", _GUIDANCE,
+     "closed-loop landing Monte Carlo: cold, previous, T-SCvx and best re-plans",
+     "mpc_pdg6dof", 100, "the shipped tscvx-midflight networks",
+     ("src/scpformer/experiments/mpc_pdg6dof.py", *_GUIDANCE_PDG6DOF,
       "src/scpformer/problems/pdg6dof", _SCP)),
     ("tscvx-training", f"{_TSCVX} Table 3",
      "T-SCvx networks: losses, test accuracy vs all-zeros/ones, precision/recall", "tscvx", 1,
