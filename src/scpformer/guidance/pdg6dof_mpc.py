@@ -80,7 +80,7 @@ from scpformer.validation import check_bool, check_finite, check_int, check_posi
 #: Warm starts of a re-plan that the loop implements.
 WARMSTARTS = ("cold", "previous", "tscvx", "best")
 #: Methods of ``solve`` per warm start (``best`` runs ``tscvx`` from either guess).
-METHOD = {"cold": "scvx", "previous": "scvx", "tscvx": "tscvx"}
+METHOD = {"cold": "scvx", "previous": "scvx", "tscvx": "tscvx", "best": "tscvx"}
 #: Cost difference below which two re-plans tie [U_M]: SCvx's stationarity test, ``Delta L <=
 #: eps_opt max(1, |J|)`` (eps_opt = 1e-4, |J| = m_f <= m0 = 3 U_M).
 TIE_U_M = 3e-4
@@ -771,7 +771,7 @@ class PredictedRowsFrom:
 
     def guess_for(self, instance: PDGInstance, config: PDGSolverConfig) -> Any:
         """The start's guess (``config`` is the solve's; the guess is already on N nodes)."""
-        return self.start.guess(instance)
+        return self.guess(instance)
 
     def tight(self, instance: PDGInstance) -> Any:
         """The networks' ``k -> flags`` of the rows predicted tight."""
@@ -829,7 +829,7 @@ def _replan(
         warm = cfg.tscvx_provider()
     else:
         warm = None
-    method = "tscvx" if name == "best" else METHOD[used]
+    method = METHOD[name]
     sol = solve(sub, cfg.replan_solver, method=method, warmstart=warm)
     wall = time.perf_counter() - start
     fallback = ""
