@@ -12,15 +12,13 @@ from warmstart_standins import AffineNormalization, ReplayModel, replay_model
 from scpformer.data.rendezvous_family import sequence_fields
 from scpformer.problems.rendezvous import linear_model, sample_instances, solve
 from scpformer.problems.robust_rendezvous import RobustInstance, solve_tpbvp, trajectory_violations
+from scpformer.problems.robust_rendezvous.plan_dynamics import linearize_dynamics
 from scpformer.problems.robust_rendezvous.safety import linear_model as robust_linear_model
 from scpformer.problems.robust_rendezvous.scenario import RobustSolverConfig
 from scpformer.warmstart import AcceptanceCheck, ArtWarmStart, generate
 from scpformer.warmstart.families import art_family
 
 N = 100
-
-
-STM = RobustSolverConfig(dynamics="stm")  # the robust model ART propagates with
 
 
 @pytest.fixture(scope="module")
@@ -30,12 +28,23 @@ def rendezvous():
     return instances, [solve(i, "convex", verify=False) for i in instances]
 
 
+STM = RobustSolverConfig(dynamics="stm")  # the paper's plan model: exact replays to 1e-8 m
+
+
 @pytest.fixture(scope="module")
 def robust():
-    # The TPBVP in the STM model, the model ART's Algorithm 2 propagates with (the solve
-    # itself plans in the nonlinear mean dynamics by default and relinearizes)
+    # The TPBVP in the STM model, which ART's Algorithm 2 then follows (config=STM) exactly
     instance = RobustInstance()
     return instance, solve_tpbvp(instance, STM)
+
+
+@pytest.fixture(scope="module", params=["stm", "nonlinear"])
+def robust_plan(request, robust):
+    """The default instance's TPBVP planned in each plan model ART's Algorithm 2 can follow."""
+    if request.param == "stm":
+        return robust
+    instance = RobustInstance()
+    return instance, solve_tpbvp(instance, RobustSolverConfig(dynamics=request.param))
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +52,10 @@ def norm():
     return AffineNormalization.random(N)
 
 
-def _rollout(instances, model, norm, *, frame="rtn", art_mode="dynamics", rtg0, ctg0, mode=None):
-    family = art_family("robust-rendezvous", mode) if mode else art_family("rendezvous")
+def _rollout(instances, model, norm, *, frame="rtn", art_mode="dynamics", rtg0, ctg0, mode=None,
+             dynamics="nonlinear"):  # fmt: skip
+    family = (art_family("robust-rendezvous", mode, dynamics) if mode
+              else art_family("rendezvous"))  # fmt: skip
     batch = family.batch(instances)
     return generate(model, norm, batch, family, frame=frame, art_mode=art_mode,
                     rtg0=np.asarray(rtg0, float), ctg0=np.asarray(ctg0, float))  # fmt: skip
@@ -84,21 +95,48 @@ def test_reward_and_constraint_to_go_follow_the_datasets_sequences(rendezvous, n
     assert np.allclose(fed_ctg, stored["cvx_ctg"][:N], rtol=1e-6)
 
 
-def test_robust_replay_reproduces_the_tpbvp_and_its_eq7_budget_with_the_target_token(robust, norm):
-    instance, tpbvp = robust
-    z = tpbvp.trajectory
+def _replay_tolerance(instance, z, dynamics):
+    """How far a replay of plan ``z`` may drift from it [m]: its own largest one-step defect in
+    ``dynamics`` (a conic solution obeys them to the solver's tolerance), carried over the
+    horizon by a flow that keeps separations (at most N defects), plus rounding."""
+    defect = linearize_dynamics(instance, robust_linear_model(instance), z.x, z.u, dynamics).defect
+    return N * np.abs(defect).max() + 1e-8
+
+
+def test_robust_replay_reproduces_the_tpbvp_and_its_eq7_budget_with_the_target_token(
+    robust_plan, norm
+):
+    instance, tpbvp = robust_plan
+    z, dynamics = tpbvp.trajectory, tpbvp.extras["dynamics"]
+    tol = _replay_tolerance(instance, z, dynamics)
     for mode in ("chance", "deterministic"):
-        budget = trajectory_violations(instance, z.x, z.u, mode)
+        budget = trajectory_violations(instance, z.x, z.u, mode, dynamics=dynamics)
         model = replay_model(norm, z.u[None])
-        out = _rollout([instance], model, norm, rtg0=[-tpbvp.cost], ctg0=budget[:1], mode=mode)
-        assert np.abs(out.x[0] - z.x).max() < 1e-8
+        out = _rollout([instance], model, norm, rtg0=[-tpbvp.cost], ctg0=budget[:1], mode=mode,
+                       dynamics=dynamics)  # fmt: skip
+        assert np.abs(out.x[0] - z.x).max() < tol
         assert np.array_equal(out.ctg[0], budget[:N]) and out.violations[0].sum() == budget[0]
         assert budget[0] > 0  # the TPBVP is not passively safe
         target = norm.decode("target", model.fed["target"].double().numpy()[0])
         assert np.allclose(target, instance.xf_rtn, atol=1e-3)  # waypoint's RTN state
     out_roe = _rollout([instance], replay_model(norm, z.u[None]), norm, frame="roe",
-                       rtg0=[-tpbvp.cost], ctg0=[0.0], mode="chance")  # fmt: skip
-    assert np.abs(out_roe.x[0] - z.x).max() < 1e-8
+                       rtg0=[-tpbvp.cost], ctg0=[0.0], mode="chance",
+                       dynamics=dynamics)  # fmt: skip
+    assert np.abs(out_roe.x[0] - z.x).max() < tol
+
+
+def test_robust_rollout_through_the_stm_leaves_a_nonlinear_plan_it_follows_through_the_flow(norm):
+    # The default plans obey the nonlinear mean-element flow: replaying a plan's impulses
+    # through the STM drifts metres away from it (the model error ART's rollout must not add)
+    instance = RobustInstance()
+    z = solve_tpbvp(instance, RobustSolverConfig()).trajectory
+    gaps = {}
+    for dynamics in ("stm", "nonlinear"):
+        out = _rollout([instance], replay_model(norm, z.u[None]), norm, rtg0=[-z.u.sum()],
+                       ctg0=[0.0], mode="chance", dynamics=dynamics)  # fmt: skip
+        gaps[dynamics] = np.abs(out.x[0] - z.x).max()
+    assert gaps["nonlinear"] < _replay_tolerance(instance, z, "nonlinear")
+    assert gaps["stm"] > 1.0  # metres: the STM's neglected second-order terms
 
 
 # -- Algorithm 1: transformer only ----------------------------------------------------------

@@ -184,7 +184,9 @@ class RobustForecastSolver(ForecastSolver):
     def adapter(self) -> Any:
         from scpformer.warmstart.families import RobustArtFamily
 
-        return RobustArtFamily(mode=str(self.data_config.get("mode", "chance")))
+        solver = self.data_config.get("solver", {})
+        return RobustArtFamily(mode=str(self.data_config.get("mode", "chance")),
+                               dynamics=str(solver.get("dynamics", "nonlinear")))  # fmt: skip
 
     def instance(self, theta: np.ndarray) -> Any:
         from scpformer.experiments.robust_studies import RobustWarmstartSolver

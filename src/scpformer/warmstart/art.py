@@ -9,9 +9,11 @@ the desired reward-to-go ``R(t_1)`` and constraint-to-go ``C(t_1)``; at each ste
 2. ``R(t_{k+1}) = R(t_k) - (-|u_k|_2)`` and ``C(t_{k+1}) = C(t_k) - C_k`` (Eqs. 4-5), with
    ``C_k`` the instantaneous constraint violation of the family (ART Eq. 21: keep-out zone;
    robust Eq. 7: passive safety with the chance margin) at ``(x_k, u_k)``;
-3. the next state is ``x_{k+1} = Phi_k (x_k + B_k u_k)`` (Algorithm 2, dynamics in the loop:
-   the family's exact STM and control input matrix) or the model's prediction at the ``u_k``
-   token (Algorithm 1, transformer only).
+3. the next state is the family's dynamics at ``(x_k, u_k)`` (Algorithm 2, dynamics in the
+   loop: ``Phi_k (x_k + B_k u_k)`` with the rendezvous' exact STM and control input matrix;
+   the robust family's plan dynamics, by default the nonlinear mean-element flow its SCvx*
+   plans obey) or the model's prediction at the ``u_k`` token (Algorithm 1, transformer
+   only).
 
 Signs follow the dataset (:func:`scpformer.problems.rendezvous.constraints.reward_to_go`):
 ``R(t_k) = -sum_{j >= k} |dv_j|_2 <= 0``, so the update adds ``|u_k|`` and the default
@@ -381,7 +383,7 @@ def generate(
             violations[:, k] = family.violations(batch, k, x[:, k], u[:, k])
             R = R + np.linalg.norm(u[:, k], axis=1)  # R(t_{k+1}) = R(t_k) - (-|u_k|)
             C = C - violations[:, k]
-            x_next = batch.step(k, x[:, k], u[:, k])
+            x_next = family.step(batch, k, x[:, k], u[:, k])
             if k == n - 1:
                 x[:, n] = x_next
                 break
@@ -461,7 +463,8 @@ class ArtWarmStart:
     mode
         Robust family: passive safety ``chance`` or ``deterministic`` (the Eq. 7 budget).
     config
-        Solver configuration of the convex warm start (``J_CVX`` and the fallback).
+        Solver configuration of the convex warm start (``J_CVX`` and the fallback); for the
+        robust family its ``dynamics`` is also the model of the rollout and of ``C(t_1)``.
     fallback
         Warm start used when the check rejects ART's guess; default the family's convex one.
     """
@@ -484,7 +487,7 @@ class ArtWarmStart:
         self.model, self.normalization = model, normalization
         self.frame = _check_choice("frame", frame, ART_FRAMES)
         self.art_mode = _check_choice("art_mode", art_mode, ART_MODES)
-        self.adapter = art_family(family, mode)
+        self.adapter = art_family(family, mode, getattr(config, "dynamics", "nonlinear"))
         self.family, self.mode = family, mode
         if rtg is not None and not (math.isfinite(rtg) and rtg <= 0.0):
             raise ValueError(

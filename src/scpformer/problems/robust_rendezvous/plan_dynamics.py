@@ -14,9 +14,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from scpformer.dynamics.mean_elements import MeanOscMap, impulse_roe_jacobian, mean_osc_map
+from scpformer.dynamics.mean_elements import (
+    MeanOscMap,
+    impulse_roe,
+    impulse_roe_jacobian,
+    mean_osc_map,
+)
 from scpformer.dynamics.orbits import J2, eci_to_oe, j2_secular_rates, oe_to_qns, qns_to_oe
 from scpformer.dynamics.roe import (
+    propagate_roe_mean,
     psi_matrix,
     qns_offset_to_roe,
     roe_flow_jacobian,
@@ -147,3 +153,27 @@ def linearize_dynamics(
     Phi, Gamma = A @ Gx, A @ (Gu * a)
     f = a * flow - np.einsum("ikl,il->ik", Phi, x[:n]) - np.einsum("ikl,il->ik", Gamma, u)
     return DynamicsLinearization(Phi, Gamma, f, x[1:] - a * flow, a * y, Gu * a)
+
+
+def plan_step(
+    instance: RobustInstance, model: LinearModel, k: int, x: np.ndarray, u: np.ndarray,
+    dynamics: str,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """One step ``x_{k+1} = F(G(x_k, u_k))`` of the plan's dynamics from node ``k``.
+
+    ``x`` (B, 6) [m] and ``u`` (B, 3) [m/s] are states and impulses of instances that share
+    ``instance``'s target orbit and node times (``model`` is its linear model). Returns the
+    states at node ``k + 1`` and the post-impulse states ``G(x_k, u_k)`` (B, 6) [m]: with
+    ``"stm"`` the paper's Eq. 1 (``Phi_k (x_k + B_k u_k)``), with ``"nonlinear"`` the exact
+    mean-element impulse and J2 flow that :func:`linearize_dynamics` linearizes, so that a
+    trajectory rolled out here obeys the dynamics a converged plan obeys.
+    """
+    if dynamics == "stm":
+        y = x + np.einsum("kl,bl->bk", model.B[k], u)
+        return np.einsum("kl,bl->bk", model.Phi[k], y), y
+    a = model.oe[0, 0]
+    mo = target_mean_osc_map(instance).take(slice(k, k + 1))
+    y = impulse_roe(mo, model.oe[k : k + 1], x[None] / a, u[None])[0]
+    j2 = J2 if instance.scenario.j2 else 0.0
+    flow = propagate_roe_mean(model.oe[k], y, model.t[k + 1] - model.t[k], j2=j2)
+    return a * flow, a * y

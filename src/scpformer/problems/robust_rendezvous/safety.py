@@ -550,13 +550,15 @@ def arc_upper_bound(h: np.ndarray) -> np.ndarray:
 def node_violation_flags(
     geometry: DriftGeometry, model: LinearModel, x: np.ndarray, u: np.ndarray,
     instance: RobustInstance, mode: str, tol: float = VIOLATION_TOL,
+    post_impulse: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:  # fmt: skip
     """``C_i`` of Eq. 7 of every node, ``violation_flags(evaluate_safety(...).h, tol)``, with
     the worst instant located only when the design samples leave the answer open: a sample
     above ``tol`` is a violation, an arc whose :func:`arc_upper_bound` is below ``tol`` is
     none. The ART rollout asks this at every node it generates (the constraint-to-go token);
-    the search of :func:`refine_worst_instant` is most of its cost."""
-    arcs = _sampled_arcs(geometry, model, x, u, instance, mode, None)
+    the search of :func:`refine_worst_instant` is most of its cost. ``post_impulse`` is that
+    of :func:`evaluate_safety` (the drift arcs' start in the plan's dynamics)."""
+    arcs = _sampled_arcs(geometry, model, x, u, instance, mode, post_impulse)
     flags = arcs.h.max(axis=1) > tol
     open_ = ~flags & (arc_upper_bound(arcs.h) > tol) & (geometry.tau.size > 1)
     if open_.any():  # the samples already evaluated serve the full evaluation
