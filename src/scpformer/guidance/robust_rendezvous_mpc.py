@@ -491,16 +491,18 @@ class RobustClosedLoopResult(ClosedLoopResult):
 # ======================================================================================
 # the warm start best
 # ======================================================================================
-def previous_candidate(sub: RobustInstance, warm: GivenWarmStart, mode: str) -> WarmStartResult:
+def previous_candidate(
+    sub: RobustInstance, warm: GivenWarmStart, mode: str, dynamics: str = "nonlinear"
+) -> WarmStartResult:
     """The shifted plan of ``previous`` (:func:`previous_plan`) as a candidate of the post hoc
     check: its guess with the record's ``cost`` = ``sum |u|`` [m/s] and ``constraint_to_go`` =
     ``C(t_k)``, the Eq. 7 budget of its states and impulses in the remaining problem ``sub``
-    (passive safety ``mode``; the measure ART's own guess is given,
+    (passive safety ``mode``, plan model ``dynamics``; the measure ART's own guess is given,
     ``RobustArtFamily.trajectory_ctg``); ``time_s`` is the time this took."""
     start = time.perf_counter()
     prev = warm.guess(sub)
     x, u = prev.trajectory.x, prev.trajectory.u
-    ctg = float(trajectory_violations(sub, x, u, mode)[0])
+    ctg = float(trajectory_violations(sub, x, u, mode, dynamics=dynamics)[0])
     record = replace(prev.record, cost=trajectory_cost(prev.trajectory), constraint_to_go=ctg)
     return replace(prev, record=timed(record, start))
 
@@ -604,7 +606,7 @@ def _warmstart(
     art = provider.guess(sub, history)
     if name == "art":
         return art
-    candidate = previous_candidate(sub, warm, cfg.solver.safety_mode)
+    candidate = previous_candidate(sub, warm, cfg.solver.safety_mode, cfg.solver.dynamics)
     return best_guess(art, candidate, provider.acceptance or AcceptanceCheck())
 
 
