@@ -23,7 +23,7 @@ TPBVP for the robust family) is negative; ``C(t_1) = 0`` by default (both papers
 States are fed in the model's frame (``rtn``: ``Psi_k x_k``, ART Eq. 9; ``roe``: ``x_k``) and
 the returned guess is always in the solvers' scaled mean ROE. Algorithm 1 outputs N states
 ``x_0 .. x_{N-1}``; the final node ``x_N`` (outside the model's N-step context) is propagated
-from ``x_{N-1}`` through the STM in both modes.
+from ``x_{N-1}`` through the family's dynamics (step 3) in both modes.
 
 Post hoc acceptance check (robust paper, Eq. 8 and Sec. 5): with the realized
 ``R_ART = -sum |u|`` and ``C_ART`` (the generated trajectory's constraint-to-go at ``t_1``),
