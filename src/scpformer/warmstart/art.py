@@ -380,10 +380,9 @@ def generate(
                 tensor(normalization.encode("state", states[:, k], step=k0 + k)),
             )  # (B, 3)
             u[:, k] = normalization.decode("action", numpy(u_norm), step=k0 + k)
-            violations[:, k] = family.violations(batch, k, x[:, k], u[:, k])
+            violations[:, k], x_next = family.transition(batch, k, x[:, k], u[:, k])
             R = R + np.linalg.norm(u[:, k], axis=1)  # R(t_{k+1}) = R(t_k) - (-|u_k|)
             C = C - violations[:, k]
-            x_next = family.step(batch, k, x[:, k], u[:, k])
             if k == n - 1:
                 x[:, n] = x_next
                 break

@@ -117,9 +117,11 @@ class RendezvousArtFamily:
         groups = _grouped([instance.scenario for instance in instances])
         return _stack(instances, models, x0, None, groups)
 
-    def step(self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``x_{k+1}`` through the STM of the problem (:meth:`Batch.step`), (B, 6) [m]."""
-        return batch.step(k, x, u)
+    def transition(
+        self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``C_k`` (:meth:`violations`) and ``x_{k+1}`` through the STM (:meth:`Batch.step`)."""
+        return self.violations(batch, k, x, u), batch.step(k, x, u)
 
     def violations(self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``C_k`` of Eq. 21: 1 where node ``k <= N_wp`` lies inside the keep-out zone, (B,).
@@ -201,10 +203,14 @@ class RobustArtFamily:
         x_target = np.stack([b.x_final for b in bounds])
         return _stack(instances, models, x0, x_target, groups)
 
-    def step(self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``x_{k+1}`` in the plan's dynamics
-        (:func:`~scpformer.problems.robust_rendezvous.plan_dynamics.plan_step`), (B, 6) [m]."""
-        return self._advance(batch, k, x, u)[0]
+    def transition(
+        self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``C_k`` (:meth:`violations`) and ``x_{k+1}`` in the plan's dynamics
+        (:func:`~scpformer.problems.robust_rendezvous.plan_dynamics.plan_step`), from one
+        step of the dynamics."""
+        x_next, post = self._advance(batch, k, x, u)
+        return self._flags(batch, k, x, u, post), x_next
 
     def violations(self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``C_k`` of Eq. 7 at node ``k`` (post-maneuver drift with the chance margin), (B,).
@@ -215,9 +221,14 @@ class RobustArtFamily:
         arc starting from the post-impulse state of the plan's dynamics (the input matrix
         passed beside it is the STM's: a flag needs no derivative).
         """
+        return self._flags(batch, k, x, u, self._advance(batch, k, x, u)[1])
+
+    def _flags(
+        self, batch: Batch, k: int, x: np.ndarray, u: np.ndarray, post: np.ndarray
+    ) -> np.ndarray:
+        """:meth:`violations` with the post-impulse states ``post`` (B, 6) [m] given."""
         from scpformer.problems.robust_rendezvous.safety import node_violation_flags
 
-        post = self._advance(batch, k, x, u)[1]
         flags = np.zeros(x.shape[0], dtype=int)
         for idx, group in batch.groups:
             for i, geometry in zip(idx, group.geometry, strict=True):
